@@ -97,8 +97,8 @@ def R_to_euler_zyx(R: np.ndarray) -> np.ndarray:
     """
     R = np.asarray(R, dtype=float)
     sb = -R[2, 0]
-    beta = float(np.arcsin(np.clip(sb, -1.0, 1.0)))
     cb = np.hypot(R[0, 0], R[1, 0])
+    beta = float(np.arctan2(sb, cb))  # atan2 keeps full precision near +-pi/2, where arcsin does not
     if cb > 1e-12:
         alpha = np.arctan2(R[1, 0], R[0, 0])
         gamma = np.arctan2(R[2, 1], R[2, 2])
