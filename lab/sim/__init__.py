@@ -1,1 +1,23 @@
-"""lab.sim"""
+"""The simulator: the only package that imports pybullet.
+
+``SimWorld`` loads a scene file (``worlds/*.toml``) into its own headless PyBullet client and renders
+stereo views; ``SimRobot`` is the simulated robot behind the :class:`lab.robot.Robot` interface; ground
+truth is reached only through ``SimWorld.truth``.
+"""
+
+from lab.sim.robot import OdometryNoise, SimRobot
+from lab.sim.scene import Scene, list_worlds, load_scene
+from lab.sim.world import Carrier, RenderSettings, SimWorld, load_box_models, viewpoint_G_WC
+
+__all__ = [
+    "Carrier",
+    "OdometryNoise",
+    "RenderSettings",
+    "Scene",
+    "SimRobot",
+    "SimWorld",
+    "list_worlds",
+    "load_box_models",
+    "load_scene",
+    "viewpoint_G_WC",
+]

@@ -1,0 +1,314 @@
+"""The simulated robot: a differential-drive base, a PTU-D46-like pan-tilt unit and a stereo camera.
+
+:class:`SimRobot` implements :class:`lab.robot.Robot` on a :class:`~lab.sim.world.SimWorld` with the same
+limits, watchdog, emergency stop and exceptions as the hardware adapter, so that a notebook behaves the
+same on both. Simulated time advances only in :meth:`SimRobot.step`, in sub-steps of ``dt_physics``:
+
+1. the watchdog zeroes the velocity target when no ``drive`` arrived for ``cmd_timeout_s``;
+2. the base's velocity slews towards its target within the acceleration limits;
+3. the base moves (exact unicycle arc); if its footprint would touch a body, it stays where it was, its
+   velocity is zeroed and a collision is counted (the bump sensor's view of it);
+4. wheel odometry integrates the same motion with seeded noise (:class:`OdometryNoise`);
+5. the pan-tilt moves towards its targets at its speed;
+6. the world's clock and carriers advance.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from lab.errors import ConfigError, EStopActive, NotEnabled, SafetyStop
+from lab.geometry import Pose2D, R_to_quat_xyzw, Rz, wrap_angle
+from lab.robot import (
+    BaseLimits,
+    PanTiltLimits,
+    PanTiltState,
+    Robot,
+    StereoCamera,
+    StereoFrame,
+    check_finite,
+)
+from lab.sim.world import SimWorld, pybullet
+
+__all__ = ["OdometryNoise", "SimRobot"]
+
+
+@dataclass(frozen=True)
+class OdometryNoise:
+    """Wheel-odometry error model (standard deviations per sub-step, proportional to the motion).
+
+    Attributes
+    ----------
+    scale : float
+        Relative error of the distance travelled (0.02 = 2 %).
+    turn : float
+        Relative error of the heading change.
+    drift : float [rad/m]
+        Heading drift per metre travelled.
+    """
+
+    scale: float = 0.02
+    turn: float = 0.02
+    drift: float = 0.01
+
+    @classmethod
+    def none(cls) -> OdometryNoise:
+        return cls(0.0, 0.0, 0.0)
+
+
+class SimRobot(Robot):
+    """A simulated robot in a :class:`SimWorld` (see the module docstring for one sub-step).
+
+    Parameters
+    ----------
+    world : SimWorld
+    camera : StereoCamera, optional
+        Default: 320 x 240, 60 degree vertical field of view, 0.12 m baseline, pan axis 0.7 m high.
+    start : Pose2D, optional
+        Default: the scene's ``[robot] start``.
+    seed : int
+        Seeds the odometry noise.
+    odometry_noise, base_limits, pan_tilt_limits : optional
+    pan_tilt_speed : float [rad/s]
+        The unit's default slew speed.
+    dt_physics : float [s]
+        Sub-step of :meth:`step`.
+    """
+
+    HEIGHT = 0.3  # base height [m] (the mast above it is thin and has no collision shape)
+
+    def __init__(
+        self,
+        world: SimWorld,
+        camera: StereoCamera | None = None,
+        start: Pose2D | None = None,
+        seed: int = 0,
+        odometry_noise: OdometryNoise | None = None,
+        base_limits: BaseLimits | None = None,
+        pan_tilt_limits: PanTiltLimits | None = None,
+        pan_tilt_speed: float = math.radians(60.0),
+        dt_physics: float = 0.02,
+    ):
+        if world.robot is not None:
+            raise ConfigError("this world already has a robot")
+        self.world = world
+        self._camera = camera or StereoCamera.from_fov(320, 240, 60.0, 0.12, mount_R=(0.0, 0.0, 0.7))
+        self._base_limits = base_limits or BaseLimits()
+        self._pt_limits = pan_tilt_limits or PanTiltLimits()
+        self._pt_limits.check_speed(pan_tilt_speed)
+        self._pt_speed_default = pan_tilt_speed
+        if not 0 < dt_physics <= 0.1:
+            raise ConfigError(f"dt_physics must be within (0, 0.1] s, got {dt_physics}")
+        self.dt_physics = dt_physics
+        self._noise = odometry_noise or OdometryNoise()
+        self._rng = np.random.default_rng(seed)
+        if start is None:
+            x, y, h = world.scene.robot_start
+            start = Pose2D(x, y, math.radians(h))
+        self._true_pose = start
+        self._odom = start
+        self._v = self._omega = 0.0
+        self._v_cmd = self._omega_cmd = 0.0
+        self._last_cmd_t = -math.inf
+        self._pan = self._tilt = 0.0
+        self._pan_target = self._tilt_target = 0.0
+        self._pt_speed = pan_tilt_speed
+        self._enabled = False
+        self._estop = False
+        self._closed = False
+        self._safety_trip: str | None = None
+        self._collisions = 0
+        self._in_contact = False
+        self._build_body()
+        world.robot = self
+
+    # --- body -----------------------------------------------------------------------------------
+    def _build_body(self):
+        pb = self.world.p
+        r = self._base_limits.radius
+        col = pb.createCollisionShape(pybullet.GEOM_CYLINDER, radius=r, height=self.HEIGHT)
+        vis = pb.createVisualShape(pybullet.GEOM_CYLINDER, radius=r, length=self.HEIGHT, rgbaColor=(0.1, 0.45, 0.2, 1))
+        self._body = pb.createMultiBody(0, col, vis, (0, 0, self.HEIGHT / 2))
+        mast_h = self._camera.mount_R[2] - self.HEIGHT - 0.06
+        mvis = pb.createVisualShape(pybullet.GEOM_BOX, halfExtents=(0.02, 0.02, mast_h / 2), rgbaColor=(0.3, 0.3, 0.3, 1))
+        self._mast = pb.createMultiBody(0, -1, mvis, (0, 0, 0))
+        self._mast_h = mast_h
+        self.world._register("robot", self._body)
+        self._others = [b for b in self.world._ids.values() if b not in (self._body, self.world._ids.get("floor"))]
+        self._place(self._true_pose)
+
+    def _place(self, pose: Pose2D):
+        pb = self.world.p
+        q = R_to_quat_xyzw(Rz(pose.theta))
+        pb.resetBasePositionAndOrientation(self._body, (pose.x, pose.y, self.HEIGHT / 2), q)
+        m = self._camera.mount_R
+        c, s = math.cos(pose.theta), math.sin(pose.theta)
+        mx, my = pose.x + c * m[0] - s * m[1] - 0.03 * c, pose.y + s * m[0] + c * m[1] - 0.03 * s
+        pb.resetBasePositionAndOrientation(self._mast, (mx, my, self.HEIGHT + self._mast_h / 2), q)
+
+    def _collides(self) -> bool:
+        pb = self.world.p
+        others = self._others + [c.base_id for c in self.world.carriers.values()]
+        for b in others:
+            if pb.getClosestPoints(self._body, b, 0.0):
+                return True
+        return False
+
+    # --- Robot interface ------------------------------------------------------------------------
+    @property
+    def camera(self) -> StereoCamera:
+        return self._camera
+
+    @property
+    def pan_tilt_limits(self) -> PanTiltLimits:
+        return self._pt_limits
+
+    @property
+    def base_limits(self) -> BaseLimits:
+        return self._base_limits
+
+    def now(self) -> float:
+        return self.world.t
+
+    @property
+    def enabled(self) -> bool:
+        return self._enabled
+
+    def enable(self) -> None:
+        self._check_open()
+        if self._estop:
+            raise EStopActive("emergency stop is latched: call clear_estop() before enable()")
+        self._safety_trip = None
+        self._enabled = True
+
+    def disable(self) -> None:
+        self.stop()
+        self._enabled = False
+
+    def _check_open(self):
+        if self._closed:
+            raise NotEnabled("the robot is closed; create a new one")
+
+    def _check_motion_allowed(self):
+        self._check_open()
+        if self._safety_trip is not None:
+            raise SafetyStop(f"safety stop ({self._safety_trip}): call enable() to re-arm")
+        if self._estop:
+            raise EStopActive("emergency stop is latched: call clear_estop() and then enable()")
+        if not self._enabled:
+            raise NotEnabled("motors are disabled: call enable() first")
+
+    def capture_stereo(self, after: float | None = None) -> StereoFrame:
+        self._check_open()
+        if after is not None and after >= self.world.t:
+            self.step(after - self.world.t + self.dt_physics)
+        G_WC = self._true_pose.G() @ self._camera.G_RC(self._pan, self._tilt)
+        left, right = self.world.render_stereo(G_WC, self._camera)
+        return StereoFrame(self.world.t, left, right, self._camera, self.pan_tilt(), self._odom)
+
+    def odometry(self) -> Pose2D:
+        return self._odom
+
+    def pan_tilt(self) -> PanTiltState:
+        moving = abs(self._pan - self._pan_target) > 1e-9 or abs(self._tilt - self._tilt_target) > 1e-9
+        return PanTiltState(self._pan, self._tilt, self.world.t, self._pan_target, self._tilt_target, moving)
+
+    def command_pan_tilt(self, pan: float, tilt: float, speed: float | None = None) -> None:
+        check_finite(pan=pan, tilt=tilt, **({} if speed is None else {"speed": speed}))
+        self._pt_limits.check(float(pan), float(tilt))
+        if speed is not None:
+            self._pt_limits.check_speed(float(speed))
+        self._check_motion_allowed()
+        self._pan_target, self._tilt_target = float(pan), float(tilt)
+        self._pt_speed = self._pt_speed_default if speed is None else float(speed)
+
+    def drive(self, v: float, omega: float) -> None:
+        check_finite(v=v, omega=omega)
+        self._check_motion_allowed()
+        L = self._base_limits
+        self._v_cmd = float(np.clip(v, -L.max_speed, L.max_speed))
+        self._omega_cmd = float(np.clip(omega, -L.max_turn_rate, L.max_turn_rate))
+        self._last_cmd_t = self.world.t
+
+    def stop(self) -> None:
+        self._v = self._omega = self._v_cmd = self._omega_cmd = 0.0
+        self._pan_target, self._tilt_target = self._pan, self._tilt
+
+    def estop(self) -> None:
+        self.stop()
+        self._estop = True
+        self._enabled = False
+
+    def clear_estop(self) -> None:
+        self._estop = False
+
+    def close(self) -> None:
+        if not self._closed:
+            self.stop()
+            self._enabled = False
+            self._closed = True
+
+    def trip_safety(self, reason: str) -> None:
+        """Simulate a cliff or wheel-drop trip: stop, disable, and raise from the next command or step."""
+        self.stop()
+        self._enabled = False
+        self._safety_trip = reason
+
+    @property
+    def collisions(self) -> int:
+        """Number of times the base ran into something (the bump sensor's count)."""
+        return self._collisions
+
+    # --- simulation -----------------------------------------------------------------------------
+    def step(self, dt: float) -> None:
+        check_finite(dt=dt)
+        if dt < 0:
+            raise ValueError(f"dt must be >= 0 s, got {dt}")
+        self._check_open()
+        if self._safety_trip is not None:
+            raise SafetyStop(f"safety stop ({self._safety_trip}): call enable() to re-arm")
+        n = max(1, int(math.ceil(dt / self.dt_physics - 1e-9))) if dt > 0 else 0
+        for _ in range(n):
+            self._substep(dt / n)
+
+    def _substep(self, h: float) -> None:
+        L = self._base_limits
+        if self.world.t - self._last_cmd_t > self.cmd_timeout_s or not self._enabled:
+            self._v_cmd = self._omega_cmd = 0.0  # watchdog: no fresh command, no motion
+        self._v += float(np.clip(self._v_cmd - self._v, -L.max_accel * h, L.max_accel * h))
+        self._omega += float(np.clip(self._omega_cmd - self._omega, -L.max_turn_accel * h, L.max_turn_accel * h))
+        if self._v != 0.0 or self._omega != 0.0:
+            new = _unicycle(self._true_pose, self._v, self._omega, h)
+            self._place(new)
+            if self._collides():
+                self._place(self._true_pose)
+                if not self._in_contact:
+                    self._collisions += 1
+                self._in_contact = True
+                self._v = self._omega = 0.0
+            else:
+                self._in_contact = False
+                ds = self._v * h
+                dth = self._omega * h
+                n = self._noise
+                ds_m = ds * (1.0 + n.scale * self._rng.standard_normal())
+                dth_m = dth * (1.0 + n.turn * self._rng.standard_normal()) + n.drift * abs(ds) * self._rng.standard_normal()
+                self._odom = _unicycle_increment(self._odom, ds_m, dth_m)
+                self._true_pose = new
+        step = self._pt_speed * h
+        self._pan += float(np.clip(self._pan_target - self._pan, -step, step))
+        self._tilt += float(np.clip(self._tilt_target - self._tilt, -step, step))
+        self.world.step(h)
+
+
+def _unicycle_increment(p: Pose2D, ds: float, dth: float) -> Pose2D:
+    """Pose after moving ``ds`` [m] along an arc that turns by ``dth`` [rad] (midpoint heading)."""
+    th_mid = p.theta + 0.5 * dth
+    return Pose2D(p.x + ds * math.cos(th_mid), p.y + ds * math.sin(th_mid), wrap_angle(p.theta + dth))
+
+
+def _unicycle(p: Pose2D, v: float, omega: float, h: float) -> Pose2D:
+    return _unicycle_increment(p, v * h, omega * h)
