@@ -19,7 +19,9 @@ def _floats(text: str, n: int, what: str) -> list[float]:
     try:
         vals = [float(v) for v in text.split(",")]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{what} must be {n} comma-separated numbers, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"{what} must be {n} comma-separated numbers, got {text!r}"
+        ) from None
     if len(vals) != n:
         raise argparse.ArgumentTypeError(f"{what} must be {n} comma-separated numbers, got {text!r}")
     return vals
@@ -35,40 +37,71 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (what is wrong, and where help is), exit status 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = _Parser(
         prog="lab",
         description="Active stereo perception on a mobile robot: model identification with next-best-view "
         "planning, and object search with a probability map, in PyBullet and on a real robot.",
     )
     sub = ap.add_subparsers(dest="command", metavar="COMMAND")
 
-    d = sub.add_parser("demo", help="run the main demo in the simulator and write its report",
-                       description="Run the main demo headless in the simulator and write a report "
-                       "(Markdown, JSON and pictures) into --out.")
+    d = sub.add_parser(
+        "demo",
+        help="run the main demo in the simulator and write its report",
+        description="Run the main demo headless in the simulator and write a report "
+        "(Markdown, JSON and pictures) into --out.",
+    )
     d.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default: out/demo)")
     d.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     d.add_argument("--supersample", type=int, default=1, choices=(1, 2), help="render at 2x and downsample")
 
-    r = sub.add_parser("render", help="render a stereo pair and its disparity from a viewpoint",
-                       description="Render the left and right images of the robot's stereo camera and a "
-                       "disparity picture (StereoSGBM) for a world and a viewpoint; writes left.png, "
-                       "right.png and disparity.png into --out.")
+    r = sub.add_parser(
+        "render",
+        help="render a stereo pair and its disparity from a viewpoint",
+        description="Render the left and right images of the robot's stereo camera and a "
+        "disparity picture (StereoSGBM) for a world and a viewpoint; writes left.png, "
+        "right.png and disparity.png into --out.",
+    )
     r.add_argument("--world", default="lab_room", help="world name (see `lab worlds`; default: lab_room)")
-    r.add_argument("--at", type=lambda s: _floats(s, 3, "--at"), metavar="X,Y,HEADING_DEG",
-                   help="robot pose in the world (default: the scene's start)")
-    r.add_argument("--pan-tilt", type=lambda s: _floats(s, 2, "--pan-tilt"), default=[0.0, 0.0],
-                   metavar="PAN_DEG,TILT_DEG", help="pan-tilt angles in degrees (default: 0,0)")
+    r.add_argument(
+        "--at",
+        type=lambda s: _floats(s, 3, "--at"),
+        metavar="X,Y,HEADING_DEG",
+        help="robot pose in the world (default: the scene's start)",
+    )
+    r.add_argument(
+        "--pan-tilt",
+        type=lambda s: _floats(s, 2, "--pan-tilt"),
+        default=[0.0, 0.0],
+        metavar="PAN_DEG,TILT_DEG",
+        help="pan-tilt angles in degrees (default: 0,0)",
+    )
     r.add_argument("--model", help="put this box model (M0..M3) on a carrier at the origin")
-    r.add_argument("--model-yaw", type=float, default=180.0,
-                   help="yaw of the carried box in degrees (default 180: unique face towards -x)")
-    r.add_argument("--size", type=_size, default=(320, 240), metavar="WxH", help="image size (default 320x240)")
+    r.add_argument(
+        "--model-yaw",
+        type=float,
+        default=180.0,
+        help="yaw of the carried box in degrees (default 180: unique face towards -x)",
+    )
+    r.add_argument(
+        "--size", type=_size, default=(320, 240), metavar="WxH", help="image size (default 320x240)"
+    )
     r.add_argument("--fov", type=float, default=60.0, help="vertical field of view in degrees (default 60)")
     r.add_argument("--supersample", type=int, default=1, choices=(1, 2), help="render at 2x and downsample")
     r.add_argument("--out", type=Path, default=Path("out/render"), help="output folder (default: out/render)")
 
-    sub.add_parser("worlds", help="list the worlds and their bodies",
-                   description="List the scene files in worlds/ with their named bodies.")
+    sub.add_parser(
+        "worlds",
+        help="list the worlds and their bodies",
+        description="List the scene files in worlds/ with their named bodies.",
+    )
     return ap
 
 

@@ -40,8 +40,12 @@ def run_demo(out: Path, seed: int = 0, supersample: int = 1) -> Path:
     lines = ["# lab demo: a tour of the simulator", ""]
     summary: dict = {"seed": seed, "supersample": supersample, "models": [], "room": {}}
 
-    lines += ["## The box database (identification paper, Fig. 4)", "",
-              "Each model seen from 1.2 m: its unique face, then a shared face.", ""]
+    lines += [
+        "## The box database (identification paper, Fig. 4)",
+        "",
+        "Each model seen from 1.2 m: its unique face, then a shared face.",
+        "",
+    ]
     for model in load_box_models():
         row = {"model": model.name}
         for side, yaw in (("unique", math.pi), ("shared", 0.0)):
@@ -63,14 +67,21 @@ def run_demo(out: Path, seed: int = 0, supersample: int = 1) -> Path:
                 ok = box & np.isfinite(d)
                 z_stereo = cam.fx * cam.baseline / d[ok]
                 err = np.abs(z_stereo - depth[ok])
-                row[side] = {"image": name, "box_pixels": int(box.sum()),
-                             "dense_depth_error_median_m": float(np.median(err)) if err.size else None}
+                row[side] = {
+                    "image": name,
+                    "box_pixels": int(box.sum()),
+                    "dense_depth_error_median_m": float(np.median(err)) if err.size else None,
+                }
                 lines.append(f"![{model.name} {side}]({name})")
         summary["models"].append(row)
         lines.append("")
 
-    lines += ["## The lab room (search paper)", "",
-              "The robot drives 1.5 m into the room while the head pans left and right.", ""]
+    lines += [
+        "## The lab room (search paper)",
+        "",
+        "The robot drives 1.5 m into the room while the head pans left and right.",
+        "",
+    ]
     with SimWorld("lab_room", settings) as world:
         robot = SimRobot(world, cam, seed=seed)
         robot.enable()
@@ -97,9 +108,13 @@ def run_demo(out: Path, seed: int = 0, supersample: int = 1) -> Path:
             "collisions": world.truth.collisions,
             "sim_time_s": world.t,
         }
-        lines += ["", f"True pose after the drive: x={true.x:.3f} m, y={true.y:.3f} m; odometry says "
-                  f"x={odo.x:.3f} m, y={odo.y:.3f} m (error {summary['room']['odometry_error_m'] * 100:.1f} cm); "
-                  f"collisions: {world.truth.collisions}.", ""]
+        lines += [
+            "",
+            f"True pose after the drive: x={true.x:.3f} m, y={true.y:.3f} m; odometry says "
+            f"x={odo.x:.3f} m, y={odo.y:.3f} m (error {summary['room']['odometry_error_m'] * 100:.1f} cm); "
+            f"collisions: {world.truth.collisions}.",
+            "",
+        ]
     summary["wall_time_s"] = time.perf_counter() - t0
     lines += ["## Numbers", "", "```json", json.dumps(summary, indent=2), "```", ""]
     _write_atomic(out / "report.json", json.dumps(summary, indent=2))

@@ -62,7 +62,8 @@ def test_se3_inverse_compose_and_points():
         np.testing.assert_allclose(g.transform_points(G1, p), r1.apply(p) + X1[:3], atol=1e-12)
         # composition equals applying one after the other
         np.testing.assert_allclose(
-            g.transform_points(g.compose(G1, G2), p), g.transform_points(G1, g.transform_points(G2, p)),
+            g.transform_points(g.compose(G1, G2), p),
+            g.transform_points(G1, g.transform_points(G2, p)),
             atol=1e-12,
         )
         np.testing.assert_allclose(g.pose6_to_G(g.G_to_pose6(G1)), G1, atol=1e-12)
@@ -91,7 +92,9 @@ def test_pan_tilt_camera_frame_looks_where_it_should():
     # the same transform built with SciPy from its parts
     pan, tilt = 0.4, -0.3
     R_ref = (
-        Rotation.from_euler("z", pan) * Rotation.from_euler("y", -tilt) * Rotation.from_matrix(g.R_BODY_TO_OPTICAL)
+        Rotation.from_euler("z", pan)
+        * Rotation.from_euler("y", -tilt)
+        * Rotation.from_matrix(g.R_BODY_TO_OPTICAL)
     ).as_matrix()
     t_ref = np.array(mount) + (Rotation.from_euler("z", pan) * Rotation.from_euler("y", -tilt)).apply(off)
     G = g.pan_tilt_G_RC(pan, tilt, mount, off)

@@ -44,7 +44,12 @@ _WORDS = (
     "ROBOT VISION STEREO KALMAN ENTROPY BAYES SEARCH MODEL POSE SIFT FEATURE CAMERA PANTILT "
     "ODOMETRY GRID PROBABILITY LAB DEPTH DISPARITY TRACK SCAN MAP RING VIEW GAIN"
 ).split()
-_FONTS = (cv2.FONT_HERSHEY_SIMPLEX, cv2.FONT_HERSHEY_DUPLEX, cv2.FONT_HERSHEY_TRIPLEX, cv2.FONT_HERSHEY_COMPLEX)
+_FONTS = (
+    cv2.FONT_HERSHEY_SIMPLEX,
+    cv2.FONT_HERSHEY_DUPLEX,
+    cv2.FONT_HERSHEY_TRIPLEX,
+    cv2.FONT_HERSHEY_COMPLEX,
+)
 
 
 def _color(rng: np.random.Generator, palette: np.ndarray | None) -> tuple[int, int, int]:
@@ -100,8 +105,16 @@ def magazine_texture(
         c = _color(rng, pal)
         ink = tuple(255 - v for v in c)
         x0, y0 = int(rng.integers(0, int(size * 0.55))), int(rng.integers(int(20 * s), size))
-        cv2.putText(img, word, (x0, y0), _FONTS[rng.integers(0, len(_FONTS))], 0.45 * s + rng.uniform(0, 0.4 * s),
-                    ink, max(1, int(2 * s)), cv2.LINE_AA)
+        cv2.putText(
+            img,
+            word,
+            (x0, y0),
+            _FONTS[rng.integers(0, len(_FONTS))],
+            0.45 * s + rng.uniform(0, 0.4 * s),
+            ink,
+            max(1, int(2 * s)),
+            cv2.LINE_AA,
+        )
     if label:
         font = cv2.FONT_HERSHEY_DUPLEX
         scale = 2.6 * s
@@ -134,7 +147,9 @@ def atlas(faces: dict[str, np.ndarray], fill=(200, 200, 200)) -> np.ndarray:
         if name in faces:
             img = faces[name]
             if img.shape[:2] != (px, px):
-                raise ConfigError(f"face {name} is {img.shape[1]}x{img.shape[0]} px, atlas cells are {px}x{px}")
+                raise ConfigError(
+                    f"face {name} is {img.shape[1]}x{img.shape[0]} px, atlas cells are {px}x{px}"
+                )
             r, c = divmod(k, 3)
             out[r * px : (r + 1) * px, c * px : (c + 1) * px] = img
     return out
@@ -173,7 +188,9 @@ def _face_frames(size):
     }
 
 
-def box_obj_text(size, uv_mode: str = "atlas", tile_m: float = 1.0, texture_name: str = "texture.png") -> tuple[str, str]:
+def box_obj_text(
+    size, uv_mode: str = "atlas", tile_m: float = 1.0, texture_name: str = "texture.png"
+) -> tuple[str, str]:
     """OBJ and MTL text of a box of ``size`` (x, y, z) [m] centred on its origin, 24 vertices.
 
     ``uv_mode="atlas"``: each face's UVs cover its cell of a 3 x 2 atlas (:data:`FACES` order).
@@ -190,8 +207,12 @@ def box_obj_text(size, uv_mode: str = "atlas", tile_m: float = 1.0, texture_name
     for k, name in enumerate(FACES):
         n, right, up, hw, hh, hd = _face_frames(size)[name]
         centre = n * hd
-        corners = [centre - right * hw - up * hh, centre + right * hw - up * hh,
-                   centre + right * hw + up * hh, centre - right * hw + up * hh]
+        corners = [
+            centre - right * hw - up * hh,
+            centre + right * hw - up * hh,
+            centre + right * hw + up * hh,
+            centre - right * hw + up * hh,
+        ]
         if uv_mode == "atlas":
             r, c = divmod(k, 3)
             u0, u1 = c / 3 + inset, (c + 1) / 3 - inset
@@ -211,10 +232,32 @@ def box_obj_text(size, uv_mode: str = "atlas", tile_m: float = 1.0, texture_name
         nk = k + 1
         f_lines.append(f"f {a}/{a}/{nk} {b}/{b}/{nk} {c_}/{c_}/{nk}")
         f_lines.append(f"f {a}/{a}/{nk} {c_}/{c_}/{nk} {d}/{d}/{nk}")
-    obj = "\n".join(["# lab box mesh", "mtllib box.mtl", "o box", *v_lines, *vt_lines, *vn_lines,
-                     "usemtl textured", "s off", *f_lines, ""])
-    mtl = "\n".join(["newmtl textured", "Ka 1 1 1", "Kd 1 1 1", "Ks 0 0 0", "d 1", "illum 1",
-                     f"map_Kd {texture_name}", ""])
+    obj = "\n".join(
+        [
+            "# lab box mesh",
+            "mtllib box.mtl",
+            "o box",
+            *v_lines,
+            *vt_lines,
+            *vn_lines,
+            "usemtl textured",
+            "s off",
+            *f_lines,
+            "",
+        ]
+    )
+    mtl = "\n".join(
+        [
+            "newmtl textured",
+            "Ka 1 1 1",
+            "Kd 1 1 1",
+            "Ks 0 0 0",
+            "d 1",
+            "illum 1",
+            f"map_Kd {texture_name}",
+            "",
+        ]
+    )
     return obj, mtl
 
 

@@ -130,14 +130,20 @@ class SimRobot(Robot):
         pb = self.world.p
         r = self._base_limits.radius
         col = pb.createCollisionShape(pybullet.GEOM_CYLINDER, radius=r, height=self.HEIGHT)
-        vis = pb.createVisualShape(pybullet.GEOM_CYLINDER, radius=r, length=self.HEIGHT, rgbaColor=(0.1, 0.45, 0.2, 1))
+        vis = pb.createVisualShape(
+            pybullet.GEOM_CYLINDER, radius=r, length=self.HEIGHT, rgbaColor=(0.1, 0.45, 0.2, 1)
+        )
         self._body = pb.createMultiBody(0, col, vis, (0, 0, self.HEIGHT / 2))
         mast_h = self._camera.mount_R[2] - self.HEIGHT - 0.06
-        mvis = pb.createVisualShape(pybullet.GEOM_BOX, halfExtents=(0.02, 0.02, mast_h / 2), rgbaColor=(0.3, 0.3, 0.3, 1))
+        mvis = pb.createVisualShape(
+            pybullet.GEOM_BOX, halfExtents=(0.02, 0.02, mast_h / 2), rgbaColor=(0.3, 0.3, 0.3, 1)
+        )
         self._mast = pb.createMultiBody(0, -1, mvis, (0, 0, 0))
         self._mast_h = mast_h
         self.world._register("robot", self._body)
-        self._others = [b for b in self.world._ids.values() if b not in (self._body, self.world._ids.get("floor"))]
+        self._others = [
+            b for b in self.world._ids.values() if b not in (self._body, self.world._ids.get("floor"))
+        ]
         self._place(self._true_pose)
 
     def _place(self, pose: Pose2D):
@@ -149,13 +155,11 @@ class SimRobot(Robot):
         mx, my = pose.x + c * m[0] - s * m[1] - 0.03 * c, pose.y + s * m[0] + c * m[1] - 0.03 * s
         pb.resetBasePositionAndOrientation(self._mast, (mx, my, self.HEIGHT + self._mast_h / 2), q)
 
-    def _collides(self) -> bool:
+    def _collides(self, margin: float = 0.0) -> bool:
+        """Whether the base's footprint touches (or comes within ``margin`` [m] of) any other body."""
         pb = self.world.p
         others = self._others + [c.base_id for c in self.world.carriers.values()]
-        for b in others:
-            if pb.getClosestPoints(self._body, b, 0.0):
-                return True
-        return False
+        return any(pb.getClosestPoints(self._body, b, margin) for b in others)
 
     # --- Robot interface ------------------------------------------------------------------------
     @property
@@ -278,24 +282,31 @@ class SimRobot(Robot):
         L = self._base_limits
         if self.world.t - self._last_cmd_t > self.cmd_timeout_s or not self._enabled:
             self._v_cmd = self._omega_cmd = 0.0  # watchdog: no fresh command, no motion
+        v0, w0 = self._v, self._omega
         self._v += float(np.clip(self._v_cmd - self._v, -L.max_accel * h, L.max_accel * h))
-        self._omega += float(np.clip(self._omega_cmd - self._omega, -L.max_turn_accel * h, L.max_turn_accel * h))
-        if self._v != 0.0 or self._omega != 0.0:
-            new = _unicycle(self._true_pose, self._v, self._omega, h)
+        self._omega += float(
+            np.clip(self._omega_cmd - self._omega, -L.max_turn_accel * h, L.max_turn_accel * h)
+        )
+        v_mid, w_mid = 0.5 * (v0 + self._v), 0.5 * (w0 + self._omega)  # exact for constant acceleration
+        if v_mid != 0.0 or w_mid != 0.0:
+            new = _unicycle(self._true_pose, v_mid, w_mid, h)
             self._place(new)
             if self._collides():
                 self._place(self._true_pose)
-                if not self._in_contact:
+                if not self._in_contact:  # one collision per contact, not one per push against it
                     self._collisions += 1
                 self._in_contact = True
                 self._v = self._omega = 0.0
             else:
-                self._in_contact = False
-                ds = self._v * h
-                dth = self._omega * h
+                self._in_contact = self._in_contact and self._collides(margin=0.02)
+                ds = v_mid * h
+                dth = w_mid * h
                 n = self._noise
                 ds_m = ds * (1.0 + n.scale * self._rng.standard_normal())
-                dth_m = dth * (1.0 + n.turn * self._rng.standard_normal()) + n.drift * abs(ds) * self._rng.standard_normal()
+                dth_m = (
+                    dth * (1.0 + n.turn * self._rng.standard_normal())
+                    + n.drift * abs(ds) * self._rng.standard_normal()
+                )
                 self._odom = _unicycle_increment(self._odom, ds_m, dth_m)
                 self._true_pose = new
         step = self._pt_speed * h
@@ -305,9 +316,13 @@ class SimRobot(Robot):
 
 
 def _unicycle_increment(p: Pose2D, ds: float, dth: float) -> Pose2D:
-    """Pose after moving ``ds`` [m] along an arc that turns by ``dth`` [rad] (midpoint heading)."""
+    """Pose after moving ``ds`` [m] along a circular arc that turns by ``dth`` [rad] (exact).
+
+    The chord of the arc has length ``ds * sin(dth/2) / (dth/2)`` and points along the midpoint heading.
+    """
     th_mid = p.theta + 0.5 * dth
-    return Pose2D(p.x + ds * math.cos(th_mid), p.y + ds * math.sin(th_mid), wrap_angle(p.theta + dth))
+    chord = ds * float(np.sinc(0.5 * dth / math.pi))  # np.sinc(x) = sin(pi x) / (pi x)
+    return Pose2D(p.x + chord * math.cos(th_mid), p.y + chord * math.sin(th_mid), wrap_angle(p.theta + dth))
 
 
 def _unicycle(p: Pose2D, v: float, omega: float, h: float) -> Pose2D:

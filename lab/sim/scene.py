@@ -237,16 +237,20 @@ def load_scene(name_or_path: str | Path) -> Scene:
             wall_height=float(r.get("wall_height", 2.5)),
             wall_thickness=float(r.get("wall_thickness", 0.1)),
             floor_texture=_asset(base, r["floor_texture"], f"{where} [room] floor_texture")
-            if "floor_texture" in r else None,
+            if "floor_texture" in r
+            else None,
             wall_texture=_asset(base, r["wall_texture"], f"{where} [room] wall_texture")
-            if "wall_texture" in r else None,
+            if "wall_texture" in r
+            else None,
             tile_m=float(r.get("tile_m", 1.0)),
         )
     start = (0.0, 0.0, 0.0)
     if "robot" in d:
         _check_keys(d["robot"], {"start"}, f"{where} [robot]")
         start = _floats(d["robot"].get("start", [0, 0, 0]), 3, f"{where} [robot] start")
-    bodies = tuple(_parse_body(b, base, f"{where} [[body]] #{i + 1}") for i, b in enumerate(d.get("body", [])))
+    bodies = tuple(
+        _parse_body(b, base, f"{where} [[body]] #{i + 1}") for i, b in enumerate(d.get("body", []))
+    )
     names = [b.name for b in bodies]
     dup = {n for n in names if names.count(n) > 1}
     if dup:
@@ -261,8 +265,11 @@ def load_scene(name_or_path: str | Path) -> Scene:
         uf = m.get("unique_face", "+X")
         if uf not in ("+X", "-X", "+Y", "-Y"):
             raise ConfigError(f"{w}: unique_face {uf!r} is not one of +X, -X, +Y, -Y")
-        models.append(ModelSpec(str(m["name"]), _floats(m["size"], 3, f"{w} size"),
-                                _asset(base, m["atlas"], f"{w} atlas"), uf))
+        models.append(
+            ModelSpec(
+                str(m["name"]), _floats(m["size"], 3, f"{w} size"), _asset(base, m["atlas"], f"{w} atlas"), uf
+            )
+        )
     return Scene(
         name=str(d.get("name", p.stem)),
         path=p,

@@ -162,8 +162,11 @@ class Carrier:
             return
         x, y, th = self.pose.x, self.pose.y, self.pose.theta
         th_mid = th + 0.5 * self.omega * dt
-        self.pose = Pose2D(x + self.v * dt * math.cos(th_mid), y + self.v * dt * math.sin(th_mid),
-                           math.atan2(math.sin(th + self.omega * dt), math.cos(th + self.omega * dt)))
+        self.pose = Pose2D(
+            x + self.v * dt * math.cos(th_mid),
+            y + self.v * dt * math.sin(th_mid),
+            math.atan2(math.sin(th + self.omega * dt), math.cos(th + self.omega * dt)),
+        )
         self._place()
 
 
@@ -219,7 +222,9 @@ class SimWorld:
         process, so this raises :class:`ConfigError` instead.
     """
 
-    def __init__(self, scene: str | Scene = "lab_room", render: RenderSettings | None = None, gui: bool = False):
+    def __init__(
+        self, scene: str | Scene = "lab_room", render: RenderSettings | None = None, gui: bool = False
+    ):
         self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
         self.settings = render or RenderSettings()
         if gui and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
@@ -284,8 +289,11 @@ class SimWorld:
             sx, sy = room.size
             floor_tex = room.floor_texture
             floor = (sx + 2 * room.wall_thickness, sy + 2 * room.wall_thickness, 0.02)
-            fid = (self._textured_box(floor, floor_tex, "tiled", room.tile_m, pos=(0, 0, -0.01))
-                   if floor_tex else self._plain_box(floor, (0.6, 0.6, 0.6), (0, 0, -0.01)))
+            fid = (
+                self._textured_box(floor, floor_tex, "tiled", room.tile_m, pos=(0, 0, -0.01))
+                if floor_tex
+                else self._plain_box(floor, (0.6, 0.6, 0.6), (0, 0, -0.01))
+            )
             self._register("floor", fid)
             h, t = room.wall_height, room.wall_thickness
             walls = {
@@ -295,8 +303,11 @@ class SimWorld:
                 "wall_west": ((t, sy, h), (-sx / 2 - t / 2, 0, h / 2)),
             }
             for name, (size, pos) in walls.items():
-                wid = (self._textured_box(size, room.wall_texture, "tiled", room.tile_m, pos=pos)
-                       if room.wall_texture else self._plain_box(size, (0.85, 0.85, 0.8), pos))
+                wid = (
+                    self._textured_box(size, room.wall_texture, "tiled", room.tile_m, pos=pos)
+                    if room.wall_texture
+                    else self._plain_box(size, (0.85, 0.85, 0.8), pos)
+                )
                 self._register(name, wid)
         else:
             # a bare floor, 12 x 12 m, for scenes without a room (the training ring)
@@ -313,7 +324,9 @@ class SimWorld:
         cx, cy, cz = b.centre
         if b.shape == "cylinder":
             r, h = b.size
-            vis = self.p.createVisualShape(pybullet.GEOM_CYLINDER, radius=r, length=h, rgbaColor=(*b.color, 1))
+            vis = self.p.createVisualShape(
+                pybullet.GEOM_CYLINDER, radius=r, length=h, rgbaColor=(*b.color, 1)
+            )
             col = self.p.createCollisionShape(pybullet.GEOM_CYLINDER, radius=r, height=h)
             return self.p.createMultiBody(0, col, vis, (cx, cy, cz))
         if b.shape == "textured_box":
@@ -339,7 +352,9 @@ class SimWorld:
             self._register(f"{b.name}/leg{i}", lid)
         return top
 
-    def add_carrier(self, model: ModelSpec, pose: Pose2D, box_yaw: float = 0.0, name: str = "target") -> Carrier:
+    def add_carrier(
+        self, model: ModelSpec, pose: Pose2D, box_yaw: float = 0.0, name: str = "target"
+    ) -> Carrier:
         """Put a box model on a second robot at ``pose``; the box is addressable as ``name``."""
         c = Carrier(self, name, model, pose, box_yaw)
         self.carriers[name] = c
@@ -357,8 +372,14 @@ class SimWorld:
         self.t += dt
 
     # --- rendering ------------------------------------------------------------------------------
-    def render(self, G_WC: np.ndarray, camera, want_depth: bool = False, want_seg: bool = False,
-               supersample: int | None = None):
+    def render(
+        self,
+        G_WC: np.ndarray,
+        camera,
+        want_depth: bool = False,
+        want_seg: bool = False,
+        supersample: int | None = None,
+    ):
         """Render the view of a pinhole camera whose optical frame C is at ``G_WC``.
 
         Parameters
@@ -383,13 +404,22 @@ class SimWorld:
         fwd = G_WC[:3, 2]
         up = -G_WC[:3, 1]
         view = self.p.computeViewMatrix(eye.tolist(), (eye + fwd).tolist(), up.tolist())
-        proj = self.p.computeProjectionMatrixFOV(camera.fov_y_deg, camera.width / camera.height,
-                                                 self.settings.near, self.settings.far)
+        proj = self.projection_matrix(camera, s)
         flags = 0 if want_seg else pybullet.ER_NO_SEGMENTATION_MASK
-        renderer = pybullet.ER_TINY_RENDERER if self.settings.renderer == "tiny" else pybullet.ER_BULLET_HARDWARE_OPENGL
+        renderer = (
+            pybullet.ER_TINY_RENDERER
+            if self.settings.renderer == "tiny"
+            else pybullet.ER_BULLET_HARDWARE_OPENGL
+        )
         _, _, rgba, depth_buf, seg = self.p.getCameraImage(
-            W, H, view, proj, shadow=int(self.settings.shadows), lightDirection=self.settings.light_direction,
-            renderer=renderer, flags=flags,
+            W,
+            H,
+            view,
+            proj,
+            shadow=int(self.settings.shadows),
+            lightDirection=self.settings.light_direction,
+            renderer=renderer,
+            flags=flags,
         )
         rgb = np.asarray(rgba, dtype=np.uint8).reshape(H, W, 4)[:, :, :3]
         if s > 1:
@@ -403,6 +433,36 @@ class SimWorld:
         if segm is not None:
             segm = np.where(segm >= 0, segm & ((1 << 24) - 1), -1)
         return np.ascontiguousarray(rgb), depth, segm
+
+    def projection_matrix(self, camera, supersample: int = 1) -> list[float]:
+        """OpenGL projection (column-major, 16 floats) whose image has exactly ``camera``'s intrinsics.
+
+        Built from ``fx, fy, cx, cy`` rather than a field of view, so any principal point is honoured.
+        TinyRenderer samples each pixel at its corner, not its centre, and flips the rows; measured
+        (``tests/test_sim_render.py``) that puts the principal point at ``(W/2, H/2 - 1)`` with
+        ``computeProjectionMatrixFOV``. The off-centre terms below undo that, so a render at any
+        supersampling factor has ``cx = W/2 - 0.5, cy = H/2 - 0.5`` as ``StereoCamera.from_fov`` says.
+        EGL (real OpenGL) samples pixel centres.
+        """
+        s = supersample
+        W, H = camera.width * s, camera.height * s
+        fx, fy = camera.fx * s, camera.fy * s
+        # pixel index u in the s-times image that INTER_AREA maps onto index (u - (s-1)/2)/s
+        cx, cy = camera.cx * s + (s - 1) / 2, camera.cy * s + (s - 1) / 2
+        if self.settings.renderer == "tiny":  # samples at x_screen = u, rows r = H - 1 - y_screen
+            p02, p12 = 1.0 - 2.0 * cx / W, 2.0 * (cy - H / 2 + 1.0) / H
+        else:  # samples at pixel centres: x_screen = u + 0.5, r + 0.5 = H - y_screen
+            p02, p12 = 1.0 - 2.0 * (cx + 0.5) / W, 2.0 * (cy - H / 2 + 0.5) / H
+        n, f = self.settings.near, self.settings.far
+        P = np.array(
+            [
+                [2.0 * fx / W, 0.0, p02, 0.0],
+                [0.0, 2.0 * fy / H, p12, 0.0],
+                [0.0, 0.0, -(f + n) / (f - n), -2.0 * f * n / (f - n)],
+                [0.0, 0.0, -1.0, 0.0],
+            ]
+        )
+        return P.T.reshape(-1).tolist()  # column-major, as pybullet expects
 
     def render_stereo(self, G_WC: np.ndarray, camera):
         """Left and right images of a rectified pair whose left optical frame is at ``G_WC``."""
