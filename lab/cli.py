@@ -97,6 +97,18 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--supersample", type=int, default=1, choices=(1, 2), help="render at 2x and downsample")
     r.add_argument("--out", type=Path, default=Path("out/render"), help="output folder (default: out/render)")
 
+    t = sub.add_parser(
+        "train",
+        help="build the feature databases and colour models (cached)",
+        description="Render each object from its training ring, extract 3D SIFT features and colour "
+        "histograms, and store them in the cache (reused while textures and parameters are unchanged).",
+    )
+    t.add_argument("objects", nargs="*", help="object names (default: all; see `lab train --list`)")
+    t.add_argument("--list", action="store_true", help="list the trainable objects and exit")
+    t.add_argument("--cache", type=Path, help="cache folder (default: $LAB_CACHE or ~/.cache/lab)")
+    t.add_argument("--force", action="store_true", help="rebuild even when the cache is current")
+    t.add_argument("--step-deg", type=float, default=10.0, help="angle between ring viewpoints (default 10)")
+
     sub.add_parser(
         "worlds",
         help="list the worlds and their bodies",
@@ -150,6 +162,30 @@ def _cmd_render(args) -> int:
     return 0
 
 
+def _cmd_train(args) -> int:
+    import time
+
+    from lab.vision.database import TrainingParams, database_path, get_database, trainable_objects
+
+    names = list(trainable_objects())
+    if args.list:
+        print("\n".join(names))
+        return 0
+    unknown = [n for n in args.objects if n not in names]
+    if unknown:
+        raise LabError(f"unknown object(s) {', '.join(unknown)}; trainable objects: {', '.join(names)}")
+    folder = args.cache / "databases" if args.cache else None
+    params = TrainingParams(step_deg=args.step_deg)
+    for name in args.objects or names:
+        t0 = time.perf_counter()
+        db = get_database(name, folder, params, rebuild=args.force)
+        print(
+            f"{name}: {len(db)} features from {db.seen_from.shape[1]} views "
+            f"({time.perf_counter() - t0:.1f} s) -> {database_path(name, folder)}"
+        )
+    return 0
+
+
 def _cmd_demo(args) -> int:
     from lab.demo import run_demo
 
@@ -164,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         ap.print_help()
         return 0
-    handlers = {"demo": _cmd_demo, "render": _cmd_render, "worlds": _cmd_worlds}
+    handlers = {"demo": _cmd_demo, "render": _cmd_render, "train": _cmd_train, "worlds": _cmd_worlds}
     try:
         return handlers[args.command](args)
     except LabError as e:

@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 
 from lab.sim.assets import write_png_atomic
+from lab.vision.dense import disparity_map
 
 __all__ = ["disparity_map", "disparity_picture", "save_rgb"]
 
@@ -15,27 +16,6 @@ __all__ = ["disparity_map", "disparity_picture", "save_rgb"]
 def save_rgb(path: Path, img_rgb: np.ndarray) -> None:
     """Write an RGB image as PNG (atomically)."""
     write_png_atomic(Path(path), img_rgb)
-
-
-def disparity_map(
-    left_rgb: np.ndarray, right_rgb: np.ndarray, num_disparities: int = 64, block_size: int = 5
-) -> np.ndarray:
-    """Dense disparity [px] of a rectified pair by semi-global matching (NaN where invalid)."""
-    gl = cv2.cvtColor(left_rgb, cv2.COLOR_RGB2GRAY)
-    gr = cv2.cvtColor(right_rgb, cv2.COLOR_RGB2GRAY)
-    sgbm = cv2.StereoSGBM_create(
-        minDisparity=0,
-        numDisparities=num_disparities,
-        blockSize=block_size,
-        P1=8 * block_size**2,
-        P2=32 * block_size**2,
-        uniquenessRatio=10,
-        speckleWindowSize=50,
-        speckleRange=2,
-    )
-    d = sgbm.compute(gl, gr).astype(np.float32) / 16.0
-    d[d <= 0] = np.nan
-    return d
 
 
 def disparity_picture(left_rgb: np.ndarray, right_rgb: np.ndarray) -> np.ndarray:

@@ -40,10 +40,6 @@ __all__ = [
 FACES = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
 FACE_PX = 256
 
-_WORDS = (
-    "ROBOT VISION STEREO KALMAN ENTROPY BAYES SEARCH MODEL POSE SIFT FEATURE CAMERA PANTILT "
-    "ODOMETRY GRID PROBABILITY LAB DEPTH DISPARITY TRACK SCAN MAP RING VIEW GAIN"
-).split()
 _FONTS = (
     cv2.FONT_HERSHEY_SIMPLEX,
     cv2.FONT_HERSHEY_DUPLEX,
@@ -101,7 +97,8 @@ def magazine_texture(
             pts = rng.integers(0, size, (3, 2)).astype(np.int32)
             cv2.fillPoly(img, [pts], c, cv2.LINE_AA)
     for _ in range(7):
-        word = _WORDS[rng.integers(0, len(_WORDS))]
+        # words of random letters: textures share no vocabulary, so their SIFT features do not alias
+        word = "".join(chr(65 + int(c)) for c in rng.integers(0, 26, int(rng.integers(3, 8))))
         c = _color(rng, pal)
         ink = tuple(255 - v for v in c)
         x0, y0 = int(rng.integers(0, int(size * 0.55))), int(rng.integers(int(20 * s), size))
@@ -311,7 +308,7 @@ def build_textures(out: Path | None = None) -> list[Path]:
     shared = magazine_texture(SHARED_SEED)
     top = np.full((FACE_PX, FACE_PX, 3), (205, 200, 190), np.uint8)
     for k in range(BOX_MODELS):
-        unique = magazine_texture(100 + k, label=f"M{k}")
+        unique = magazine_texture(100 + k, label=("ALPHA", "BRAVO", "DELTA", "KILO")[k])
         faces = {UNIQUE_FACE: unique, "+Z": top, "-Z": top}
         faces.update({f: shared for f in SHARED_FACES})
         p = out / f"box{k}.png"

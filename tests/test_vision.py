@@ -1,0 +1,248 @@
+"""Stereo 3D SIFT features and feature databases against the simulator's ground truth and OpenCV."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from lab.errors import AssetError, ConfigError
+from lab.geometry import Pose2D, Ry, se3, se3_inv, transform_points, translation
+from lab.robot import StereoCamera
+from lab.sim import RenderSettings, SimWorld, load_box_models, viewpoint_G_WC
+from lab.vision.database import (
+    Matcher,
+    TrainingParams,
+    get_database,
+    load_database,
+    save_database,
+    train_database,
+)
+from lab.vision.rectify import Rectifier, StereoCalibration
+from lab.vision.stereo import StereoParams, stereo_features, triangulate
+
+CAM = StereoCamera.from_fov(320, 240, 60.0, 0.12)
+RING = [(math.cos(a), math.sin(a)) for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)]
+
+
+@pytest.fixture(scope="module")
+def models():
+    return load_box_models()
+
+
+@pytest.fixture(scope="module")
+def dbs():
+    return {k: get_database(k, progress=False) for k in ("M0", "M1", "M2", "M3")}
+
+
+def _bilinear(img, uv):
+    x0, y0 = np.floor(uv[:, 0]).astype(int), np.floor(uv[:, 1]).astype(int)
+    ax, ay = uv[:, 0] - x0, uv[:, 1] - y0
+    return (
+        img[y0, x0] * (1 - ax) * (1 - ay)
+        + img[y0, x0 + 1] * ax * (1 - ay)
+        + img[y0 + 1, x0] * (1 - ax) * ay
+        + img[y0 + 1, x0 + 1] * ax * ay
+    )
+
+
+def _errors_against_depth(models, supersample):
+    """3D errors [m] of triangulated box features against the depth buffer, and Mahalanobis distances."""
+    errs, maha = [], []
+    for k, m in enumerate(models):
+        with SimWorld("box_database", RenderSettings(supersample=supersample)) as w:
+            w.add_carrier(m, Pose2D(0, 0, 0), box_yaw=0.3 * k)
+            for cx, cy in RING:
+                G_WC = viewpoint_G_WC((cx, cy, 0.7), (0, 0, 0.49))
+                f = stereo_features(*w.render_stereo(G_WC, CAM), CAM)
+                depth = w.truth.depth(G_WC, CAM)
+                box = w.truth.segmentation(G_WC, CAM) == w.body_id("target")
+                inner = cv2.erode(box.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+                u = np.round(f.uv).astype(int)
+                sel = inner[u[:, 1], u[:, 0]]
+                z = _bilinear(depth, f.uv[sel])
+                uv = f.uv[sel]
+                p_true = np.stack([(uv[:, 0] - CAM.cx) * z / CAM.fx, (uv[:, 1] - CAM.cy) * z / CAM.fy, z], 1)
+                e = f.points_C[sel] - p_true
+                errs.append(np.linalg.norm(e, axis=1))
+                maha.append(np.einsum("ni,nij,nj->n", e, np.linalg.inv(f.covariances[sel]), e))
+    return np.concatenate(errs), np.concatenate(maha)
+
+
+def test_triangulated_features_within_10mm_at_1m(models):
+    e1, m1 = _errors_against_depth(models, 1)
+    assert len(e1) > 300
+    print(
+        f"\n1x: n={len(e1)} median {np.median(e1) * 1e3:.1f} mm p90 {np.percentile(e1, 90) * 1e3:.1f} mm "
+        f"inside 95% ellipsoid {np.mean(m1 < 7.815):.2f}"
+    )
+    assert np.median(e1) <= 0.010
+    # the error model is consistent: most errors fall inside the 95% ellipsoid (outliers are mismatches)
+    assert 0.85 <= np.mean(m1 < 7.815) <= 0.99
+    e2, m2 = _errors_against_depth(models, 2)
+    print(
+        f"2x: n={len(e2)} median {np.median(e2) * 1e3:.1f} mm p90 {np.percentile(e2, 90) * 1e3:.1f} mm "
+        f"inside 95% ellipsoid {np.mean(m2 < 7.815):.2f}"
+    )
+    assert np.median(e2) < np.median(e1)  # supersampling helps, as measured before the project
+
+
+def test_triangulation_agrees_with_opencv():
+    rng = np.random.default_rng(0)
+    uv_l = rng.uniform([20, 20], [300, 220], (50, 2))
+    d = rng.uniform(5, 60, 50)
+    uv_r = uv_l - np.c_[d, np.zeros(50)]
+    P1 = CAM.K @ np.c_[np.eye(3), np.zeros(3)]
+    P2 = CAM.K @ np.c_[np.eye(3), [-CAM.baseline, 0, 0]]
+    X = cv2.triangulatePoints(P1, P2, uv_l.T, uv_r.T)
+    np.testing.assert_allclose(triangulate(uv_l, uv_r, CAM), (X[:3] / X[3]).T, rtol=1e-9, atol=1e-9)
+
+
+def test_unique_face_matches_its_model_5x_more_and_shared_faces_match_all(models, dbs):
+    matchers = {k: Matcher(db) for k, db in dbs.items()}
+    for k, m in enumerate(models):
+        with SimWorld("box_database") as w:
+            w.add_carrier(m, Pose2D(0, 0, 0), box_yaw=0.2)
+            for dist, height in ((1.0, 0.7), (0.8, 0.65)):
+                eye = (dist * math.cos(0.2), dist * math.sin(0.2), height)  # frontal to the unique face (+X)
+                f = stereo_features(*w.render_stereo(viewpoint_G_WC(eye, (0, 0, 0.49)), CAM), CAM)
+                n = {j: mt.match(f).n_matched for j, mt in matchers.items()}
+                own = n[m.name]
+                assert own >= 12 and own >= 5 * max(1, max(v for j, v in n.items() if j != m.name)), (
+                    k,
+                    dist,
+                    n,
+                )
+            shared_eye = (-math.cos(0.2), -math.sin(0.2), 0.7)  # the -X face: shared
+            f = stereo_features(*w.render_stereo(viewpoint_G_WC(shared_eye, (0, 0, 0.49)), CAM), CAM)
+            n = [mt.match(f).n_matched for mt in matchers.values()]
+            assert min(n) >= 5 and max(n) <= 2 * min(n), n
+
+
+def test_matcher_flann_agrees_with_exact_search(dbs):
+    db = dbs["M1"]
+    with SimWorld("box_database") as w:
+        w.add_carrier(load_box_models()[1], Pose2D(0, 0, 0))
+        f = stereo_features(*w.render_stereo(viewpoint_G_WC((0.9, 0.3, 0.7), (0, 0, 0.49)), CAM), CAM)
+    a, b = Matcher(db, method="flann").match(f), Matcher(db, method="brute").match(f)
+    sa = set(zip(a.idx_meas, a.idx_db, strict=True))
+    sb = set(zip(b.idx_meas, b.idx_db, strict=True))
+    assert len(sa & sb) >= 0.9 * len(sb)  # approximate search finds nearly all exact matches
+    # OpenCV's own brute-force matcher agrees with our nearest neighbours
+    nn = cv2.BFMatcher(cv2.NORM_L2).match(f.descriptors, db.descriptors)
+    idx, _ = Matcher(db, method="brute").neighbours(f.descriptors)
+    agree = np.mean([m.trainIdx == idx[m.queryIdx, 0] for m in nn])
+    assert agree > 0.99
+    # and FLANN repeats itself exactly
+    c = Matcher(db, method="flann").match(f)
+    np.testing.assert_array_equal(a.idx_db, c.idx_db)
+
+
+def test_training_is_deterministic_and_remembers_visibility(dbs):
+    params = TrainingParams(step_deg=30.0)
+    a, b = train_database("M2", params), train_database("M2", params)
+    assert a.digest() == b.digest()
+    assert a.seen_from.shape == (len(a), 12) and a.seen_from.any(axis=1).all()
+    # a feature on the +X face is seen from azimuths near 0, never from behind (azimuth 180 deg)
+    db = dbs["M2"]
+    front = db.points_O[:, 0] > 0.13
+    az = np.degrees(db.viewpoints[:, 0])
+    behind = (az > 120) & (az < 240)
+    assert front.sum() > 20 and not db.seen_from[np.ix_(front, behind)].any()
+
+
+def test_cache_is_versioned_atomic_and_detects_corruption(tmp_path, dbs):
+    db = dbs["M3"]
+    p = tmp_path / "M3.npz"
+    save_database(db, p)
+    assert load_database(p).digest() == db.digest()
+    raw = bytearray(p.read_bytes())
+    raw[len(raw) // 2] ^= 0xFF
+    p.write_bytes(bytes(raw))
+    with pytest.raises(AssetError, match="corrupt"):
+        load_database(p)
+    with pytest.raises(AssetError, match="does not exist"):
+        load_database(tmp_path / "none.npz")
+    with pytest.raises(ConfigError, match="unknown object 'M9'; trainable objects: M0, M1, M2, M3"):
+        get_database("M9")
+    # a corrupt cache entry is rebuilt, and says so
+    folder = tmp_path / "cache"
+    from lab.vision.database import database_path
+
+    q = database_path("M3", folder)
+    q.parent.mkdir(parents=True)
+    q.write_bytes(b"not a database")
+    params = TrainingParams(step_deg=60.0)
+    got = get_database("M3", folder, params, progress=False)
+    assert load_database(q).digest() == got.digest()
+
+
+def _distort(ideal, K_ideal, K_raw, D, size):
+    """The raw image a distorting camera (K_raw, D) sees, resampled from an ideal pinhole render."""
+    w, h = size
+    u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    pts = np.stack([u.ravel(), v.ravel()], 1).reshape(-1, 1, 2)
+    n = cv2.undistortPoints(pts, K_raw, D).reshape(-1, 2)
+    mx = (K_ideal[0, 0] * n[:, 0] + K_ideal[0, 2]).reshape(h, w).astype(np.float32)
+    my = (K_ideal[1, 1] * n[:, 1] + K_ideal[1, 2]).reshape(h, w).astype(np.float32)
+    return cv2.remap(ideal, mx, my, cv2.INTER_LINEAR)
+
+
+def _surface_distance(p_O, size):
+    half = 0.5 * np.asarray(size)
+    return np.min(np.abs(np.abs(p_O) - half), axis=1)
+
+
+def test_real_camera_style_input_gives_the_same_accuracy(models, tmp_path):
+    """Render distorted raw images with a slightly rotated right camera, store a calibration file,
+    rectify, and measure the distance of triangulated features to the true box surface."""
+    K_raw = np.array([[215.0, 0, 161.3], [0, 213.0, 118.2], [0, 0, 1]])
+    D = np.array([-0.18, 0.05, 0.0008, -0.0006, 0.0])
+    R_LR = Ry(math.radians(0.8))  # right camera slightly toed in
+    t_LR = np.array([0.12, 0.001, -0.0015])
+    calib = StereoCalibration((320, 240), K_raw, D, K_raw, D, R_LR.T, -R_LR.T @ t_LR)
+    path = tmp_path / "stereo.yaml"
+    calib.save(path)
+    rect = Rectifier(StereoCalibration.load(path))
+    wide = StereoCamera.from_fov(640, 480, 80.0, 0.12)  # the ideal render covers the raw field of view
+    direct, via_raw = [], []
+    m = models[0]
+    with SimWorld("box_database", RenderSettings(supersample=1)) as w:
+        c = w.add_carrier(m, Pose2D(0, 0, 0), box_yaw=0.5)
+        for cx, cy in RING[:5]:
+            G_WL = viewpoint_G_WC((cx, cy, 0.7), (0, 0, 0.49))
+            G_WR = G_WL @ se3(R_LR, t_LR)
+            raw_l = _distort(w.render(G_WL, wide)[0], wide.K, K_raw, D, (320, 240))
+            raw_r = _distort(w.render(G_WR, wide)[0], wide.K, K_raw, D, (320, 240))
+            left, right = rect.rectify(raw_l, raw_r)
+            f = stereo_features(left, right, rect.camera)
+            G_W_rect = G_WL @ se3(rect.R1.T)  # the rectified left frame is the raw one turned by R1
+            p_O = transform_points(se3_inv(c.G_WO) @ G_W_rect, f.points_C)
+            via_raw.append(_surface_distance(p_O[np.all(np.abs(p_O) < 0.16, 1)], m.size))
+            f0 = stereo_features(*w.render_stereo(G_WL, CAM), CAM)
+            p_O = transform_points(se3_inv(c.G_WO) @ G_WL, f0.points_C)
+            direct.append(_surface_distance(p_O[np.all(np.abs(p_O) < 0.16, 1)], m.size))
+    d_direct, d_raw = np.median(np.concatenate(direct)), np.median(np.concatenate(via_raw))
+    print(f"\nsurface distance median: rendered {d_direct * 1e3:.2f} mm, rectified raw {d_raw * 1e3:.2f} mm")
+    assert abs(rect.camera.baseline - 0.12) < 0.003
+    assert d_raw <= 1.2 * d_direct + 1e-4
+    with pytest.raises(ConfigError, match="calibration is for 320x240"):
+        rect.rectify(np.zeros((480, 640, 3), np.uint8), np.zeros((480, 640, 3), np.uint8))
+    with pytest.raises(AssetError, match="does not exist"):
+        StereoCalibration.load(tmp_path / "missing.yaml")
+
+
+def test_bad_inputs_are_refused_clearly():
+    img = np.zeros((240, 320, 3), np.uint8)
+    with pytest.raises(ConfigError, match="differ in shape"):
+        stereo_features(img, img[:100], CAM)
+    with pytest.raises(ConfigError, match="camera model is 320x240"):
+        stereo_features(np.zeros((100, 100), np.uint8), np.zeros((100, 100), np.uint8), CAM)
+    assert len(stereo_features(img, img, CAM)) == 0  # a blank pair has no features, not an error
+    with pytest.raises(ConfigError, match="ratio"):
+        StereoParams(ratio=1.5)
+    with pytest.raises(ConfigError, match="step_deg must divide 360"):
+        TrainingParams(step_deg=7.0)
+
+
+_ = translation
