@@ -93,10 +93,12 @@ def _planes_through(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _tls_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
-    """Total-least-squares plane through points (m, 3): the normal is the smallest singular vector."""
+    """Total-least-squares plane through points (m, 3): the normal is the eigenvector of the scatter
+    matrix with the smallest eigenvalue (the direction in which the points spread least)."""
     c = points.mean(axis=0)
-    _, _, Vt = np.linalg.svd(points - c, full_matrices=False)
-    n = Vt[2]
+    X = points - c
+    _, V = np.linalg.eigh(X.T @ X)  # eigenvalues ascending
+    n = V[:, 0]
     if n[2] < 0:
         n = -n
     return n, float(-n @ c)
