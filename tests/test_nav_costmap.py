@@ -214,6 +214,10 @@ def test_range_limit_and_bad_points_are_ignored():
     with pytest.raises(ValueError, match="sensor_origin_xy"):
         cm.integrate(pts, PLANE, sensor_origin_xy=(np.nan, 0.0))
     cm.integrate(np.zeros((0, 3)), PLANE)  # an empty view changes nothing
+    with pytest.raises(ValueError, match=r"shape \(n, 3\)"):
+        cm.integrate(np.zeros((6, 2)), PLANE)
+    with pytest.raises(ValueError, match="points_W"):
+        fit_ground_plane(np.zeros((100, 2)), rng=0)
 
 
 # -- inflation ---------------------------------------------------------------------------------------

@@ -54,7 +54,7 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.navigation.grid import GridSpec, check_finite_xy
-from lab.navigation.ground import GroundPlane
+from lab.navigation.ground import GroundPlane, as_points3
 
 __all__ = ["CellState", "CostmapConfig", "CostmapUpdate", "Costmap", "CostGrid", "grow_obstacles"]
 
@@ -353,7 +353,7 @@ class Costmap:
         CostmapUpdate
         """
         cfg, spec = self.config, self.spec
-        P = np.asarray(points_W, dtype=float).reshape(-1, 3)
+        P = as_points3(points_W)
         n_points = len(P)
         ij, use = spec.cells_of(P[:, :2])
         use &= np.isfinite(P[:, 2])

@@ -25,6 +25,22 @@ class NoGroundPlane(LabError, RuntimeError):
     """No near-horizontal plane close to z = 0 has enough support among the points."""
 
 
+def as_points3(points, name: str = "points_W") -> np.ndarray:
+    """``points`` as a float array of shape (n, 3); a single point (3,) becomes (1, 3).
+
+    Raises
+    ------
+    ValueError
+        Any other shape (e.g. (n, 2) image points), naming ``name``.
+    """
+    P = np.asarray(points, dtype=float)
+    if P.ndim == 1 and P.shape == (3,):
+        P = P[None, :]
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (n, 3) [m], got {P.shape}")
+    return P
+
+
 @dataclass(frozen=True)
 class GroundPlane:
     """The floor as a plane in the world frame W: ``h(p) = normal . p + offset`` is the height [m].
@@ -67,7 +83,7 @@ class GroundPlane:
 
     def height(self, points_W: np.ndarray) -> np.ndarray:
         """Signed height [m] of points above the plane, shape (n, 3) -> (n,)."""
-        p = np.asarray(points_W, dtype=float).reshape(-1, 3)
+        p = as_points3(points_W)
         return p @ np.asarray(self.normal) + self.offset
 
     def z_at(self, x, y):
@@ -159,7 +175,7 @@ def fit_ground_plane(
         floor, e.g. it faces a wall).
     """
     rng = np.random.default_rng(rng)
-    P = np.asarray(points_W, dtype=float).reshape(-1, 3)
+    P = as_points3(points_W)
     P = P[np.isfinite(P).all(axis=1)]
     n_pts = len(P)
     need = max(int(min_inliers), math.ceil(min_inlier_fraction * n_pts), 3)
