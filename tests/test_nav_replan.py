@@ -89,7 +89,7 @@ def test_unreachable_goal_is_reported_and_retried():
     assert d.replanned and not d.path.found and d.path.reason == "UNREACHABLE" and len(d.waypoints) == 0
     occ[40, 15:25] = False  # a door opens
     d = rp.update(Costmap.from_occupancy(spec, occ).inflated(radius), (0.5, 2.0))
-    assert d.replanned and d.path.found
+    assert d.replanned and d.reason == "retry" and d.path.found
     with pytest.raises(ValueError, match="pose"):
         rp.update(Costmap.from_occupancy(spec, occ).inflated(radius), (math.nan, 2.0))
 

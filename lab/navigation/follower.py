@@ -431,7 +431,9 @@ def drive_to(
     follower : PathFollower, optional
         Default: ``PathFollower(robot.base_limits)``.
     on_step : callable ``(pose, t) -> StepUpdate or None``, optional
-        Called before each command, e.g. to integrate a stereo frame into the costmap and replan.
+        Called before each command, e.g. to integrate a stereo frame into the costmap and replan. A new
+        path replaces the current one (progress restarts on it); an empty one ends the run with
+        NO_PATH; ``abort=True`` ends it with ABORTED.
 
     Returns
     -------

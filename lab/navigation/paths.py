@@ -33,6 +33,9 @@ __all__ = [
 def segment_cells(grid: CostGrid, a_xy, b_xy, step_fraction: float = 0.125) -> tuple[np.ndarray, bool]:
     """Cells a straight segment passes over, by sampling it every ``step_fraction`` of a cell.
 
+    Sampling can miss a cell the segment only grazes (by less than a sample step, 1.25 cm for 10 cm
+    cells); the planner's inflation margin is far larger.
+
     Returns
     -------
     ij : ndarray, shape (k, 2), int
@@ -136,8 +139,9 @@ class ReplanDecision:
     replanned : bool
         A new path was planned in this update.
     reason : str
-        ``"initial"``, ``"blocked"`` (the path ahead crossed a blocked cell), ``"clear"`` (kept), or
-        ``"escape"`` (the robot stood in a grown obstacle and planned from the nearest free cell).
+        ``"initial"`` (first plan), ``"retry"`` (the previous plan had failed), ``"blocked"`` (the path
+        ahead crossed a blocked cell), ``"clear"`` (path kept), or ``"escape"`` (the robot stood in a
+        grown obstacle and planned from the nearest free cell).
     path : PathResult
         The current A* result (``path.found`` is False when planning failed; ``path.reason`` says why).
     waypoints : ndarray, shape (m, 2) [m]
@@ -220,7 +224,7 @@ class Replanner:
         """
         xy = check_finite_xy("pose", pose)
         if self.path is None or not self.path.found or len(self.waypoints) == 0:
-            reason = "initial" if self.path is None else "blocked"
+            reason = "initial" if self.path is None else "retry"
             result, wp, escaped = self._plan_from(grid, xy)
             self.path, self.waypoints = result, wp
             return ReplanDecision(True, "escape" if escaped else reason, result, wp)
