@@ -263,7 +263,9 @@ def astar(grid: CostGrid, start, goal) -> PathResult:
     return astar_cells(grid, ij[0], ij[1])
 
 
-def astar_to_region(grid: CostGrid, start, target_xy, max_distance: float, min_distance: float = 0.0):
+def astar_to_region(
+    grid: CostGrid, start, target_xy, max_distance: float, min_distance: float = 0.0
+) -> PathResult:
     """A* to the cheapest-to-reach cell whose centre is within ``[min_distance, max_distance]`` of a target.
 
     The search robot must stand facing a probability-map cell within local-search range, not on it
