@@ -1,4 +1,5 @@
-"""Synthetic stereo views of a floor with boxes, for the navigation tests (ground truth by ray casting).
+"""Synthetic scenes for the navigation tests: random cost grids, and stereo views of a floor with boxes
+(ground truth by ray casting).
 
 A pinhole camera on the robot's pan-tilt head casts one ray per pixel against a (possibly tilted and
 offset) floor plane and axis-aligned boxes standing on it. Stereo noise is modelled where it arises:
@@ -14,6 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from lab.geometry import Pose2D, transform_points
+from lab.navigation.costmap import CostGrid
+from lab.navigation.grid import GridSpec
 from lab.robot import StereoCamera
 
 
@@ -113,3 +116,15 @@ def stereo_view(
     Z_noisy = fb / disparity[ok]
     p_C = rays_C[ok] * Z_noisy[:, None]
     return transform_points(G_WC, p_C), hit[ok]
+
+
+def random_grid(rng, shape=None, res=None) -> CostGrid:
+    """A random cost grid: 0-45 % blocked cells, multipliers in {1, 1.5, 2, 4} (or all 1), a random origin."""
+    shape = shape or tuple(int(v) for v in rng.integers(4, 28, size=2))
+    res = res or float(rng.choice([0.05, 0.1, 0.25, 1.0]))
+    density = rng.uniform(0.0, 0.45)
+    cost = rng.choice([1.0, 1.0, 1.0, 1.5, 2.0, 4.0], size=shape)
+    if rng.random() < 0.3:
+        cost[:] = 1.0  # uniform costs: many equal-cost paths, the hard case for tie-breaking
+    cost[rng.random(shape) < density] = np.inf
+    return CostGrid(GridSpec((float(rng.uniform(-3, 3)), float(rng.uniform(-3, 3))), res, shape), cost)

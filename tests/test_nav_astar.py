@@ -11,6 +11,7 @@ import time
 import networkx as nx
 import numpy as np
 import pytest
+from nav_scenes import random_grid
 
 from lab.geometry import Pose2D
 from lab.navigation.astar import PathStatus, astar, astar_cells, astar_to_region, heading_towards
@@ -37,17 +38,6 @@ def peer_graph(grid: CostGrid) -> nx.DiGraph:
                 w = (SQ2 if di and dj else 1.0) * res * c[a, b]
                 G.add_edge((int(i), int(j)), (int(a), int(b)), weight=w)
     return G
-
-
-def random_grid(rng, shape=None, res=None) -> CostGrid:
-    shape = shape or tuple(int(v) for v in rng.integers(4, 28, size=2))
-    res = res or float(rng.choice([0.05, 0.1, 0.25, 1.0]))
-    density = rng.uniform(0.0, 0.45)
-    cost = rng.choice([1.0, 1.0, 1.0, 1.5, 2.0, 4.0], size=shape)
-    if rng.random() < 0.3:
-        cost[:] = 1.0  # uniform costs: many equal-cost paths, the hard case for tie-breaking
-    cost[rng.random(shape) < density] = np.inf
-    return CostGrid(GridSpec((float(rng.uniform(-3, 3)), float(rng.uniform(-3, 3))), res, shape), cost)
 
 
 def assert_valid_path(grid: CostGrid, r, start, goal=None):

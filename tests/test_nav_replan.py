@@ -5,8 +5,7 @@ import math
 import numpy as np
 import pytest
 from nav_fakes import KinematicRobot
-from nav_scenes import Box, Floor, stereo_view
-from test_nav_astar import random_grid
+from nav_scenes import Box, Floor, random_grid, stereo_view
 
 from lab.geometry import Pose2D
 from lab.navigation.astar import PathStatus, astar, astar_cells
