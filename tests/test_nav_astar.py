@@ -92,6 +92,29 @@ def test_costs_equal_networkx_on_random_grids_including_unreachable():
     assert n_found >= 200 and n_unreachable >= 20 and n_blocked >= 20, (n_found, n_unreachable, n_blocked)
 
 
+def test_compiled_and_python_searches_are_the_same_search():
+    """The numba kernel and the readable Python version expand the same cells and return the same path."""
+    rng = np.random.default_rng(11)
+    for _ in range(40):
+        grid = random_grid(rng)
+        free = np.argwhere(np.isfinite(grid.cost))
+        if len(free) < 2:
+            continue
+        for _ in range(3):
+            s, g = (tuple(free[k]) for k in rng.integers(0, len(free), 2))
+            a, b = astar_cells(grid, s, g, backend="compiled"), astar_cells(grid, s, g, backend="python")
+            assert a.status == b.status and a.expanded == b.expanded
+            np.testing.assert_array_equal(a.cells, b.cells)
+            assert a.cost == b.cost
+        target = grid.spec.centers_of(free[rng.integers(0, len(free), 1)])[0]
+        a = astar_to_region(grid, grid.spec.centers_of(free[:1])[0], target, 0.5, 0.2, backend="compiled")
+        b = astar_to_region(grid, grid.spec.centers_of(free[:1])[0], target, 0.5, 0.2, backend="python")
+        assert a.status == b.status and a.cost == b.cost
+        np.testing.assert_array_equal(a.cells, b.cells)
+    with pytest.raises(ValueError, match="backend must be"):
+        astar_cells(grid, s, g, backend="cuda")
+
+
 def test_same_query_gives_the_same_path_bit_for_bit():
     rng = np.random.default_rng(3)
     grid = random_grid(rng, shape=(40, 40), res=0.1)

@@ -206,6 +206,13 @@ class CostGrid:
         return np.pad(self.cost * self.spec.resolution, 1, constant_values=np.inf).ravel().tolist()
 
     @cached_property
+    def padded_step_costs_array(self) -> np.ndarray:
+        """:attr:`padded_step_costs` as a read-only float64 array, for the compiled A*."""
+        a = np.pad(self.cost * self.spec.resolution, 1, constant_values=np.inf).ravel()
+        a.flags.writeable = False
+        return a
+
+    @cached_property
     def min_cost(self) -> float:
         """Smallest finite multiplier (1 when every cell is blocked): scales A*'s heuristic."""
         finite = self.cost[np.isfinite(self.cost)]
