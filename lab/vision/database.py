@@ -492,6 +492,18 @@ class Correspondences:
     def empty(cls) -> Correspondences:
         return cls(np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros(0, bool))
 
+    def pairs(self, features: Features3D, db: FeatureDatabase) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The EKF's inputs for these matches: ``d_C`` (m, 3), ``b_O`` (m, 3) and ``Sigma_d`` (m, 3, 3).
+
+        One row per candidate, so a measured feature with aliases appears once per alias; RANSAC and
+        the EKF's feasibility gate keep the geometrically consistent one.
+        """
+        return (
+            features.points_C[self.idx_meas],
+            db.points_O[self.idx_db],
+            features.covariances[self.idx_meas],
+        )
+
 
 class Matcher:
     """Lowe's Best-Bin-First matching of measured features against one database (FLANN KD-tree).
