@@ -1,1 +1,45 @@
-"""lab.estimation"""
+"""Pose estimation: the 6-DOF pose EKF of the two papers and the bank of per-model filters.
+
+State ``X = [x, y, z, alpha, beta, gamma]``: the object frame O in the left camera frame C, z-y-x
+Euler angles (``docs/conventions.md``).
+
+* :mod:`~lab.estimation.models`: measurement model Eq. (3) and motion model Eqs. (1)-(2) with their
+  analytic Jacobians, process noise.
+* :mod:`~lab.estimation.fit`: closed-form rigid fit and RANSAC initialisation.
+* :mod:`~lab.estimation.ekf`: :class:`PoseEKF` (predict, gated Joseph-form update, Eq. (9) likelihood,
+  divergence detection).
+* :mod:`~lab.estimation.bank`: :class:`EKFBank`, one filter per database model.
+* :mod:`~lab.estimation.synthetic`: synthetic box features and stereo-like noise for tests and notebooks.
+"""
+
+from lab.estimation.models import (
+    ObjectNoiseKind,
+    ProcessNoise,
+    euler_rate_matrix,
+    euler_rate_matrix_inv,
+    measurement_covariance,
+    measurement_jacobian,
+    measurement_model,
+    motion_jacobian,
+    motion_model,
+    motion_noise_jacobians,
+    odometry_covariance,
+    process_noise_covariance,
+    state_residual,
+)
+
+__all__ = [
+    "ObjectNoiseKind",
+    "ProcessNoise",
+    "euler_rate_matrix",
+    "euler_rate_matrix_inv",
+    "measurement_covariance",
+    "measurement_jacobian",
+    "measurement_model",
+    "motion_jacobian",
+    "motion_model",
+    "motion_noise_jacobians",
+    "odometry_covariance",
+    "process_noise_covariance",
+    "state_residual",
+]
