@@ -12,6 +12,7 @@ Euler angles (``docs/conventions.md``).
 * :mod:`~lab.estimation.synthetic`: synthetic box features and stereo-like noise for tests and notebooks.
 """
 
+from lab.estimation.fit import InitResult, RansacConfig, fit_rigid_transform, ransac_pose
 from lab.estimation.models import (
     ObjectNoiseKind,
     ProcessNoise,
@@ -29,6 +30,10 @@ from lab.estimation.models import (
 )
 
 __all__ = [
+    "InitResult",
+    "RansacConfig",
+    "fit_rigid_transform",
+    "ransac_pose",
     "ObjectNoiseKind",
     "ProcessNoise",
     "euler_rate_matrix",
