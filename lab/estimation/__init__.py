@@ -12,6 +12,19 @@ Euler angles (``docs/conventions.md``).
 * :mod:`~lab.estimation.synthetic`: synthetic box features and stereo-like noise for tests and notebooks.
 """
 
+from lab.estimation.bank import EKFBank
+from lab.estimation.ekf import (
+    DivergenceConfig,
+    EKFConfig,
+    GateConfig,
+    PoseEKF,
+    PoseEstimate,
+    UpdateOutcome,
+    UpdateResult,
+    data_log_likelihood,
+    gate_matches,
+    nees,
+)
 from lab.estimation.fit import InitResult, RansacConfig, fit_rigid_transform, ransac_pose
 from lab.estimation.models import (
     ObjectNoiseKind,
@@ -30,6 +43,17 @@ from lab.estimation.models import (
 )
 
 __all__ = [
+    "DivergenceConfig",
+    "EKFBank",
+    "EKFConfig",
+    "GateConfig",
+    "PoseEKF",
+    "PoseEstimate",
+    "UpdateOutcome",
+    "UpdateResult",
+    "data_log_likelihood",
+    "gate_matches",
+    "nees",
     "InitResult",
     "RansacConfig",
     "fit_rigid_transform",
