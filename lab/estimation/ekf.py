@@ -527,7 +527,7 @@ class PoseEKF:
         dt = float(dt)
         if not (math.isfinite(dt) and dt >= 0.0):
             raise ValueError(f"dt must be finite and >= 0 s, got {dt}")
-        bad = [k for k, G in mats.items() if not np.all(np.isfinite(G))]
+        bad = [k for k, G in mats.items() if not (np.all(np.isfinite(G)) and np.abs(G[:3, 3]).max() <= 1e3)]
         if not bad:
             for name, G in mats.items():
                 if not _is_rotation(G):
@@ -536,7 +536,7 @@ class PoseEKF:
         if self.mu is None:
             return None
         if bad:  # the robot's motion is unknown: we no longer know where the object is
-            self.divergence = f"prediction impossible: non-finite {', '.join(bad)}"
+            self.divergence = f"prediction impossible: non-finite or absurd (> 1 km) {', '.join(bad)}"
             return self.estimate
         G_RC_prev, G_RC, G_odom = mats["G_RC_prev"], mats["G_RC"], mats["G_odom"]
         G_OO = mats.get("G_OO")

@@ -30,6 +30,12 @@ from scipy.stats import chi2
 from lab.estimation.models import canonical_state, measurement_jacobian, measurement_model
 from lab.geometry import R_to_euler_zyx
 
+# Validity bounds for a matched feature (not tuning knobs): a coordinate beyond a kilometre or a
+# standard deviation outside [1 nm, 1 km] is a broken measurement, and would overflow the algebra.
+_MAX_COORD_M = 1e3
+_MIN_VAR_M2 = 1e-18
+_MAX_VAR_M2 = 1e6
+
 __all__ = ["RansacConfig", "InitResult", "fit_rigid_transform", "ransac_pose", "point_spread"]
 
 
@@ -320,18 +326,18 @@ def _check_matches(d_C, b_O, Sigma_d):
 
 
 def _valid_rows(d, b, S) -> np.ndarray:
-    """Rows with finite values and a symmetric positive definite 3x3 covariance (Sylvester's test)."""
+    """Rows a filter can use: finite coordinates within ``_MAX_COORD_M`` and a symmetric covariance
+    whose eigenvalues lie in [``_MIN_VAR_M2``, ``_MAX_VAR_M2``] (anything else is a broken feature)."""
     finite = (
         np.all(np.isfinite(d), axis=1)
         & np.all(np.isfinite(b), axis=1)
         & np.all(np.isfinite(S.reshape(len(S), 9)), axis=1)
     )
-    Sf = np.where(finite[:, None, None], S, np.eye(3))
-    scale = np.maximum(np.abs(Sf).max(axis=(1, 2)), 1e-300)
+    sane = finite & (np.abs(d).max(axis=1, initial=0.0) <= _MAX_COORD_M)
+    sane &= np.abs(b).max(axis=1, initial=0.0) <= _MAX_COORD_M
+    sane &= np.abs(S.reshape(len(S), 9)).max(axis=1, initial=0.0) <= _MAX_VAR_M2
+    Sf = np.where(sane[:, None, None], S, np.eye(3))
+    scale = np.abs(Sf).max(axis=(1, 2))
     sym = np.all(np.abs(Sf - np.swapaxes(Sf, 1, 2)) <= 1e-9 * scale[:, None, None], axis=(1, 2))
-    m1 = Sf[:, 0, 0]
-    m2 = Sf[:, 0, 0] * Sf[:, 1, 1] - Sf[:, 0, 1] * Sf[:, 1, 0]
-    with np.errstate(over="ignore", invalid="ignore"):
-        m3 = np.linalg.det(Sf)
-    pd = (m1 > 0) & (m2 > 0) & (m3 > 0)
-    return finite & sym & pd
+    eig = np.linalg.eigvalsh(0.5 * (Sf + np.swapaxes(Sf, 1, 2)))
+    return sane & sym & (eig[:, 0] >= _MIN_VAR_M2)
