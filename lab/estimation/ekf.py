@@ -48,11 +48,11 @@ from lab.estimation.fit import (
 )
 from lab.estimation.models import (
     ProcessNoise,
+    _camera_motion,
+    _predict,
     canonical_state,
     measurement_jacobian,
     measurement_model,
-    motion_jacobian,
-    motion_model,
     process_noise_covariance,
     state_residual,
 )
@@ -382,8 +382,14 @@ def nees(X_true, estimate: PoseEstimate) -> float:
 
 
 def _is_rotation(G) -> bool:
+    """Is the 3x3 block a proper rotation (orthonormal to 1e-6, det +1)?"""
     R = G[:3, :3]
-    return bool(np.allclose(R @ R.T, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0)
+    if np.abs(R @ R.T - np.eye(3)).max() > 1e-6:
+        return False
+    det = R[0, 0] * (R[1, 1] * R[2, 2] - R[1, 2] * R[2, 1]) - R[0, 1] * (
+        R[1, 0] * R[2, 2] - R[1, 2] * R[2, 0]
+    )
+    return bool(det + R[0, 2] * (R[1, 0] * R[2, 1] - R[1, 1] * R[2, 0]) > 0)
 
 
 class PoseEKF:
@@ -477,16 +483,16 @@ class PoseEKF:
         dc = self.config.divergence
         if not (np.all(np.isfinite(mu)) and np.all(np.isfinite(Sigma))):
             return "non-finite state or covariance"
-        if not np.allclose(Sigma, Sigma.T, rtol=0.0, atol=1e-9 * max(1.0, float(np.abs(Sigma).max()))):
+        if np.abs(Sigma - Sigma.T).max() > 1e-9 * max(1.0, float(np.abs(Sigma).max())):
             return "covariance is not symmetric"
         try:
             np.linalg.cholesky(Sigma)
         except np.linalg.LinAlgError:
             return "covariance is not positive definite"
-        pos_std = math.sqrt(max(0.0, float(np.linalg.eigvalsh(Sigma[:3, :3])[-1])))
+        top = np.linalg.eigvalsh(np.stack([Sigma[:3, :3], Sigma[3:, 3:]]))[:, -1]  # largest variances
+        pos_std, rot_std = math.sqrt(max(0.0, float(top[0]))), math.sqrt(max(0.0, float(top[1])))
         if pos_std > dc.max_position_std_m:
             return f"covariance blow-up: position std {pos_std:.3g} m > {dc.max_position_std_m} m"
-        rot_std = math.sqrt(max(0.0, float(np.linalg.eigvalsh(Sigma[3:, 3:])[-1])))
         if rot_std > dc.max_rotation_std_rad:
             return f"covariance blow-up: angle std {rot_std:.3g} rad > {dc.max_rotation_std_rad} rad"
         if abs(math.cos(mu[4])) < dc.min_cos_beta:
@@ -538,10 +544,9 @@ class PoseEKF:
         if bad:  # the robot's motion is unknown: we no longer know where the object is
             self.divergence = f"prediction impossible: non-finite or absurd (> 1 km) {', '.join(bad)}"
             return self.estimate
-        G_RC_prev, G_RC, G_odom = mats["G_RC_prev"], mats["G_RC"], mats["G_odom"]
-        G_OO = mats.get("G_OO")
-        F = motion_jacobian(self.mu, G_RC_prev, G_RC, G_odom, G_OO)  # F = dF/dX at mu
-        mu_bar = motion_model(self.mu, G_RC_prev, G_RC, G_odom, G_OO)  # mu_bar = F(mu, u), Eq. (2)
+        G_RC, G_odom = mats["G_RC"], mats["G_odom"]
+        A = _camera_motion(mats["G_RC_prev"], G_RC, G_odom)  # G_{C(k) C(k-1)}, Eq. (1) without the object
+        mu_bar, F = _predict(self.mu, A, mats.get("G_OO"), jacobian=True)  # mu_bar = F(mu, u); F = dF/dX
         Q = process_noise_covariance(mu_bar, G_RC, G_odom, dt, self.config.process, Sigma_odom)
         Sigma_bar = F @ self.Sigma @ F.T + Q  # Sigma_bar = F Sigma F^T + Q
         Sigma_bar = 0.5 * (Sigma_bar + Sigma_bar.T)
@@ -629,10 +634,6 @@ class PoseEKF:
             return self._skip(f"too few matches: {n_valid} usable < {gc.min_matches}{note}", n)
         idx = np.flatnonzero(valid)
         d, b, S = d[idx], b[idx], S[idx]
-        if point_spread(b) < gc.min_spread_m:
-            return self._skip(
-                f"degenerate geometry: matched model points are collinear or coincident{note}", n
-            )
 
         mu_bar, Sigma_bar = self.mu, self.Sigma
         keep, r, C = _gate(mu_bar, Sigma_bar, d, b, S, gc)  # geometric feasibility check
@@ -652,7 +653,7 @@ class PoseEKF:
         self._gated_out_run = 0
         if point_spread(b[keep]) < gc.min_spread_m:
             return self._skip(
-                "degenerate geometry: gated-in model points are collinear or coincident", n, inliers
+                f"degenerate geometry: the matched model points are collinear or coincident{note}", n, inliers
             )
 
         y = r[keep]  # innovation y = D - H(mu_bar)

@@ -169,8 +169,9 @@ def point_spread(b_O) -> float:
     b = np.asarray(b_O, dtype=float)
     if b.shape[0] < 2:
         return 0.0
-    s = np.linalg.svd(b - b.mean(axis=0), compute_uv=False)
-    return float(np.sqrt(np.sum(s[1:] ** 2) / b.shape[0]))
+    c = b - b.mean(axis=0)
+    lam = np.linalg.eigvalsh(c.T @ c)  # squared singular values of the centred points, ascending
+    return float(np.sqrt(max(0.0, lam[0] + lam[1]) / b.shape[0]))
 
 
 def _mahalanobis_sq(r, W):
@@ -339,5 +340,17 @@ def _valid_rows(d, b, S) -> np.ndarray:
     Sf = np.where(sane[:, None, None], S, np.eye(3))
     scale = np.abs(Sf).max(axis=(1, 2))
     sym = np.all(np.abs(Sf - np.swapaxes(Sf, 1, 2)) <= 1e-9 * scale[:, None, None], axis=(1, 2))
-    eig = np.linalg.eigvalsh(0.5 * (Sf + np.swapaxes(Sf, 1, 2)))
-    return sane & sym & (eig[:, 0] >= _MIN_VAR_M2)
+    # positive definite by Sylvester's criterion (leading minors > 0) ...
+    m2 = Sf[:, 0, 0] * Sf[:, 1, 1] - Sf[:, 0, 1] * Sf[:, 1, 0]
+    det = (
+        Sf[:, 0, 0] * (Sf[:, 1, 1] * Sf[:, 2, 2] - Sf[:, 1, 2] * Sf[:, 2, 1])
+        - Sf[:, 0, 1] * (Sf[:, 1, 0] * Sf[:, 2, 2] - Sf[:, 1, 2] * Sf[:, 2, 0])
+        + Sf[:, 0, 2] * (Sf[:, 1, 0] * Sf[:, 2, 1] - Sf[:, 1, 1] * Sf[:, 2, 0])
+    )
+    ok = sane & sym & (Sf[:, 0, 0] > 0) & (m2 > 0) & (det > 0)
+    # ... with smallest eigenvalue >= _MIN_VAR_M2: det / trace^2 is a lower bound; check the rest exactly
+    tr = np.trace(Sf, axis1=1, axis2=2)
+    unsure = ok & ~(det >= _MIN_VAR_M2 * tr * tr)
+    if np.any(unsure):
+        ok[unsure] = np.linalg.eigvalsh(Sf[unsure])[:, 0] >= _MIN_VAR_M2
+    return ok

@@ -32,12 +32,13 @@ filter's covariance then explodes, which :class:`lab.estimation.PoseEKF` reports
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
 
-from lab.geometry import G_to_pose6, euler_zyx_to_R, pose6_to_G, se3_inv, wrap_angle
+from lab.geometry import G_to_pose6, euler_zyx_to_R, se3, se3_inv
 
 __all__ = [
     "ObjectNoiseKind",
@@ -233,12 +234,8 @@ def motion_model(X_prev, G_RC_prev, G_RC, G_odom, G_OO=None) -> np.ndarray:
     -------
     X : ndarray, shape (6,) [m, rad]
     """
-    X_prev = _check_state(X_prev)
-    A = _camera_motion(_check_G(G_RC_prev, "G_RC_prev"), _check_G(G_RC, "G_RC"), _check_G(G_odom, "G_odom"))
-    G = A @ pose6_to_G(X_prev)
-    if G_OO is not None:
-        G = G @ _check_G(G_OO, "G_OO")
-    return G_to_pose6(G)
+    A, G_OO = _motion_inputs(G_RC_prev, G_RC, G_odom, G_OO)
+    return _predict(_check_state(X_prev), A, G_OO, jacobian=False)[0]
 
 
 def motion_jacobian(X_prev, G_RC_prev, G_RC, G_odom, G_OO=None) -> np.ndarray:
@@ -257,19 +254,32 @@ def motion_jacobian(X_prev, G_RC_prev, G_RC, G_odom, G_OO=None) -> np.ndarray:
     Analytic rather than numerical: it is exact, cheap (a few 3x3 products), and the tests check it
     against central differences of :func:`motion_model`. Singular at gimbal lock of ``X_k``.
     """
-    X_prev = _check_state(X_prev)
+    A, G_OO = _motion_inputs(G_RC_prev, G_RC, G_odom, G_OO)
+    return _predict(_check_state(X_prev), A, G_OO, jacobian=True)[1]
+
+
+def _motion_inputs(G_RC_prev, G_RC, G_odom, G_OO):
     A = _camera_motion(_check_G(G_RC_prev, "G_RC_prev"), _check_G(G_RC, "G_RC"), _check_G(G_odom, "G_odom"))
-    R_A = A[:3, :3]
+    return A, (None if G_OO is None else _check_G(G_OO, "G_OO"))
+
+
+def _predict(X_prev, A, G_OO, jacobian: bool):
+    """``X_k`` (Eq. (1)) and, if asked, ``F`` for the camera motion ``A = G_{C_k C_{k-1}}``."""
     R = euler_zyx_to_R(X_prev[3], X_prev[4], X_prev[5])
+    G = A @ se3(R, X_prev[:3])
+    if G_OO is not None:
+        G = G @ G_OO
+    X = G_to_pose6(G)
+    if not jacobian:
+        return X, None
+    R_A = A[:3, :3]
     E_prev = euler_rate_matrix(X_prev[3], X_prev[4])
-    X = motion_model(X_prev, G_RC_prev, G_RC, G_odom, G_OO)
     F = np.zeros((6, 6))
     F[:3, :3] = R_A
     if G_OO is not None:
-        p_o = np.asarray(G_OO, dtype=float)[:3, 3]
-        F[:3, 3:] = -R_A @ skew(R @ p_o) @ E_prev
+        F[:3, 3:] = -R_A @ skew(R @ G_OO[:3, 3]) @ E_prev
     F[3:, 3:] = euler_rate_matrix_inv(X[3], X[4]) @ R_A @ E_prev
-    return F
+    return X, F
 
 
 def motion_noise_jacobians(X, G_RC) -> tuple[np.ndarray, np.ndarray]:
@@ -437,6 +447,12 @@ def process_noise_covariance(X, G_RC, G_odom, dt: float, noise: ProcessNoise, Si
     return 0.5 * (Q + Q.T)
 
 
+def _wrap(a: float) -> float:
+    """A scalar angle wrapped to (-pi, pi] (plain floats: this runs every step)."""
+    w = (a + math.pi) % (2.0 * math.pi) - math.pi
+    return math.pi if w == -math.pi else w
+
+
 def canonical_state(X, Sigma=None):
     """Bring Euler angles to the canonical range: ``beta`` in [-pi/2, pi/2], ``alpha``, ``gamma``
     wrapped to (-pi, pi].
@@ -451,15 +467,15 @@ def canonical_state(X, Sigma=None):
     Sigma : ndarray, shape (6, 6) or None
     """
     X = np.array(X, dtype=float)
-    b = wrap_angle(X[4])
-    flip = abs(b) > np.pi / 2
+    b = _wrap(float(X[4]))
+    flip = abs(b) > math.pi / 2
     if flip:
-        X[3] += np.pi
-        X[5] += np.pi
-        b = (np.pi - b) if b > 0 else (-np.pi - b)
+        X[3] += math.pi
+        X[5] += math.pi
+        b = (math.pi - b) if b > 0 else (-math.pi - b)
     X[4] = b
-    X[3] = wrap_angle(X[3])
-    X[5] = wrap_angle(X[5])
+    X[3] = _wrap(float(X[3]))
+    X[5] = _wrap(float(X[5]))
     if Sigma is None:
         return X, None
     Sigma = np.array(Sigma, dtype=float)
@@ -474,5 +490,5 @@ def state_residual(X_a, X_b) -> np.ndarray:
     a, _ = canonical_state(_check_state(X_a))
     b, _ = canonical_state(_check_state(X_b))
     r = a - b
-    r[3:] = wrap_angle(r[3:])
+    r[3:] = [_wrap(float(v)) for v in r[3:]]
     return r
