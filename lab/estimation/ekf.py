@@ -28,6 +28,11 @@ with whitened residuals and Jacobian (``L_j L_j^T = Sigma_j``, ``y~_j = L_j^-1 y
 Cholesky factor is well conditioned however small ``Sigma_bar`` or ``Sigma_m`` are. The results equal
 filterpy's dense ``ExtendedKalmanFilter.update`` (which is Joseph form too) to ~1e-12; the tests
 check that over a 25-step run.
+
+With ``EKFConfig(chart=ROTATION_VECTOR)`` the same equations run with ``C`` and ``Sigma`` over
+``[x_r, phi]`` (``phi`` a small rotation in C) and the correction is applied as
+``R <- Exp(phi) R``: the state is still the Euler ``X``, but the filter no longer breaks down at
+gimbal lock (see :class:`OrientationChart`).
 """
 
 from __future__ import annotations
@@ -47,13 +52,18 @@ from lab.estimation.fit import (
     ransac_pose,
 )
 from lab.estimation.models import (
+    OrientationChart,
     ProcessNoise,
     _camera_motion,
     _predict,
     canonical_state,
+    euler_to_rv_jacobian,
     measurement_jacobian,
+    measurement_jacobian_rv,
     measurement_model,
     process_noise_covariance,
+    retract_rv,
+    rv_to_euler_jacobian,
     state_residual,
 )
 from lab.geometry import pose6_to_G
@@ -153,6 +163,11 @@ class EKFConfig:
         Divergence criteria.
     auto_initialize : bool
         ``update`` initialises (and re-initialises after divergence) from its matches by RANSAC.
+    chart : OrientationChart
+        Coordinates of the covariance's orientation part. ``EULER`` (default) is the papers' EKF and
+        matches filterpy step for step; ``ROTATION_VECTOR`` keeps the same state ``X`` but tracks the
+        uncertainty as a small rotation in C, which stays well defined at Euler gimbal lock (a box's
+        x face looking straight at a level camera). See :mod:`lab.estimation.models`.
     """
 
     process: ProcessNoise = field(default_factory=ProcessNoise)
@@ -160,6 +175,7 @@ class EKFConfig:
     ransac: RansacConfig = field(default_factory=RansacConfig)
     divergence: DivergenceConfig = field(default_factory=DivergenceConfig)
     auto_initialize: bool = True
+    chart: OrientationChart = OrientationChart.EULER
 
 
 def _frozen(a) -> np.ndarray:
@@ -177,20 +193,33 @@ class PoseEstimate:
     mu : ndarray, shape (6,) [m, rad]
         ``[x, y, z, alpha, beta, gamma]`` (read-only).
     Sigma : ndarray, shape (6, 6)
-        Its covariance [m^2, m rad, rad^2] (read-only).
+        Its covariance [m^2, m rad, rad^2] over ``X`` (Euler angles; read-only).
     t : float [s]
+    Sigma_rv : ndarray, shape (6, 6)
+        The same uncertainty over ``[x_r, phi]``, ``phi`` a small rotation vector in C
+        (``R_true = Exp(phi) R``): ``T Sigma T^T`` with ``T = diag(I, E)``. Computed from ``Sigma``
+        when not given; finite at every orientation when given by a rotation-vector filter.
     """
 
     mu: np.ndarray = field(repr=False)
     Sigma: np.ndarray = field(repr=False)
     t: float = 0.0
+    Sigma_rv: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self):
         mu, Sigma = _frozen(self.mu), _frozen(self.Sigma)
         if mu.shape != (6,) or Sigma.shape != (6, 6):
             raise ValueError(f"PoseEstimate needs mu (6,) and Sigma (6, 6), got {mu.shape}, {Sigma.shape}")
+        if self.Sigma_rv is None:
+            T = euler_to_rv_jacobian(mu)
+            Sigma_rv = _frozen(T @ Sigma @ T.T)
+        else:
+            Sigma_rv = _frozen(self.Sigma_rv)
+            if Sigma_rv.shape != (6, 6):
+                raise ValueError(f"PoseEstimate needs Sigma_rv (6, 6), got {Sigma_rv.shape}")
         object.__setattr__(self, "mu", mu)
         object.__setattr__(self, "Sigma", Sigma)
+        object.__setattr__(self, "Sigma_rv", Sigma_rv)
 
     @property
     def G_CO(self) -> np.ndarray:
@@ -258,10 +287,11 @@ class UpdateResult:
     estimate: PoseEstimate | None = field(default=None, repr=False)
 
 
-def _gate(mu_bar, Sigma_bar, d, b, S, gate: GateConfig):
-    """Per-match gate; returns (keep mask, r (n,3), C (n,3,6))."""
+def _gate(mu_bar, Sigma_bar, d, b, S, gate: GateConfig, chart=OrientationChart.EULER):
+    """Per-match gate; returns (keep mask, r (n,3), C (n,3,6)). ``Sigma_bar`` is in ``chart``."""
     n = d.shape[0]
-    C = measurement_jacobian(mu_bar, b).reshape(n, 3, 6)
+    jac = measurement_jacobian if chart is OrientationChart.EULER else measurement_jacobian_rv
+    C = jac(mu_bar, b).reshape(n, 3, 6)
     r = d - measurement_model(mu_bar, b)  # residual of each match under the predicted pose
     keep = np.ones(n, bool)
     if np.isfinite(gate.dist_max_m):
@@ -316,8 +346,11 @@ def _whitened(r, C, S):
     return sol[..., 0].reshape(-1), sol[..., 1:].reshape(-1, 6), logdet_m
 
 
-def _information_update(mu_bar, Sigma_bar, y_w, C_w, logdet_m):
-    """The Kalman update with whitened quantities (see the module docstring). Raises LinAlgError."""
+def _information_update(Sigma_bar, y_w, C_w, logdet_m):
+    """The Kalman update with whitened quantities (see the module docstring). Raises LinAlgError.
+
+    Returns the correction ``K y`` (6,), the Joseph-form posterior covariance, the NIS and the log
+    likelihood; the caller adds the correction to ``mu_bar`` (in its chart)."""
     L = np.linalg.cholesky(Sigma_bar)  # Sigma_bar = L L^T
     Lam = C_w.T @ C_w  # Lambda = C^T Sigma_m^-1 C
     g = C_w.T @ y_w  # g = C^T Sigma_m^-1 y
@@ -325,8 +358,7 @@ def _information_update(mu_bar, Sigma_bar, y_w, C_w, logdet_m):
     L_B = np.linalg.cholesky(B)
     Z = np.linalg.solve(L_B, L.T)  # Z = L_B^-1 L^T
     M = Z.T @ Z  # M = L B^-1 L^T = (Sigma_bar^-1 + Lambda)^-1
-    dx = M @ g  # K y
-    mu = mu_bar + dx  # mu = mu_bar + K y
+    dx = M @ g  # K y: the correction, mu = mu_bar + K y
     I_KC = np.eye(6) - M @ Lam  # I - K C
     Sigma = (
         I_KC @ Sigma_bar @ I_KC.T + M @ Lam @ M.T
@@ -335,7 +367,7 @@ def _information_update(mu_bar, Sigma_bar, y_w, C_w, logdet_m):
     nis = float(y_w @ y_w - g @ dx)  # y^T S^-1 y (Woodbury)
     logdet_S = logdet_m + 2.0 * float(np.sum(np.log(np.diag(L_B))))  # log|S| = log|Sigma_m| + log|B|
     loglik = -0.5 * (nis + logdet_S + y_w.size * _LOG_2PI)  # log N(y; 0, S), Eq. (9)
-    return mu, Sigma, nis, loglik
+    return dx, Sigma, nis, loglik
 
 
 def data_log_likelihood(d_C, b_O, Sigma_d, mu_bar, Sigma_bar) -> float:
@@ -370,15 +402,32 @@ def data_log_likelihood(d_C, b_O, Sigma_d, mu_bar, Sigma_bar) -> float:
     r = d - measurement_model(mu_bar, b)
     C = measurement_jacobian(mu_bar, b).reshape(n, 3, 6)
     y_w, C_w, logdet_m = _whitened(r, C, S)
-    return _information_update(mu_bar, np.asarray(Sigma_bar, float), y_w, C_w, logdet_m)[3]
+    return _information_update(np.asarray(Sigma_bar, float), y_w, C_w, logdet_m)[3]
 
 
-def nees(X_true, estimate: PoseEstimate) -> float:
-    """Normalised estimation error squared ``e^T Sigma^-1 e`` (angles wrapped); chi2(6) if consistent."""
-    e = state_residual(estimate.mu, X_true)
-    L = np.linalg.cholesky(estimate.Sigma)
+def nees(X_true, estimate: PoseEstimate, chart: OrientationChart = OrientationChart.EULER) -> float:
+    """Normalised estimation error squared ``e^T Sigma^-1 e``; chi-square(6) if the filter is consistent.
+
+    ``EULER``: ``e`` is the Euler-state difference (angles wrapped) and ``Sigma`` the estimate's.
+    ``ROTATION_VECTOR``: ``e = [x_r - x_r_true, phi]`` with ``Exp(phi) = R R_true^T`` and ``Sigma_rv``.
+    """
+    if chart is OrientationChart.EULER:
+        e, Sigma = state_residual(estimate.mu, X_true), estimate.Sigma
+    else:
+        R = pose6_to_G(estimate.mu)[:3, :3] @ pose6_to_G(X_true)[:3, :3].T
+        e = np.concatenate([estimate.mu[:3] - np.asarray(X_true, float)[:3], _rotation_vector(R)])
+        Sigma = estimate.Sigma_rv
+    L = np.linalg.cholesky(Sigma)
     z = np.linalg.solve(L, e)
     return float(z @ z)
+
+
+def _rotation_vector(R) -> np.ndarray:
+    """``Log(R)``: the rotation vector (3,) of a rotation matrix (angle < pi)."""
+    c = min(1.0, max(-1.0, 0.5 * (np.trace(R) - 1.0)))
+    th = math.acos(c)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return 0.5 * w * (th / math.sin(th) if th > 1e-8 else 1.0)
 
 
 def _is_rotation(G) -> bool:
@@ -403,8 +452,11 @@ class PoseEKF:
 
     Attributes
     ----------
-    mu, Sigma : ndarray or None
-        Current state ``X`` (6,) and covariance (6, 6); None before initialisation.
+    mu : ndarray, shape (6,) or None
+        Current state ``X`` [m, rad]; None before initialisation.
+    P : ndarray, shape (6, 6) or None
+        The covariance the filter propagates, in its chart (``config.chart``): over ``X`` (EULER) or
+        over ``[x_r, phi]`` (ROTATION_VECTOR). :attr:`Sigma` and :attr:`Sigma_rv` give both views.
     t : float [s]
         Filter time (advanced by ``predict``'s ``dt``).
     divergence : str or None
@@ -427,7 +479,7 @@ class PoseEKF:
         self.config = config or EKFConfig()
         self.rng = rng
         self.mu: np.ndarray | None = None
-        self.Sigma: np.ndarray | None = None
+        self.P: np.ndarray | None = None
         self.t = 0.0
         self.divergence: str | None = None
         self.n_reinit = 0
@@ -437,34 +489,72 @@ class PoseEKF:
 
     # ------------------------------------------------------------------ state
     @property
+    def _euler(self) -> bool:
+        return self.config.chart is OrientationChart.EULER
+
+    @property
     def initialized(self) -> bool:
         return self.mu is not None
+
+    @property
+    def Sigma(self) -> np.ndarray | None:
+        """Covariance (6, 6) over the Euler state ``X`` (derived from :attr:`P` in the rotation-vector
+        chart, where it blows up near gimbal lock)."""
+        if self.P is None or self._euler:
+            return self.P
+        T_inv = rv_to_euler_jacobian(self.mu)
+        return T_inv @ self.P @ T_inv.T
+
+    @property
+    def Sigma_rv(self) -> np.ndarray | None:
+        """Covariance (6, 6) over ``[x_r, phi]``, ``phi`` a small rotation vector in C."""
+        if self.P is None or not self._euler:
+            return self.P
+        T = euler_to_rv_jacobian(self.mu)
+        return T @ self.P @ T.T
 
     @property
     def estimate(self) -> PoseEstimate | None:
         """The current estimate (a read-only snapshot), or None before initialisation."""
         if self.mu is None:
             return None
-        return PoseEstimate(self.mu, self.Sigma, self.t)
+        return PoseEstimate(self.mu, self.Sigma, self.t, self.Sigma_rv)
 
     @property
     def log_likelihood(self) -> float | None:
         """Eq. (9)'s log data likelihood of the last update (None if it applied no update)."""
         return None if self.last_result is None else self.last_result.log_likelihood
 
-    def initialize(self, mu, Sigma, t: float | None = None) -> None:
-        """Set the state explicitly (a prior, or a pose from elsewhere); clears any divergence."""
+    def initialize(self, mu, Sigma, t: float | None = None, *, Sigma_rv=None) -> None:
+        """Set the state explicitly (a prior, or a pose from elsewhere); clears any divergence.
+
+        ``Sigma`` is over the Euler state; alternatively pass ``Sigma=None`` and ``Sigma_rv`` over
+        ``[x_r, phi]`` (what a rotation-vector filter propagates; converted for an Euler one).
+        """
         mu = np.asarray(mu, dtype=float)
-        Sigma = np.asarray(Sigma, dtype=float)
-        if mu.shape != (6,) or Sigma.shape != (6, 6):
-            raise ValueError(f"initialize needs mu (6,) and Sigma (6, 6), got {mu.shape} and {Sigma.shape}")
-        if not (np.all(np.isfinite(mu)) and np.all(np.isfinite(Sigma))):
-            raise ValueError("initialize needs a finite mu and Sigma")
+        given = Sigma if Sigma is not None else Sigma_rv
+        if given is None or (Sigma is not None and Sigma_rv is not None):
+            raise ValueError("initialize needs exactly one of Sigma and Sigma_rv")
+        given = np.asarray(given, dtype=float)
+        if mu.shape != (6,) or given.shape != (6, 6):
+            raise ValueError(
+                f"initialize needs mu (6,) and a (6, 6) covariance, got {mu.shape} and {given.shape}"
+            )
+        if not (np.all(np.isfinite(mu)) and np.all(np.isfinite(given))):
+            raise ValueError("initialize needs a finite mu and covariance")
         try:
-            np.linalg.cholesky(Sigma)
+            np.linalg.cholesky(given)
         except np.linalg.LinAlgError:
-            raise ValueError("initialize needs a symmetric positive definite Sigma") from None
-        self.mu, self.Sigma = canonical_state(mu, 0.5 * (Sigma + Sigma.T))
+            raise ValueError("initialize needs a symmetric positive definite covariance") from None
+        given = 0.5 * (given + given.T)
+        in_rv = Sigma is None
+        if in_rv == self._euler:  # convert to the filter's chart
+            T = rv_to_euler_jacobian(mu) if in_rv else euler_to_rv_jacobian(mu)
+            given = T @ given @ T.T
+        if self._euler:
+            self.mu, self.P = canonical_state(mu, given)
+        else:
+            self.mu, self.P = retract_rv(mu, np.zeros(6)), given  # canonical Euler angles, same rotation
         if t is not None:
             self.t = float(t)
         self.divergence = None
@@ -473,29 +563,29 @@ class PoseEKF:
 
     def reset(self) -> None:
         """Forget the state (the next update initialises again)."""
-        self.mu = self.Sigma = None
+        self.mu = self.P = None
         self.divergence = None
         self._huge_nis_run = 0
         self._gated_out_run = 0
 
-    def _health(self, mu, Sigma) -> str | None:
-        """Why (mu, Sigma) is not a usable estimate, or None."""
+    def _health(self, mu, P) -> str | None:
+        """Why (mu, P) is not a usable estimate, or None."""
         dc = self.config.divergence
-        if not (np.all(np.isfinite(mu)) and np.all(np.isfinite(Sigma))):
+        if not (np.all(np.isfinite(mu)) and np.all(np.isfinite(P))):
             return "non-finite state or covariance"
-        if np.abs(Sigma - Sigma.T).max() > 1e-9 * max(1.0, float(np.abs(Sigma).max())):
+        if np.abs(P - P.T).max() > 1e-9 * max(1.0, float(np.abs(P).max())):
             return "covariance is not symmetric"
         try:
-            np.linalg.cholesky(Sigma)
+            np.linalg.cholesky(P)
         except np.linalg.LinAlgError:
             return "covariance is not positive definite"
-        top = np.linalg.eigvalsh(np.stack([Sigma[:3, :3], Sigma[3:, 3:]]))[:, -1]  # largest variances
+        top = np.linalg.eigvalsh(np.stack([P[:3, :3], P[3:, 3:]]))[:, -1]  # largest variances
         pos_std, rot_std = math.sqrt(max(0.0, float(top[0]))), math.sqrt(max(0.0, float(top[1])))
         if pos_std > dc.max_position_std_m:
             return f"covariance blow-up: position std {pos_std:.3g} m > {dc.max_position_std_m} m"
         if rot_std > dc.max_rotation_std_rad:
             return f"covariance blow-up: angle std {rot_std:.3g} rad > {dc.max_rotation_std_rad} rad"
-        if abs(math.cos(mu[4])) < dc.min_cos_beta:
+        if self._euler and abs(math.cos(mu[4])) < dc.min_cos_beta:
             return f"gimbal lock: beta = {mu[4]:.6f} rad, the Euler state is singular"
         return None
 
@@ -544,15 +634,16 @@ class PoseEKF:
         if bad:  # the robot's motion is unknown: we no longer know where the object is
             self.divergence = f"prediction impossible: non-finite or absurd (> 1 km) {', '.join(bad)}"
             return self.estimate
+        chart = self.config.chart
         G_RC, G_odom = mats["G_RC"], mats["G_odom"]
         A = _camera_motion(mats["G_RC_prev"], G_RC, G_odom)  # G_{C(k) C(k-1)}, Eq. (1) without the object
-        mu_bar, F = _predict(self.mu, A, mats.get("G_OO"), jacobian=True)  # mu_bar = F(mu, u); F = dF/dX
-        Q = process_noise_covariance(mu_bar, G_RC, G_odom, dt, self.config.process, Sigma_odom)
-        Sigma_bar = F @ self.Sigma @ F.T + Q  # Sigma_bar = F Sigma F^T + Q
-        Sigma_bar = 0.5 * (Sigma_bar + Sigma_bar.T)
-        problem = self._health(mu_bar, Sigma_bar)
+        mu_bar, F = _predict(self.mu, A, mats.get("G_OO"), jacobian=True, chart=chart)  # mu_bar = F(mu, u)
+        Q = process_noise_covariance(mu_bar, G_RC, G_odom, dt, self.config.process, Sigma_odom, chart)
+        P_bar = F @ self.P @ F.T + Q  # Sigma_bar = F Sigma F^T + Q
+        P_bar = 0.5 * (P_bar + P_bar.T)
+        problem = self._health(mu_bar, P_bar)
         if problem is None or problem.startswith(("covariance blow-up", "gimbal")):
-            self.mu, self.Sigma = mu_bar, Sigma_bar  # finite and SPD: keep it, even if it is lost
+            self.mu, self.P = mu_bar, P_bar  # finite and SPD: keep it, even if it is lost
         if problem is not None and self.divergence is None:
             self.divergence = problem
         return self.estimate
@@ -579,9 +670,10 @@ class PoseEKF:
             if was is not None:
                 why = f"diverged ({was}); re-initialisation failed: {init.reason}"
             return self._skip(why, n)
-        self.initialize(init.mu, init.Sigma)
-        if self._health(self.mu, self.Sigma) is not None:  # e.g. the fitted pose is at gimbal lock
-            self.divergence = self._health(self.mu, self.Sigma)
+        self.initialize(init.mu, None, Sigma_rv=init.Sigma_rv)
+        problem = self._health(self.mu, self.P)
+        if problem is not None:  # e.g. an Euler filter initialised at gimbal lock
+            self.divergence = problem
         if was is None:
             outcome, why = UpdateOutcome.INITIALIZED, init.reason
         else:
@@ -635,8 +727,8 @@ class PoseEKF:
         idx = np.flatnonzero(valid)
         d, b, S = d[idx], b[idx], S[idx]
 
-        mu_bar, Sigma_bar = self.mu, self.Sigma
-        keep, r, C = _gate(mu_bar, Sigma_bar, d, b, S, gc)  # geometric feasibility check
+        mu_bar, P_bar = self.mu, self.P
+        keep, r, C = _gate(mu_bar, P_bar, d, b, S, gc, self.config.chart)  # geometric feasibility check
         inliers = np.zeros(n, bool)
         inliers[idx[keep]] = True
         n_used = int(np.count_nonzero(keep))
@@ -659,16 +751,19 @@ class PoseEKF:
         y = r[keep]  # innovation y = D - H(mu_bar)
         try:
             y_w, C_w, logdet_m = _whitened(y, C[keep], S[keep])
-            mu, Sigma, nis, loglik = _information_update(mu_bar, Sigma_bar, y_w, C_w, logdet_m)
+            dx, P, nis, loglik = _information_update(P_bar, y_w, C_w, logdet_m)
         except np.linalg.LinAlgError:
             self.divergence = "covariance is not positive definite"
             return self._skip("update failed: a covariance factorisation failed", n, inliers)
-        mu, Sigma = canonical_state(mu, Sigma)  # wrap alpha, gamma to (-pi, pi]; beta to [-pi/2, pi/2]
-        problem = self._health(mu, Sigma)
+        if self._euler:
+            mu, P = canonical_state(mu_bar + dx, P)  # mu = mu_bar + K y; alpha, gamma wrapped, beta in range
+        else:
+            mu = retract_rv(mu_bar, dx)  # x_r + dx_r, R <- Exp(phi) R (the reset's Jacobian ~ I is ignored)
+        problem = self._health(mu, P)
         if problem is not None and not problem.startswith(("covariance blow-up", "gimbal")):
             self.divergence = problem
             return self._skip(f"update rejected: {problem}", n, inliers)
-        self.mu, self.Sigma = mu, Sigma
+        self.mu, self.P = mu, P
         dof = 3 * n_used
         dcfg = self.config.divergence
         self._huge_nis_run = self._huge_nis_run + 1 if nis > chi2_quantile(dcfg.nis_prob, dof) else 0

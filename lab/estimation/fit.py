@@ -9,7 +9,8 @@ in C) and ``b_j`` (database, in O), we
 2. keep the hypothesis with the lowest truncated Mahalanobis cost (MSAC) over all pairs,
 3. refit on its inliers, refine by Gauss-Newton on the weighted measurement model Eq. (3), and
    re-select the inliers until they settle,
-4. take the Gauss-Newton covariance ``(C^T Sigma_m^-1 C)^-1`` (scaled) as the initial ``Sigma``.
+4. take the Gauss-Newton covariance ``(C^T Sigma_m^-1 C)^-1`` (scaled) as the initial ``Sigma``
+   (computed over a rotation vector, then expressed in Euler angles).
 
 The closed-form fit minimises ``sum_j w_j |d_j - (R b_j + t)|^2``. With centroids ``b_bar``,
 ``d_bar`` and the cross-covariance ``M = sum_j w_j (d_j - d_bar)(b_j - b_bar)^T = U S V^T``:
@@ -27,7 +28,12 @@ from functools import lru_cache
 import numpy as np
 from scipy.stats import chi2
 
-from lab.estimation.models import canonical_state, measurement_jacobian, measurement_model
+from lab.estimation.models import (
+    measurement_jacobian_rv,
+    measurement_model,
+    retract_rv,
+    rv_to_euler_jacobian,
+)
 from lab.geometry import R_to_euler_zyx
 
 # Validity bounds for a matched feature (not tuning knobs): a coordinate beyond a kilometre or a
@@ -106,6 +112,9 @@ class InitResult:
         Its covariance.
     inliers : ndarray, shape (n,), bool
         Which input pairs support the pose (all False on failure).
+    Sigma_rv : ndarray, shape (6, 6) or None
+        The same covariance over ``[x_r, phi]``, ``phi`` a small rotation vector in C (finite at
+        every orientation; ``Sigma`` is derived from it and blows up at Euler gimbal lock).
     """
 
     success: bool
@@ -113,6 +122,7 @@ class InitResult:
     mu: np.ndarray | None = field(default=None, repr=False)
     Sigma: np.ndarray | None = field(default=None, repr=False)
     inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, bool), repr=False)
+    Sigma_rv: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def n_inliers(self) -> int:
@@ -182,12 +192,13 @@ def _mahalanobis_sq(r, W):
 def _gauss_newton(X, b, d, W, iterations):
     """Weighted least squares on Eq. (3): minimise sum_j r_j^T W_j r_j, r_j = d_j - H_j(X).
 
-    Returns the refined X and the information matrix ``Lambda = C^T Sigma_m^-1 C`` (6, 6) at it.
+    Steps are taken in the rotation-vector chart (``x_r + dx_r``, ``R <- Exp(phi) R``), which is
+    well conditioned at every orientation, Euler gimbal lock included. Returns the refined X and
+    the information matrix ``Lambda = C^T Sigma_m^-1 C`` (6, 6) in that chart.
     """
     n = b.shape[0]
-    Lam = None
     for _ in range(max(1, iterations)):
-        C = measurement_jacobian(X, b).reshape(n, 3, 6)
+        C = measurement_jacobian_rv(X, b).reshape(n, 3, 6)
         r = d - measurement_model(X, b)
         WC = W @ C  # (n, 3, 6)
         Lam = np.einsum("nai,naj->ij", C, WC)  # Lambda = C^T Sigma_m^-1 C
@@ -197,12 +208,11 @@ def _gauss_newton(X, b, d, W, iterations):
         except np.linalg.LinAlgError:
             return X, None
         step = np.linalg.solve(L.T, np.linalg.solve(L, g))  # normal equations Lambda step = g
-        X, _ = canonical_state(X + step)
+        X = retract_rv(X, step)
         if np.max(np.abs(step)) < 1e-12:
             break
-    C = measurement_jacobian(X, b).reshape(n, 3, 6)
-    Lam = np.einsum("nai,nab,nbj->ij", C, W, C)
-    return X, Lam
+    C = measurement_jacobian_rv(X, b).reshape(n, 3, 6)
+    return X, np.einsum("nai,nab,nbj->ij", C, W, C)
 
 
 def ransac_pose(
@@ -304,12 +314,16 @@ def ransac_pose(
             False, "degenerate geometry: the pose is not observable from the inliers", inliers=inliers
         )
     Linv = np.linalg.solve(L, np.eye(6))
-    Sigma = cfg.Sigma0_scale * (Linv.T @ Linv)  # (C^T Sigma_m^-1 C)^-1, a 6x6 inverse via Cholesky
+    Sigma_rv = cfg.Sigma0_scale * (Linv.T @ Linv)  # (C^T Sigma_m^-1 C)^-1, a 6x6 inverse via Cholesky
+    Sigma_rv = 0.5 * (Sigma_rv + Sigma_rv.T)
+    T_inv = rv_to_euler_jacobian(X)
+    Sigma = T_inv @ Sigma_rv @ T_inv.T  # in Euler coordinates (huge near gimbal lock)
     Sigma = 0.5 * (Sigma + Sigma.T)
-    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Sigma))):
-        return InitResult(False, "initial pose is not finite (gimbal lock?)", inliers=inliers)
+    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Sigma_rv))):
+        return InitResult(False, "initial pose is not finite", inliers=inliers)
     inliers[idx[sel]] = True
-    return InitResult(True, f"initialised from {n_in} of {n_valid} valid matches", X, Sigma, inliers)
+    why = f"initialised from {n_in} of {n_valid} valid matches"
+    return InitResult(True, why, X, Sigma, inliers, Sigma_rv)
 
 
 def _check_matches(d_C, b_O, Sigma_d):

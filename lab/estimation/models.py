@@ -28,6 +28,14 @@ Gimbal lock: at ``beta = +-pi/2`` (the object's x axis along the optical axis) t
 parametrisation is singular: ``E`` loses rank, ``alpha`` and ``gamma`` turn about the same axis and
 ``E^-1`` blows up. The functions stay finite there (``cos(beta)`` is clamped at ``1e-12``) but the
 filter's covariance then explodes, which :class:`lab.estimation.PoseEKF` reports as divergence.
+With a level camera this happens whenever a box's x face looks straight at it.
+
+**Two charts for the covariance.** The state ``X`` is always the papers' Euler pose. Its uncertainty
+can be kept over the Euler angles themselves (:attr:`OrientationChart.EULER`, the papers' filter) or
+over a small rotation vector ``phi`` in C, ``R_true = Exp(phi) R(x_o)`` (:attr:`OrientationChart.
+ROTATION_VECTOR`, an "error-state" or multiplicative EKF), which has no singularity. The two are
+related by ``[dx_r, phi] = T(X) dX`` with ``T = diag(I, E(alpha, beta))`` (:func:`euler_to_rv_jacobian`).
+The ``*_rv`` variants of the Jacobians below are for the second chart; in it every ``E`` drops out.
 """
 
 from __future__ import annotations
@@ -38,10 +46,16 @@ from enum import Enum
 
 import numpy as np
 
-from lab.geometry import G_to_pose6, euler_zyx_to_R, se3, se3_inv
+from lab.geometry import G_to_pose6, R_to_euler_zyx, euler_zyx_to_R, se3, se3_inv
 
 __all__ = [
     "ObjectNoiseKind",
+    "OrientationChart",
+    "euler_to_rv_jacobian",
+    "rv_to_euler_jacobian",
+    "rotvec_to_R",
+    "retract_rv",
+    "measurement_jacobian_rv",
     "ProcessNoise",
     "euler_rate_matrix",
     "euler_rate_matrix_inv",
@@ -184,6 +198,79 @@ def measurement_jacobian(X, b_O) -> np.ndarray:
     return C.reshape(3 * n, 6)
 
 
+class OrientationChart(Enum):
+    """Coordinates of the orientation part of the filter's covariance (the state is Euler in both)."""
+
+    #: Covariance over ``(alpha, beta, gamma)``: the papers' EKF. Singular at ``beta = +-pi/2``.
+    EULER = "euler"
+    #: Covariance over a small rotation vector ``phi`` in C with ``R_true = Exp(phi) R``: no singularity.
+    ROTATION_VECTOR = "rotation_vector"
+
+
+def euler_to_rv_jacobian(X) -> np.ndarray:
+    """``T = diag(I, E(alpha, beta))``, shape (6, 6): Euler-state differentials -> ``[dx_r, phi]``.
+
+    Covariances convert as ``Sigma_rv = T Sigma T^T`` and ``Sigma = T^-1 Sigma_rv T^-T``
+    (``T^-1 = diag(I, E^-1)``, :func:`rv_to_euler_jacobian`).
+    """
+    X = _check_state(X)
+    T = np.eye(6)
+    T[3:, 3:] = euler_rate_matrix(X[3], X[4])
+    return T
+
+
+def rv_to_euler_jacobian(X) -> np.ndarray:
+    """``T^-1 = diag(I, E(alpha, beta)^-1)``, shape (6, 6): ``[dx_r, phi]`` -> Euler-state differentials."""
+    X = _check_state(X)
+    T = np.eye(6)
+    T[3:, 3:] = euler_rate_matrix_inv(X[3], X[4])
+    return T
+
+
+def rotvec_to_R(phi) -> np.ndarray:
+    r"""``Exp(phi)``: the rotation by ``|phi|`` radians about ``phi`` (Rodrigues' formula), shape (3, 3).
+
+    .. math:: \mathrm{Exp}(\phi) = I + \frac{\sin\theta}{\theta} [\phi]_\times
+        + \frac{1 - \cos\theta}{\theta^2} [\phi]_\times^2, \qquad \theta = |\phi|
+    """
+    phi = np.asarray(phi, dtype=float)
+    th2 = float(phi @ phi)
+    K = skew(phi)
+    if th2 < 1e-12:  # Taylor terms: exact to double precision here
+        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+    else:
+        th = math.sqrt(th2)
+        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+    return np.eye(3) + a * K + b * (K @ K)
+
+
+def retract_rv(X, delta) -> np.ndarray:
+    """Apply a correction ``delta = [dx_r, phi]`` (rotation-vector chart): ``x_r + dx_r``,
+    ``R <- Exp(phi) R``; returns the Euler state (canonical ranges)."""
+    X = _check_state(X)
+    delta = np.asarray(delta, dtype=float)
+    R = rotvec_to_R(delta[3:]) @ euler_zyx_to_R(X[3], X[4], X[5])
+    return np.concatenate([X[:3] + delta[:3], R_to_euler_zyx(R)])
+
+
+def measurement_jacobian_rv(X, b_O) -> np.ndarray:
+    r"""``C`` in the rotation-vector chart, shape (3n, 6): ``C_j = [I_3, -[q_j]_x]``, ``q_j = R b_j``.
+
+    .. math:: \frac{\partial}{\partial \phi} \left(\mathrm{Exp}(\phi) R\, b_j\right)\Big|_0
+        = -[R b_j]_\times
+
+    (:func:`measurement_jacobian` times ``T^-1``: the ``E`` drops out.)
+    """
+    X = _check_state(X)
+    b = _check_points(b_O)
+    n = b.shape[0]
+    q = b @ euler_zyx_to_R(X[3], X[4], X[5]).T
+    C = np.zeros((n, 3, 6))
+    C[:, 0, 0] = C[:, 1, 1] = C[:, 2, 2] = 1.0
+    C[:, :, 3:] = -skew(q)
+    return C.reshape(3 * n, 6)
+
+
 def measurement_covariance(Sigma_d) -> np.ndarray:
     """``Sigma_m`` of Eq. (3): block-diagonal (3n, 3n) from per-feature covariances (n, 3, 3) [m^2].
 
@@ -238,7 +325,9 @@ def motion_model(X_prev, G_RC_prev, G_RC, G_odom, G_OO=None) -> np.ndarray:
     return _predict(_check_state(X_prev), A, G_OO, jacobian=False)[0]
 
 
-def motion_jacobian(X_prev, G_RC_prev, G_RC, G_odom, G_OO=None) -> np.ndarray:
+def motion_jacobian(
+    X_prev, G_RC_prev, G_RC, G_odom, G_OO=None, chart: OrientationChart = OrientationChart.EULER
+) -> np.ndarray:
     r"""``F = dF/dX_{k-1}`` of the motion model Eq. (2), shape (6, 6), analytic.
 
     Write ``A = G_{C_k C_{k-1}} = (R_A, t_A)`` for the camera's own motion and ``G_OO = (R_o, p_o)``.
@@ -253,9 +342,13 @@ def motion_jacobian(X_prev, G_RC_prev, G_RC, G_odom, G_OO=None) -> np.ndarray:
 
     Analytic rather than numerical: it is exact, cheap (a few 3x3 products), and the tests check it
     against central differences of :func:`motion_model`. Singular at gimbal lock of ``X_k``.
+
+    In the rotation-vector chart (``chart=ROTATION_VECTOR``, errors ``[dx_r, phi]`` with
+    ``R_true = Exp(phi) R``) the ``E`` matrices drop out:
+    ``F = [[R_A, -R_A [R p_o]_x], [0, R_A]]``.
     """
     A, G_OO = _motion_inputs(G_RC_prev, G_RC, G_odom, G_OO)
-    return _predict(_check_state(X_prev), A, G_OO, jacobian=True)[1]
+    return _predict(_check_state(X_prev), A, G_OO, jacobian=True, chart=chart)[1]
 
 
 def _motion_inputs(G_RC_prev, G_RC, G_odom, G_OO):
@@ -263,7 +356,7 @@ def _motion_inputs(G_RC_prev, G_RC, G_odom, G_OO):
     return A, (None if G_OO is None else _check_G(G_OO, "G_OO"))
 
 
-def _predict(X_prev, A, G_OO, jacobian: bool):
+def _predict(X_prev, A, G_OO, jacobian: bool, chart: OrientationChart = OrientationChart.EULER):
     """``X_k`` (Eq. (1)) and, if asked, ``F`` for the camera motion ``A = G_{C_k C_{k-1}}``."""
     R = euler_zyx_to_R(X_prev[3], X_prev[4], X_prev[5])
     G = A @ se3(R, X_prev[:3])
@@ -273,16 +366,19 @@ def _predict(X_prev, A, G_OO, jacobian: bool):
     if not jacobian:
         return X, None
     R_A = A[:3, :3]
-    E_prev = euler_rate_matrix(X_prev[3], X_prev[4])
+    euler = chart is OrientationChart.EULER
+    E_prev = euler_rate_matrix(X_prev[3], X_prev[4]) if euler else np.eye(3)
     F = np.zeros((6, 6))
     F[:3, :3] = R_A
     if G_OO is not None:
         F[:3, 3:] = -R_A @ skew(R @ G_OO[:3, 3]) @ E_prev
-    F[3:, 3:] = euler_rate_matrix_inv(X[3], X[4]) @ R_A @ E_prev
+    F[3:, 3:] = (euler_rate_matrix_inv(X[3], X[4]) @ R_A @ E_prev) if euler else R_A
     return X, F
 
 
-def motion_noise_jacobians(X, G_RC) -> tuple[np.ndarray, np.ndarray]:
+def motion_noise_jacobians(
+    X, G_RC, chart: OrientationChart = OrientationChart.EULER
+) -> tuple[np.ndarray, np.ndarray]:
     r"""How the object's and the robot's motion noise enter the predicted state ``X = X_k``.
 
     Returns ``(L_O, L_R)``, each (6, 6), such that to first order
@@ -301,7 +397,8 @@ def motion_noise_jacobians(X, G_RC) -> tuple[np.ndarray, np.ndarray]:
                  \mathrm{Ad}(G_{C R}), \qquad
           \mathrm{Ad}(G) = \begin{bmatrix} R & [p]_\times R \\ 0 & R \end{bmatrix}
 
-    Twists are ordered ``[translation (3), rotation (3)]``.
+    Twists are ordered ``[translation (3), rotation (3)]``. In the rotation-vector chart every
+    ``E^-1`` above is replaced by the identity.
 
     Parameters
     ----------
@@ -309,11 +406,12 @@ def motion_noise_jacobians(X, G_RC) -> tuple[np.ndarray, np.ndarray]:
         The predicted state ``X_k`` (output of :func:`motion_model`).
     G_RC : ndarray, shape (4, 4)
         Camera in robot at step k.
+    chart : OrientationChart
     """
     X = _check_state(X)
     G_CR = se3_inv(_check_G(G_RC, "G_RC"))
     R_k = euler_zyx_to_R(X[3], X[4], X[5])
-    E_inv = euler_rate_matrix_inv(X[3], X[4])
+    E_inv = euler_rate_matrix_inv(X[3], X[4]) if chart is OrientationChart.EULER else np.eye(3)
     L_O = np.zeros((6, 6))
     L_O[:3, :3] = R_k
     L_O[3:, 3:] = E_inv @ R_k
@@ -408,7 +506,15 @@ def odometry_covariance(G_odom, noise: ProcessNoise) -> np.ndarray:
     return np.diag([sig_t**2, sig_t**2, 0.0, 0.0, 0.0, sig_r**2])
 
 
-def process_noise_covariance(X, G_RC, G_odom, dt: float, noise: ProcessNoise, Sigma_odom=None) -> np.ndarray:
+def process_noise_covariance(
+    X,
+    G_RC,
+    G_odom,
+    dt: float,
+    noise: ProcessNoise,
+    Sigma_odom=None,
+    chart: OrientationChart = OrientationChart.EULER,
+) -> np.ndarray:
     r"""``Q``, shape (6, 6): covariance of ``eta`` in Eq. (2) at the predicted state ``X = X_k``.
 
     .. math::
@@ -431,8 +537,10 @@ def process_noise_covariance(X, G_RC, G_odom, dt: float, noise: ProcessNoise, Si
     noise : ProcessNoise
     Sigma_odom : ndarray, shape (6, 6), optional
         Odometry error covariance (twist in R(k)); :func:`odometry_covariance` if omitted.
+    chart : OrientationChart
+        Coordinates of the result's orientation part (``eta_rad`` is added in those coordinates).
     """
-    L_O, L_R = motion_noise_jacobians(X, G_RC)
+    L_O, L_R = motion_noise_jacobians(X, G_RC, chart)
     scale = dt * dt if noise.kind is ObjectNoiseKind.VELOCITY else dt
     q_obj = np.array([noise.sigma_v**2] * 3 + [noise.sigma_w**2] * 3) * scale
     if Sigma_odom is None:
