@@ -43,14 +43,16 @@ class EKFBank:
         return self.filters[i]
 
     def predict(
-        self, G_RC_prev, G_RC, G_odom, dt: float, *, Sigma_odom=None
+        self, G_RC_prev, G_RC, G_odom, dt: float, *, G_OO=None, Sigma_odom=None
     ) -> tuple[PoseEstimate | None, ...]:
         """Apply one step of robot, pan-tilt and (random-walk) object motion to every model's filter.
 
         Same arguments as :meth:`PoseEKF.predict`; returns each model's ``(mu_bar, Sigma_bar)`` (None for
         a model whose filter is not initialised yet).
         """
-        return tuple(f.predict(G_RC_prev, G_RC, G_odom, dt, Sigma_odom=Sigma_odom) for f in self.filters)
+        return tuple(
+            f.predict(G_RC_prev, G_RC, G_odom, dt, G_OO=G_OO, Sigma_odom=Sigma_odom) for f in self.filters
+        )
 
     def update(self, i: int, d_C, b_O, Sigma_d) -> UpdateResult:
         """Update model ``i``'s filter with its matched pairs (same arguments as :meth:`PoseEKF.update`)."""

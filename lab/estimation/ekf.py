@@ -212,7 +212,8 @@ class PoseEstimate:
             raise ValueError(f"PoseEstimate needs mu (6,) and Sigma (6, 6), got {mu.shape}, {Sigma.shape}")
         if self.Sigma_rv is None:
             T = euler_to_rv_jacobian(mu)
-            Sigma_rv = _frozen(T @ Sigma @ T.T)
+            Sigma_rv = T @ Sigma @ T.T
+            Sigma_rv = _frozen(0.5 * (Sigma_rv + Sigma_rv.T))
         else:
             Sigma_rv = _frozen(self.Sigma_rv)
             if Sigma_rv.shape != (6, 6):
@@ -503,7 +504,8 @@ class PoseEKF:
         if self.P is None or self._euler:
             return self.P
         T_inv = rv_to_euler_jacobian(self.mu)
-        return T_inv @ self.P @ T_inv.T
+        Sigma = T_inv @ self.P @ T_inv.T
+        return 0.5 * (Sigma + Sigma.T)
 
     @property
     def Sigma_rv(self) -> np.ndarray | None:
@@ -511,7 +513,8 @@ class PoseEKF:
         if self.P is None or not self._euler:
             return self.P
         T = euler_to_rv_jacobian(self.mu)
-        return T @ self.P @ T.T
+        Sigma_rv = T @ self.P @ T.T
+        return 0.5 * (Sigma_rv + Sigma_rv.T)
 
     @property
     def estimate(self) -> PoseEstimate | None:
