@@ -7,7 +7,8 @@ Euler angles (``docs/conventions.md``).
   analytic Jacobians, process noise.
 * :mod:`~lab.estimation.fit`: closed-form rigid fit and RANSAC initialisation.
 * :mod:`~lab.estimation.ekf`: :class:`PoseEKF` (predict, gated Joseph-form update, Eq. (9) likelihood,
-  divergence detection).
+  divergence detection). ``EKFConfig(chart=OrientationChart.ROTATION_VECTOR)`` keeps the covariance
+  over a small rotation vector instead of the Euler angles: same state, no gimbal-lock breakdown.
 * :mod:`~lab.estimation.bank`: :class:`EKFBank`, one filter per database model.
 * :mod:`~lab.estimation.synthetic`: synthetic box features and stereo-like noise for tests and notebooks.
 """
