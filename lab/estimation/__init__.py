@@ -1,1 +1,87 @@
-"""lab.estimation"""
+"""Pose estimation: the 6-DOF pose EKF of the two papers and the bank of per-model filters.
+
+State ``X = [x, y, z, alpha, beta, gamma]``: the object frame O in the left camera frame C, z-y-x
+Euler angles (``docs/conventions.md``).
+
+* :mod:`~lab.estimation.models`: measurement model Eq. (3) and motion model Eqs. (1)-(2) with their
+  analytic Jacobians, process noise.
+* :mod:`~lab.estimation.fit`: closed-form rigid fit and RANSAC initialisation.
+* :mod:`~lab.estimation.ekf`: :class:`PoseEKF` (predict, gated Joseph-form update, Eq. (9) likelihood,
+  divergence detection). ``EKFConfig(chart=OrientationChart.ROTATION_VECTOR)`` keeps the covariance
+  over a small rotation vector instead of the Euler angles: same state, no gimbal-lock breakdown.
+* :mod:`~lab.estimation.bank`: :class:`EKFBank`, one filter per database model.
+* :mod:`~lab.estimation.synthetic`: synthetic box features and stereo-like noise for tests and notebooks.
+"""
+
+from lab.estimation.bank import EKFBank
+from lab.estimation.ekf import (
+    DivergenceConfig,
+    EKFConfig,
+    GateConfig,
+    PoseEKF,
+    PoseEstimate,
+    UpdateOutcome,
+    UpdateResult,
+    data_log_likelihood,
+    gate_matches,
+    nees,
+)
+from lab.estimation.fit import InitResult, RansacConfig, fit_rigid_transform, ransac_pose
+from lab.estimation.models import (
+    ObjectNoiseKind,
+    OrientationChart,
+    ProcessNoise,
+    euler_rate_matrix,
+    euler_rate_matrix_inv,
+    euler_to_rv_jacobian,
+    measurement_covariance,
+    measurement_jacobian,
+    measurement_jacobian_rv,
+    measurement_model,
+    motion_jacobian,
+    motion_model,
+    motion_noise_jacobians,
+    odometry_covariance,
+    process_noise_covariance,
+    retract_rv,
+    rotvec_to_R,
+    rv_to_euler_jacobian,
+    state_residual,
+)
+
+__all__ = [
+    "DivergenceConfig",
+    "EKFBank",
+    "EKFConfig",
+    "GateConfig",
+    "PoseEKF",
+    "PoseEstimate",
+    "UpdateOutcome",
+    "UpdateResult",
+    "data_log_likelihood",
+    "gate_matches",
+    "nees",
+    "InitResult",
+    "RansacConfig",
+    "fit_rigid_transform",
+    "ransac_pose",
+    "retract_rv",
+    "rotvec_to_R",
+    "rv_to_euler_jacobian",
+    "ObjectNoiseKind",
+    "OrientationChart",
+    "ProcessNoise",
+    "euler_rate_matrix",
+    "euler_rate_matrix_inv",
+    "euler_to_rv_jacobian",
+    "measurement_covariance",
+    "measurement_jacobian",
+    "measurement_jacobian_rv",
+    "measurement_model",
+    "motion_jacobian",
+    "motion_model",
+    "motion_noise_jacobians",
+    "odometry_covariance",
+    "process_noise_covariance",
+    "state_residual",
+]
