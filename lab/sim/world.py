@@ -122,6 +122,8 @@ class Carrier:
         self.box_yaw = float(box_yaw)
         self.v = 0.0
         self.omega = 0.0
+        self.mover = None  # a lab.sim.movers.Mover, set by the caller
+        self._placed_box_yaw = self.box_yaw
         pb = world.p
         base_col = pb.createCollisionShape(pybullet.GEOM_CYLINDER, radius=self.RADIUS, height=self.HEIGHT)
         base_vis = pb.createVisualShape(
@@ -156,9 +158,15 @@ class Carrier:
         pb.resetBasePositionAndOrientation(self.base_id, (self.pose.x, self.pose.y, self.HEIGHT / 2), q)
         G = self.G_WO
         pb.resetBasePositionAndOrientation(self.box_id, G[:3, 3], R_to_quat_xyzw(G[:3, :3]))
+        self._placed_box_yaw = self.box_yaw
 
     def advance(self, dt: float) -> None:
+        """Move by the current velocity for ``dt`` [s] (after the mover, if any, has set it)."""
+        if self.mover is not None:
+            self.mover.step(self.world.t, dt)
         if self.v == 0.0 and self.omega == 0.0:
+            if self.box_yaw != self._placed_box_yaw:
+                self._place()
             return
         x, y, th = self.pose.x, self.pose.y, self.pose.theta
         th_mid = th + 0.5 * self.omega * dt
