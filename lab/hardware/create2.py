@@ -518,8 +518,11 @@ class Create2:
         DeviceTimeout when the robot does not confirm the mode.
         """
         self._check_link()
-        s = self.sensors()
-        if s is not None and (s.wheel_drop_left or s.wheel_drop_right or any(s.cliff)):
+        s = self.wait_for_frame(timeout)  # a frame from now, not one from before the robot was put down
+        if s is None:
+            self._check_link()
+            raise DeviceTimeout(f"no sensor stream from the Create 2 on {self.port} within {timeout:.1f} s")
+        if s.wheel_drop_left or s.wheel_drop_right or any(s.cliff):
             raise SafetyStop(f"cannot enable the Create 2: {self._hazard(s)}; put it on the floor first")
         self.safety_trip = None
         self._safe_confirmed = False
