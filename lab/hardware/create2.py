@@ -407,6 +407,7 @@ class Create2:
         self._last_request_t = -math.inf
         self._last_mode_t = -math.inf
         self._stale = False
+        self._stale_stop_pending = False
         self._enabled = False
         self._safe_confirmed = False
         self.safety_trip: str | None = None
@@ -687,17 +688,24 @@ class Create2:
                     self._on_frame(values, now)
             try:
                 self._check_stale(now)
-            except (ConnectionLost, DeviceTimeout):
-                return
+            except ConnectionLost:
+                return  # _write has recorded it
+            except DeviceTimeout:
+                pass  # a write timed out: keep reading, the stale check runs again next slice
 
     def _check_stale(self, now: float) -> None:
         if self._sensors is None or now - self._last_frame_t <= self.stale_timeout_s:
             return
         if not self._stale:
             self._stale = True
+            self._stale_stop_pending = True
             self.counters["stale_events"] += 1
-            self.stop()  # no sensor stream = no cliff detection: stop the wheels
             self._emit("stale", f"no valid frame from the Create 2 for {now - self._last_frame_t:.2f} s")
+        if (
+            self._stale_stop_pending
+        ):  # no sensor stream = no cliff detection: stop the wheels (until it worked)
+            self.stop()
+            self._stale_stop_pending = False
         if now - self._last_request_t > self.stale_timeout_s:
             self._request_stream()
 

@@ -130,7 +130,7 @@ def _install_hooks(sigint: bool) -> None:
                 r._request_stop()
             if callable(prev):
                 prev(signum, frame)
-            else:
+            elif prev != signal.SIG_IGN:
                 raise KeyboardInterrupt
 
         try:
