@@ -286,3 +286,29 @@ def test_socket_url(emu):
         stop.set()
         t.join(1.0)
         srv.close()
+
+
+def test_threads_share_the_port_without_mixing_replies(ptu, emu):
+    """One lock per port: concurrent queries and moves never read each other's replies."""
+    errors, results = [], []
+
+    def poll():
+        try:
+            for _ in range(15):
+                s = ptu.get_steps()
+                results.append(s)
+        except Exception as e:  # any failure is a test failure
+            errors.append(e)
+
+    threads = [threading.Thread(target=poll) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for deg in (3.0, -3.0, 1.0):
+        ptu.set_pan_tilt(math.radians(deg), math.radians(deg / 2), wait=True)
+    for t in threads:
+        t.join(5.0)
+    assert not errors and len(results) == 60
+    lo, hi = ptu.step_limits["P"]
+    assert all(lo <= r["P"] <= hi and abs(r["T"]) <= 60 for r in results)
+    assert ptu.counters["protocol_errors"] == 0 and ptu.counters["retries"] == 0
+    assert math.degrees(ptu.get_pan_tilt()[0]) == pytest.approx(1.0, abs=0.06)
