@@ -1,0 +1,605 @@
+"""Stereo cameras: capture, rectification from a calibration file, replay, and a calibration tool.
+
+* :class:`SideBySideCamera`: a USB stereo camera that delivers both images side by side in one frame
+  (width = 2 x one image). The mode is read back after setting it (cameras silently fall back to a
+  single-eye mode), the halves are split, and ``swap_lr`` says which half is the left camera (public
+  code disagrees; cover one lens to check).
+* :class:`TwoDeviceCamera`: two ordinary webcams (grabbed back to back, then decoded).
+* :class:`ReplayStereoSource`: image pairs from a folder or from arrays (tests, the emulated robot).
+* :class:`StereoCalibration`: K1 D1 K2 D2 R T and the rectification (R1 R2 P1 P2 Q) in an OpenCV
+  FileStorage YAML file; :class:`StereoRectifier` remaps raw pairs to rectified ones and refuses frames of
+  another size.
+* :func:`calibrate_stereo`: chessboard pairs -> calibration (``calibrateCamera`` per camera, then
+  ``stereoCalibrate`` with ``CALIB_FIX_INTRINSIC`` and ``stereoRectify``).
+
+Every source returns **RGB** ``uint8`` images (OpenCV's BGR is converted at the capture boundary) with a
+timestamp on the monotonic clock. After a pan-tilt move, ``read(after=t)`` discards the frames the driver
+buffered and returns one taken after ``t`` (stale frames would show the old view).
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from lab.errors import ConfigError, ConnectionLost, DeviceTimeout
+from lab.robot import StereoCamera
+
+__all__ = [
+    "RawStereo",
+    "ReplayStereoSource",
+    "SideBySideCamera",
+    "StereoCalibration",
+    "StereoRectifier",
+    "StereoSource",
+    "TwoDeviceCamera",
+    "calibrate_folder",
+    "calibrate_stereo",
+    "find_chessboard",
+    "load_calibration",
+    "render_chessboard_view",
+]
+
+
+# --- calibration ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class StereoCalibration:
+    """A calibrated stereo pair (OpenCV conventions; lengths in metres).
+
+    Attributes
+    ----------
+    image_size : (width, height) [px] of one image
+    K1, K2 : ndarray, shape (3, 3)
+    D1, D2 : ndarray, shape (1, n)
+        Distortion coefficients (plumb bob: k1 k2 p1 p2 k3).
+    R, T : ndarray, shape (3, 3) and (3, 1)
+        Left camera -> right camera: ``X_right = R @ X_left + T``; a right camera at +b along x has
+        ``T = [-b, 0, 0]``.
+    R1, R2, P1, P2, Q : ndarray
+        ``cv2.stereoRectify`` output; the rectified intrinsics are ``P1[:, :3]``, the baseline
+        ``-P2[0, 3] / P2[0, 0]``.
+    rms : float or None [px]
+        Reprojection error of the calibration that produced it.
+    """
+
+    image_size: tuple[int, int]
+    K1: np.ndarray = field(repr=False)
+    D1: np.ndarray = field(repr=False)
+    K2: np.ndarray = field(repr=False)
+    D2: np.ndarray = field(repr=False)
+    R: np.ndarray = field(repr=False)
+    T: np.ndarray = field(repr=False)
+    R1: np.ndarray = field(repr=False)
+    R2: np.ndarray = field(repr=False)
+    P1: np.ndarray = field(repr=False)
+    P2: np.ndarray = field(repr=False)
+    Q: np.ndarray = field(repr=False)
+    rms: float | None = None
+
+    @classmethod
+    def from_intrinsics(cls, K1, D1, K2, D2, R, T, image_size, rms: float | None = None, alpha: float = 0.0):
+        """Compute the rectification (``CALIB_ZERO_DISPARITY``; ``alpha=0`` keeps only valid pixels)."""
+        K1, D1, K2, D2, R, T = (np.asarray(a, dtype=np.float64) for a in (K1, D1, K2, D2, R, T))
+        D1, D2, T = D1.reshape(1, -1), D2.reshape(1, -1), T.reshape(3, 1)
+        size = (int(image_size[0]), int(image_size[1]))
+        R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(
+            K1, D1, K2, D2, size, R, T, flags=cv2.CALIB_ZERO_DISPARITY, alpha=alpha
+        )
+        return cls(size, K1, D1, K2, D2, R, T, R1, R2, P1, P2, Q, rms)
+
+    @classmethod
+    def ideal(cls, width: int, height: int, f: float, baseline: float) -> StereoCalibration:
+        """A perfect pair: identical pinholes, no distortion, right camera at +baseline along x."""
+        K = np.array([[f, 0.0, width / 2.0 - 0.5], [0.0, f, height / 2.0 - 0.5], [0.0, 0.0, 1.0]])
+        return cls.from_intrinsics(
+            K, np.zeros(5), K, np.zeros(5), np.eye(3), [-baseline, 0.0, 0.0], (width, height)
+        )
+
+    @property
+    def baseline(self) -> float:
+        """Distance between the rectified optical centres [m]."""
+        return float(-self.P2[0, 3] / self.P2[0, 0])
+
+    def camera_model(self, mount_R=(0.0, 0.0, 0.8), camera_offset_P=(0.05, 0.06, 0.0)) -> StereoCamera:
+        """The :class:`lab.robot.StereoCamera` of the *rectified* images."""
+        w, h = self.image_size
+        P = self.P1
+        return StereoCamera(
+            w,
+            h,
+            float(P[0, 0]),
+            float(P[1, 1]),
+            float(P[0, 2]),
+            float(P[1, 2]),
+            self.baseline,
+            tuple(float(v) for v in mount_R),
+            tuple(float(v) for v in camera_offset_P),
+        )
+
+    def save(self, path: str | Path) -> None:
+        """Write an OpenCV FileStorage YAML file (``cv2.FileStorage`` reads it back)."""
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+        try:
+            fs.write("image_width", int(self.image_size[0]))
+            fs.write("image_height", int(self.image_size[1]))
+            for name in ("K1", "D1", "K2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q"):
+                fs.write(name, getattr(self, name))
+            if self.rms is not None:
+                fs.write("rms", float(self.rms))
+        finally:
+            fs.release()
+
+
+_REQUIRED = ("K1", "D1", "K2", "D2", "R", "T")
+
+
+def load_calibration(path: str | Path, expected_size: tuple[int, int] | None = None) -> StereoCalibration:
+    """Read a calibration file written by :meth:`StereoCalibration.save` (or by hand, K1 D1 K2 D2 R T).
+
+    Raises
+    ------
+    ConfigError
+        File missing or unreadable, a matrix missing or of the wrong shape, or ``expected_size``
+        (width, height) different from the calibrated image size.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(
+            f"calibration file {path} not found; set [camera] calibration or create one with "
+            "lab.hardware.camera.calibrate_folder (hardware/README.md)"
+        )
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        ok = fs.isOpened()
+    except (cv2.error, SystemError) as e:  # malformed YAML surfaces as SystemError from the binding
+        raise ConfigError(
+            f"calibration file {path} is not an OpenCV YAML file ({str(e).strip()[:80]})"
+        ) from e
+    if not ok:
+        raise ConfigError(f"calibration file {path} could not be opened as OpenCV FileStorage YAML")
+    try:
+        w, h = fs.getNode("image_width"), fs.getNode("image_height")
+        if w.empty() or h.empty():
+            raise ConfigError(f"calibration file {path} lacks image_width/image_height")
+        size = (int(w.real()), int(h.real()))
+        mats = {}
+        for name in (*_REQUIRED, "R1", "R2", "P1", "P2", "Q", "rms"):
+            node = fs.getNode(name)
+            if node.empty():
+                if name in _REQUIRED:
+                    raise ConfigError(f"calibration file {path} lacks {name} (needs {', '.join(_REQUIRED)})")
+                continue
+            mats[name] = node.real() if name == "rms" else node.mat()
+    finally:
+        fs.release()
+    shapes = {"K1": (3, 3), "K2": (3, 3), "R": (3, 3)}
+    for name, shape in shapes.items():
+        if mats[name] is None or mats[name].shape != shape:
+            raise ConfigError(f"calibration file {path}: {name} must be a 3x3 matrix")
+    if mats["T"] is None or mats["T"].size != 3:
+        raise ConfigError(f"calibration file {path}: T must have 3 elements")
+    if expected_size is not None and tuple(expected_size) != size:
+        raise ConfigError(
+            f"calibration file {path} is for {size[0]}x{size[1]} images but the camera delivers "
+            f"{expected_size[0]}x{expected_size[1]}; recalibrate or set [camera] width/height to match"
+        )
+    if all(k in mats for k in ("R1", "R2", "P1", "P2", "Q")):
+        return StereoCalibration(
+            size,
+            *(np.asarray(mats[k], dtype=np.float64) for k in (*_REQUIRED, "R1", "R2", "P1", "P2", "Q")),
+            rms=mats.get("rms"),
+        )
+    return StereoCalibration.from_intrinsics(*(mats[k] for k in _REQUIRED), size, rms=mats.get("rms"))
+
+
+class StereoRectifier:
+    """Remaps raw image pairs to the rectified pair of a :class:`StereoCalibration`."""
+
+    def __init__(self, calib: StereoCalibration):
+        self.calib = calib
+        size = calib.image_size
+        self._maps = [
+            cv2.initUndistortRectifyMap(K, D, Rr, P, size, cv2.CV_32FC1)
+            for K, D, Rr, P in (
+                (calib.K1, calib.D1, calib.R1, calib.P1),
+                (calib.K2, calib.D2, calib.R2, calib.P2),
+            )
+        ]
+
+    def rectify(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rectified (left, right); ConfigError for images of another size than the calibration's."""
+        w, h = self.calib.image_size
+        for name, img in (("left", left), ("right", right)):
+            if img.shape[:2] != (h, w):
+                raise ConfigError(
+                    f"{name} image is {img.shape[1]}x{img.shape[0]} but the calibration is for {w}x{h}; "
+                    "refusing to rectify (recalibrate or fix [camera] width/height)"
+                )
+        return tuple(
+            cv2.remap(img, mx, my, cv2.INTER_LINEAR)
+            for img, (mx, my) in zip((left, right), self._maps, strict=True)
+        )
+
+
+# --- sources ----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RawStereo:
+    """An unrectified RGB pair and its capture time [s, monotonic clock]."""
+
+    t: float
+    left: np.ndarray = field(repr=False)
+    right: np.ndarray = field(repr=False)
+
+
+class StereoSource(ABC):
+    """Something that delivers RGB image pairs of ``image_size`` = (width, height) of one image."""
+
+    image_size: tuple[int, int]
+
+    @abstractmethod
+    def read(self, after: float | None = None, timeout: float = 2.0) -> RawStereo:
+        """The next pair; with ``after``, one captured after that time (stale frames discarded)."""
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
+def _wait_until_after(after: float | None, timeout: float, clock: Callable[[], float]) -> None:
+    if after is None:
+        return
+    t_end = time.monotonic() + timeout
+    while clock() <= after:
+        if time.monotonic() >= t_end:
+            raise DeviceTimeout(f"no camera frame newer than t={after:.3f} s within {timeout:.1f} s")
+        time.sleep(min(0.005, max(0.0, after - clock()) + 1e-4))
+
+
+class SideBySideCamera(StereoSource):
+    """A USB stereo camera delivering one (H, 2W) frame with both images side by side.
+
+    Parameters
+    ----------
+    device : int or str
+        OpenCV device index, ``/dev/videoN``, or a video file (for tests).
+    width, height : int [px]
+        One image's size; the camera is asked for ``2 * width`` x ``height`` and the answer is checked.
+    swap_lr : bool
+        False: the left half of the frame is the left camera.
+    fourcc : str
+        Pixel format to request ("MJPG" saves USB bandwidth); "" leaves the default.
+    flush_grabs : int
+        Frames discarded by ``read(after=...)`` (the driver's buffer holds a few old ones).
+    capture_factory : callable
+        ``cv2.VideoCapture`` (replaceable in tests).
+    """
+
+    def __init__(
+        self,
+        device: int | str = 0,
+        width: int = 1280,
+        height: int = 720,
+        *,
+        swap_lr: bool = False,
+        fourcc: str = "MJPG",
+        flush_grabs: int = 4,
+        capture_factory: Callable = cv2.VideoCapture,
+    ):
+        self.device = device
+        self.image_size = (int(width), int(height))
+        self.swap_lr = swap_lr
+        self.flush_grabs = int(flush_grabs)
+        self._cap = capture_factory(device)
+        if not self._cap.isOpened():
+            raise ConnectionLost(
+                f"stereo camera {device!r} could not be opened; check the cable and [camera] device"
+            )
+        if fourcc:
+            self._cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*fourcc))
+        self._cap.set(cv2.CAP_PROP_FRAME_WIDTH, 2 * width)
+        self._cap.set(cv2.CAP_PROP_FRAME_HEIGHT, height)
+        self._cap.set(cv2.CAP_PROP_BUFFERSIZE, 1)
+        got = (int(self._cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self._cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+        if got != (2 * width, height):
+            self._cap.release()
+            raise ConfigError(
+                f"stereo camera {device!r} delivers {got[0]}x{got[1]}, not the side-by-side "
+                f"{2 * width}x{height} (2 x {width}x{height}) asked for; set [camera] width/height to a mode "
+                "it supports (v4l2-ctl --list-formats-ext)"
+            )
+
+    def read(self, after: float | None = None, timeout: float = 2.0) -> RawStereo:
+        _wait_until_after(after, timeout, time.monotonic)
+        if after is not None:
+            for _ in range(self.flush_grabs):
+                self._cap.grab()
+        ok, frame = self._cap.read()
+        t = time.monotonic()
+        if not ok or frame is None:
+            raise ConnectionLost(f"stereo camera {self.device!r} returned no frame (unplugged?)")
+        w, h = self.image_size
+        if frame.shape[:2] != (h, 2 * w):
+            raise ConfigError(
+                f"stereo camera {self.device!r} sent a {frame.shape[1]}x{frame.shape[0]} frame, "
+                f"expected {2 * w}x{h}"
+            )
+        a, b = frame[:, :w], frame[:, w:]
+        if self.swap_lr:
+            a, b = b, a
+        return RawStereo(t, _to_rgb(a), _to_rgb(b))
+
+    def close(self) -> None:
+        self._cap.release()
+
+
+class TwoDeviceCamera(StereoSource):
+    """Two separate cameras; both are grabbed before either is decoded, to keep them close in time."""
+
+    def __init__(
+        self,
+        left: int | str,
+        right: int | str,
+        width: int,
+        height: int,
+        *,
+        flush_grabs: int = 4,
+        capture_factory: Callable = cv2.VideoCapture,
+    ):
+        self.image_size = (int(width), int(height))
+        self.flush_grabs = int(flush_grabs)
+        self._caps = []
+        for name, dev in (("left", left), ("right", right)):
+            cap = capture_factory(dev)
+            if not cap.isOpened():
+                self.close()
+                raise ConnectionLost(f"{name} camera {dev!r} could not be opened; check [camera] devices")
+            cap.set(cv2.CAP_PROP_FRAME_WIDTH, width)
+            cap.set(cv2.CAP_PROP_FRAME_HEIGHT, height)
+            got = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+            self._caps.append(cap)
+            if got != (width, height):
+                self.close()
+                raise ConfigError(f"{name} camera {dev!r} delivers {got[0]}x{got[1]}, not {width}x{height}")
+
+    def read(self, after: float | None = None, timeout: float = 2.0) -> RawStereo:
+        _wait_until_after(after, timeout, time.monotonic)
+        n = 1 + (self.flush_grabs if after is not None else 0)
+        for _ in range(n):
+            ok = [c.grab() for c in self._caps]
+        t = time.monotonic()
+        imgs = [c.retrieve()[1] if g else None for c, g in zip(self._caps, ok, strict=True)]
+        if any(i is None for i in imgs):
+            raise ConnectionLost("a stereo camera returned no frame (unplugged?)")
+        return RawStereo(t, _to_rgb(imgs[0]), _to_rgb(imgs[1]))
+
+    def close(self) -> None:
+        for c in self._caps:
+            c.release()
+
+
+def _to_rgb(bgr: np.ndarray) -> np.ndarray:
+    if bgr.ndim == 2:
+        return cv2.cvtColor(bgr, cv2.COLOR_GRAY2RGB)
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+class ReplayStereoSource(StereoSource):
+    """Replays RGB image pairs (in a loop), stamping each with the clock when it is read.
+
+    Parameters
+    ----------
+    pairs : sequence of (left, right)
+        RGB ``uint8`` arrays, all of one shape (H, W, 3).
+    loop : bool
+        Start over after the last pair (otherwise DeviceTimeout, as a camera that stopped).
+    clock : callable
+        Time source for the stamps (the robot's ``now``).
+    """
+
+    def __init__(
+        self,
+        pairs: Sequence[tuple[np.ndarray, np.ndarray]],
+        *,
+        loop: bool = True,
+        clock: Callable[[], float] = time.monotonic,
+    ):
+        if not pairs:
+            raise ConfigError("ReplayStereoSource needs at least one image pair")
+        shape = np.asarray(pairs[0][0]).shape
+        for k, (l, r) in enumerate(pairs):
+            for img in (l, r):
+                img = np.asarray(img)
+                if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3 or img.shape != shape:
+                    raise ConfigError(
+                        f"replay pair {k}: images must be RGB uint8 of one shape {shape}, "
+                        f"got {img.shape} {img.dtype}"
+                    )
+        self._pairs = [(np.asarray(l), np.asarray(r)) for l, r in pairs]
+        self.image_size = (shape[1], shape[0])
+        self.loop = loop
+        self.clock = clock
+        self._k = 0
+
+    @classmethod
+    def from_folder(cls, folder: str | Path, **kw) -> ReplayStereoSource:
+        """Pairs ``left_<id>.<ext>`` + ``right_<id>.<ext>`` (png/jpg), in sorted order of ``<id>``."""
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise ConfigError(f"replay folder {folder} not found")
+        lefts = sorted(
+            p
+            for p in folder.iterdir()
+            if p.name.startswith("left_") and p.suffix.lower() in (".png", ".jpg", ".jpeg")
+        )
+        pairs = []
+        for lp in lefts:
+            rp = lp.with_name("right_" + lp.name[len("left_") :])
+            if not rp.exists():
+                raise ConfigError(f"replay folder {folder}: {lp.name} has no {rp.name}")
+            imgs = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in (lp, rp)]
+            if any(i is None for i in imgs):
+                raise ConfigError(f"replay folder {folder}: cannot read {lp.name} or {rp.name}")
+            pairs.append((_to_rgb(imgs[0]), _to_rgb(imgs[1])))
+        if not pairs:
+            raise ConfigError(f"replay folder {folder} has no left_<id>.png / right_<id>.png pairs")
+        return cls(pairs, **kw)
+
+    @classmethod
+    def synthetic(
+        cls, width: int = 320, height: int = 240, disparity_px: int = 8, n: int = 2, seed: int = 0, **kw
+    ) -> ReplayStereoSource:
+        """Random-dot pairs of a fronto-parallel plane: the right image is the left shifted by the disparity.
+
+        A point at left column ``u`` is at ``u - disparity_px`` on the right (right camera at +baseline).
+        """
+        rng = np.random.default_rng(seed)
+        pairs = []
+        for _ in range(n):
+            blocks = rng.integers(
+                0, 256, size=(height // 4 + 1, (width + disparity_px) // 4 + 1, 3), dtype=np.uint8
+            )
+            tex = np.repeat(np.repeat(blocks, 4, axis=0), 4, axis=1)[:height]
+            pairs.append(
+                (
+                    np.ascontiguousarray(tex[:, :width]),
+                    np.ascontiguousarray(tex[:, disparity_px : disparity_px + width]),
+                )
+            )
+        return cls(pairs, **kw)
+
+    def read(self, after: float | None = None, timeout: float = 2.0) -> RawStereo:
+        _wait_until_after(after, timeout, self.clock)
+        if self._k >= len(self._pairs):
+            if not self.loop:
+                raise DeviceTimeout("replay source has no more image pairs")
+            self._k = 0
+        l, r = self._pairs[self._k]
+        self._k += 1
+        return RawStereo(self.clock(), l.copy(), r.copy())
+
+
+# --- calibration tool --------------------------------------------------------------------------------
+def find_chessboard(image: np.ndarray, board_size: tuple[int, int]) -> np.ndarray | None:
+    """Sub-pixel inner corners, shape (n, 1, 2) float32, of a chessboard with ``board_size`` inner corners."""
+    gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    ok, corners = cv2.findChessboardCorners(
+        gray, board_size, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+    )
+    if not ok:
+        return None
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3)
+    return cv2.cornerSubPix(gray, corners, (5, 5), (-1, -1), crit)
+
+
+def calibrate_stereo(
+    pairs: Sequence[tuple[np.ndarray, np.ndarray]],
+    board_size: tuple[int, int] = (9, 6),
+    square_size: float = 0.025,
+    min_pairs: int = 5,
+) -> StereoCalibration:
+    """Calibrate a stereo pair from chessboard views.
+
+    Each camera is calibrated alone (``cv2.calibrateCamera``), then the pair with its intrinsics fixed
+    (``cv2.stereoCalibrate``, ``CALIB_FIX_INTRINSIC``), then rectified (``cv2.stereoRectify``).
+
+    Parameters
+    ----------
+    pairs : sequence of (left, right) images (RGB or grey), one size
+    board_size : (columns, rows) of *inner* corners
+    square_size : float [m]
+        Side of one square; it sets the unit of T and so of the baseline.
+    min_pairs : int
+        Fewer pairs where both images show the whole board raise ConfigError.
+    """
+    if not pairs:
+        raise ConfigError("calibrate_stereo needs chessboard image pairs")
+    h, w = pairs[0][0].shape[:2]
+    obj = np.zeros((board_size[0] * board_size[1], 3), np.float32)
+    obj[:, :2] = np.mgrid[0 : board_size[0], 0 : board_size[1]].T.reshape(-1, 2) * square_size
+    objs, pts_l, pts_r = [], [], []
+    for l, r in pairs:
+        if l.shape[:2] != (h, w) or r.shape[:2] != (h, w):
+            raise ConfigError(f"calibration images must all be {w}x{h}")
+        cl, cr = find_chessboard(l, board_size), find_chessboard(r, board_size)
+        if cl is not None and cr is not None:
+            objs.append(obj)
+            pts_l.append(cl)
+            pts_r.append(cr)
+    if len(objs) < min_pairs:
+        raise ConfigError(
+            f"the whole {board_size[0]}x{board_size[1]} chessboard was found in both images of only "
+            f"{len(objs)} of {len(pairs)} pairs; at least {min_pairs} are needed"
+        )
+    size = (w, h)
+    _, K1, D1, _, _ = cv2.calibrateCamera(objs, pts_l, size, None, None)
+    _, K2, D2, _, _ = cv2.calibrateCamera(objs, pts_r, size, None, None)
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-6)
+    rms, K1, D1, K2, D2, R, T, _, _ = cv2.stereoCalibrate(
+        objs, pts_l, pts_r, K1, D1, K2, D2, size, flags=cv2.CALIB_FIX_INTRINSIC, criteria=crit
+    )
+    return StereoCalibration.from_intrinsics(K1, D1, K2, D2, R, T, size, rms=float(rms))
+
+
+def calibrate_folder(folder: str | Path, out_path: str | Path, board_size=(9, 6), square_size: float = 0.025):
+    """Calibrate from ``left_<id>.png`` / ``right_<id>.png`` pairs in ``folder`` and save to ``out_path``."""
+    src = ReplayStereoSource.from_folder(folder)
+    calib = calibrate_stereo(src._pairs, board_size, square_size)
+    calib.save(out_path)
+    return calib
+
+
+def render_chessboard_view(
+    K: np.ndarray,
+    rvec,
+    tvec,
+    image_size: tuple[int, int],
+    board_size: tuple[int, int] = (9, 6),
+    square_size: float = 0.025,
+    px_per_square: int = 40,
+) -> np.ndarray:
+    """Render a chessboard (board frame: corners at ``(i, j, 0) * square_size``) seen by a pinhole camera.
+
+    The board texture is warped with the homography ``K [r1 r2 t]`` of the board plane (a distortion-free
+    camera), on a grey background. Used to test the calibration tool with a known camera.
+    Returns an RGB ``uint8`` image.
+    """
+    cols, rows = board_size[0] + 1, board_size[1] + 1  # squares
+    s = px_per_square
+    margin = s  # a white border helps the corner finder
+    tex = np.full((rows * s + 2 * margin, cols * s + 2 * margin), 255, np.uint8)
+    for j in range(rows):
+        for i in range(cols):
+            if (i + j) % 2 == 0:
+                tex[margin + j * s : margin + (j + 1) * s, margin + i * s : margin + (i + 1) * s] = 0
+    # texture pixel (u, v) -> board point (x, y) [m]. Pixel centres are integers, so the first inner corner
+    # (between pixels margin + s - 1 and margin + s) is at texture coordinate margin + s - 0.5.
+    c0 = margin + s - 0.5
+    A = np.array(
+        [[square_size / s, 0, -c0 * square_size / s], [0, square_size / s, -c0 * square_size / s], [0, 0, 1]]
+    )
+    Rm, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64))
+    H = (
+        np.asarray(K)
+        @ np.column_stack([Rm[:, 0], Rm[:, 1], np.asarray(tvec, dtype=np.float64).reshape(3)])
+        @ A
+    )
+    # render 4x larger and average 4x4 blocks (anti-aliasing); pixel centres: u_super = 4 u + 1.5
+    S = np.array([[4.0, 0.0, 1.5], [0.0, 4.0, 1.5], [0.0, 0.0, 1.0]])
+    big = (image_size[0] * 4, image_size[1] * 4)
+    img = cv2.warpPerspective(
+        tex, S @ H, big, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=128
+    )
+    img = cv2.resize(img, image_size, interpolation=cv2.INTER_AREA)
+    return cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)

@@ -1,0 +1,270 @@
+"""The robot's hardware configuration: a TOML file read into frozen dataclasses, strictly.
+
+``hardware/robot.toml`` describes the real robot, ``hardware/emulated.toml`` the emulators. The loader
+rejects a missing file, an unknown section or key, a wrong type and an impossible value with one
+:class:`~lab.errors.ConfigError` line that names the file, the key and what is allowed. Relative paths
+(calibration file, replay folder) are resolved against the config file's folder.
+
+Degrees appear only here, at the edge, with ``_deg`` in their names; the drivers get radians.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from lab.errors import ConfigError
+
+__all__ = ["BaseConfig", "CameraConfig", "HardwareConfig", "PTUConfig", "RobotConfig", "load_config"]
+
+CREATE_BAUDS = (115200, 19200)
+PTU_BAUDS = (9600, 19200, 38400, 57600, 115200)
+CAMERA_SOURCES = ("side_by_side", "two_devices", "replay", "synthetic")
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """``[robot]``: name, watchdog and servo loop."""
+
+    name: str = "robot"
+    cmd_timeout_s: float = 0.5
+    servo_rate_hz: float = 50.0
+    install_sigint_handler: bool = True
+
+
+@dataclass(frozen=True)
+class BaseConfig:
+    """``[base]``: the iRobot Create 2 and the limits the adapter enforces on it."""
+
+    port: str = ""
+    baudrate: int = 115200
+    mode: str = "safe"
+    max_speed: float = 0.5  # [m/s] per wheel and forward
+    max_turn_rate: float = 1.5  # [rad/s]
+    max_accel: float = 0.5  # [m/s^2]
+    max_turn_accel: float = 3.0  # [rad/s^2]
+    wheel_base: float = 0.235  # [m]
+    wheel_diameter: float = 0.072  # [m]
+    ticks_per_rev: float = 508.8
+    radius: float = 0.17  # [m] footprint
+    stale_timeout_s: float = 0.1
+    first_frame_timeout_s: float = 0.5
+    connect_attempts: int = 10
+
+
+@dataclass(frozen=True)
+class PTUConfig:
+    """``[ptu]``: the PTU-D46; signs and zero offsets map the unit's axes onto ours."""
+
+    port: str = ""
+    baudrate: int = 9600
+    timeout_s: float = 1.0
+    banner_wait_s: float = 0.6
+    pan_sign: int = 1
+    tilt_sign: int = 1
+    pan_zero_offset_deg: float = 0.0
+    tilt_zero_offset_deg: float = 0.0
+    speed_deg_s: float = 60.0
+    move_margin_s: float = 1.0
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """``[camera]``: the stereo source, its calibration file and its mounting on the pan-tilt."""
+
+    source: str = "side_by_side"
+    device: int | str = 0
+    devices: tuple = (0, 1)
+    width: int = 1280
+    height: int = 720
+    swap_lr: bool = False
+    fourcc: str = "MJPG"
+    flush_grabs: int = 4
+    calibration: str = ""
+    folder: str = ""
+    mount_R: tuple = (0.0, 0.0, 0.8)
+    camera_offset_P: tuple = (0.05, 0.06, 0.0)
+
+
+@dataclass(frozen=True)
+class HardwareConfig:
+    """The whole file. ``path`` is where it was read from (None when built in code)."""
+
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    base: BaseConfig = field(default_factory=BaseConfig)
+    ptu: PTUConfig = field(default_factory=PTUConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    path: Path | None = None
+
+    def with_ports(self, *, base: str | None = None, ptu: str | None = None) -> HardwareConfig:
+        """A copy with other serial ports (e.g. the emulators' pty paths)."""
+        b = self.base if base is None else dataclasses.replace(self.base, port=base)
+        p = self.ptu if ptu is None else dataclasses.replace(self.ptu, port=ptu)
+        return dataclasses.replace(self, base=b, ptu=p)
+
+
+_SECTIONS = {"robot": RobotConfig, "base": BaseConfig, "ptu": PTUConfig, "camera": CameraConfig}
+_REQUIRED = {
+    ("base", "port"): '"/dev/ttyUSB0"',
+    ("ptu", "port"): '"/dev/ttyUSB1"',
+    ("camera", "calibration"): '"calibration/stereo.yml"',
+}
+
+
+def _type_ok(value: Any, default: Any, key: str) -> bool:
+    if key == "device":
+        return isinstance(value, (int, str)) and not isinstance(value, bool)
+    if isinstance(default, bool):
+        return isinstance(value, bool)
+    if isinstance(default, int):
+        return isinstance(value, int) and not isinstance(value, bool)
+    if isinstance(default, float):
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if isinstance(default, str):
+        return isinstance(value, str)
+    if isinstance(default, tuple):
+        return isinstance(value, list)
+    return True
+
+
+def _type_name(default: Any, key: str) -> str:
+    if key == "device":
+        return "an integer index or a device path string"
+    return {bool: "true or false", int: "an integer", float: "a number", str: "a string", tuple: "a list"}[
+        type(default)
+    ]
+
+
+def load_config(path: str | Path) -> HardwareConfig:
+    """Read and check a hardware TOML file.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the file, the section and key, and what is allowed.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(
+            f"hardware config {path} not found (examples: hardware/robot.toml, hardware/emulated.toml)"
+        )
+    try:
+        data = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise ConfigError(f"{path}: not valid TOML ({e})") from e
+    where = str(path)
+    sections = {}
+    for name, value in data.items():
+        if name not in _SECTIONS:
+            raise ConfigError(
+                f"{where}: unknown section [{name}]; allowed: {', '.join(f'[{s}]' for s in _SECTIONS)}"
+            )
+        if not isinstance(value, dict):
+            raise ConfigError(f"{where}: {name} must be a [{name}] table")
+        cls = _SECTIONS[name]
+        defaults = {
+            f.name: (f.default if f.default is not dataclasses.MISSING else None)
+            for f in dataclasses.fields(cls)
+        }
+        kwargs = {}
+        for key, v in value.items():
+            if key not in defaults:
+                raise ConfigError(f"{where}: unknown key [{name}] {key!r}; allowed: {', '.join(defaults)}")
+            if not _type_ok(v, defaults[key], key):
+                raise ConfigError(
+                    f"{where}: [{name}] {key} must be {_type_name(defaults[key], key)}, got {v!r}"
+                )
+            if isinstance(defaults[key], float):
+                v = float(v)
+            if isinstance(defaults[key], tuple):
+                v = tuple(v)
+            kwargs[key] = v
+        sections[name] = kwargs
+    for (sec, key), example in _REQUIRED.items():
+        if not sections.get(sec, {}).get(key):
+            raise ConfigError(f"{where}: [{sec}] {key} is required (e.g. {key} = {example})")
+    cfg = HardwareConfig(**{n: _SECTIONS[n](**sections.get(n, {})) for n in _SECTIONS}, path=path)
+    _check_values(cfg, where)
+    return _resolve_paths(cfg, path.parent)
+
+
+def _check_values(c: HardwareConfig, where: str) -> None:
+    def need(ok: bool, msg: str):
+        if not ok:
+            raise ConfigError(f"{where}: {msg}")
+
+    r, b, p, cam = c.robot, c.base, c.ptu, c.camera
+    need(
+        0.05 <= r.cmd_timeout_s <= 2.0,
+        f"[robot] cmd_timeout_s must be within [0.05, 2] s, got {r.cmd_timeout_s}",
+    )
+    need(5 <= r.servo_rate_hz <= 500, f"[robot] servo_rate_hz must be within [5, 500], got {r.servo_rate_hz}")
+    need(
+        b.baudrate in CREATE_BAUDS,
+        f"[base] baudrate {b.baudrate} is not a Create 2 rate; allowed: 115200 (default) or 19200",
+    )
+    need(b.mode in ("safe", "full"), f'[base] mode must be "safe" or "full", got {b.mode!r}')
+    need(
+        0 < b.max_speed <= 0.5,
+        f"[base] max_speed must be within (0, 0.5] m/s (the Create 2's limit), got {b.max_speed}",
+    )
+    for k in (
+        "max_turn_rate",
+        "max_accel",
+        "max_turn_accel",
+        "wheel_base",
+        "wheel_diameter",
+        "ticks_per_rev",
+        "radius",
+        "stale_timeout_s",
+        "first_frame_timeout_s",
+    ):
+        need(getattr(b, k) > 0, f"[base] {k} must be > 0, got {getattr(b, k)}")
+    need(
+        1 <= b.connect_attempts <= 50,
+        f"[base] connect_attempts must be within [1, 50], got {b.connect_attempts}",
+    )
+    need(
+        p.baudrate in PTU_BAUDS,
+        f"[ptu] baudrate {p.baudrate} is not a PTU-D46 rate; allowed: {', '.join(map(str, PTU_BAUDS))} "
+        "(9600 is the factory setting)",
+    )
+    need(p.pan_sign in (1, -1) and p.tilt_sign in (1, -1), "[ptu] pan_sign and tilt_sign must be 1 or -1")
+    need(0 < p.timeout_s <= 10, f"[ptu] timeout_s must be within (0, 10] s, got {p.timeout_s}")
+    need(0 <= p.banner_wait_s <= 5, f"[ptu] banner_wait_s must be within [0, 5] s, got {p.banner_wait_s}")
+    need(p.speed_deg_s > 0, f"[ptu] speed_deg_s must be > 0, got {p.speed_deg_s}")
+    need(p.move_margin_s >= 0, f"[ptu] move_margin_s must be >= 0, got {p.move_margin_s}")
+    need(
+        cam.source in CAMERA_SOURCES,
+        f"[camera] source must be one of {', '.join(CAMERA_SOURCES)}; got {cam.source!r}",
+    )
+    need(
+        cam.width >= 16 and cam.height >= 16,
+        f"[camera] width and height must be >= 16 px, got {cam.width}x{cam.height}",
+    )
+    need(cam.flush_grabs >= 0, f"[camera] flush_grabs must be >= 0, got {cam.flush_grabs}")
+    need(
+        len(cam.devices) == 2,
+        f"[camera] devices must list two cameras (left, right), got {list(cam.devices)}",
+    )
+    for k in ("mount_R", "camera_offset_P"):
+        v = getattr(cam, k)
+        need(
+            len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v),
+            f"[camera] {k} must be 3 numbers [m], got {list(v)}",
+        )
+    need(cam.source != "replay" or bool(cam.folder), '[camera] folder is required when source = "replay"')
+
+
+def _resolve_paths(c: HardwareConfig, root: Path) -> HardwareConfig:
+    cam = c.camera
+    changes = {}
+    for k in ("calibration", "folder"):
+        v = getattr(cam, k)
+        if v and not Path(v).is_absolute():
+            changes[k] = str((root / v).resolve())
+    return dataclasses.replace(c, camera=dataclasses.replace(cam, **changes)) if changes else c

@@ -1,0 +1,56 @@
+"""The Robot contract (tests/robot_contract.py) run on every implementation listed in IMPLEMENTATIONS.
+
+Today: the HardwareRobot on the PTU-D46 and Create 2 emulators (real pyserial I/O on ptys), with a
+synthetic ReplayStereoSource camera. To add the simulator, write a factory like ``hardware_emulated``
+(a generator taking ``tmp_path`` and yielding a ContractSubject) and add it to IMPLEMENTATIONS.
+"""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from hw_helpers import EMULATED_TOML
+from robot_contract import ContractSubject, RobotContract
+
+from lab.hardware.camera import ReplayStereoSource
+from lab.hardware.config import load_config
+from lab.hardware.emulators import start_emulators
+from lab.hardware.robot import HardwareRobot
+
+_PTU_MOTION = re.compile(r"^[PT][PSO][-+]?\d+$", re.IGNORECASE)
+
+
+def hardware_emulated(tmp_path):
+    """HardwareRobot on the emulators; safety trips are a lifted robot (wheel drop)."""
+    emu = start_emulators(tmp_path)
+    cfg = load_config(EMULATED_TOML).with_ports(base=emu.base_port, ptu=emu.ptu_port)
+    cam = ReplayStereoSource.synthetic(cfg.camera.width, cfg.camera.height)
+    robot = HardwareRobot(cfg, camera_source=cam)
+
+    def commands_sent() -> int:
+        ptu_moves = sum(1 for c in emu.ptu.command_names() if _PTU_MOTION.match(c))
+        return len(emu.create.drives()) + ptu_moves
+
+    try:
+        yield ContractSubject(
+            robot,
+            trip_safety=lambda: emu.create.wheel_drop(True),
+            clear_hazard=lambda: emu.create.wheel_drop(False),
+            commands_sent=commands_sent,
+        )
+    finally:
+        robot.close()
+        emu.close()
+
+
+IMPLEMENTATIONS = {"hardware-emulated": hardware_emulated}
+
+
+@pytest.fixture(params=sorted(IMPLEMENTATIONS))
+def subject(request, tmp_path):
+    yield from IMPLEMENTATIONS[request.param](tmp_path)
+
+
+class TestRobotContract(RobotContract):
+    pass
