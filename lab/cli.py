@@ -109,6 +109,31 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--force", action="store_true", help="rebuild even when the cache is current")
     t.add_argument("--step-deg", type=float, default=10.0, help="angle between ring viewpoints (default 10)")
 
+    hw = sub.add_parser(
+        "hardware",
+        help="the real robot: emulators and bring-up checks",
+        description="Run device emulators (to rehearse without the robot) or check a robot's bring-up.",
+    )
+    hws = hw.add_subparsers(dest="hw_command", metavar="HW_COMMAND", required=True)
+    he = hws.add_parser(
+        "emulate",
+        help="run PTU-D46 and Create 2 emulators on ptys until Ctrl-C",
+        description="Start the PTU-D46 and Create 2 emulators and print their ports.",
+    )
+    he.add_argument(
+        "--dir",
+        default="/tmp/lab-emulators",
+        help="folder for the port symlinks (default /tmp/lab-emulators, as hardware/emulated.toml)",
+    )
+    hc = hws.add_parser(
+        "check",
+        help="bring-up diagnostics: one PASS/FAIL line per check, with the fix",
+        description="Check config, calibration, ports, the PTU, the base's stream and "
+        "odometry, and one stereo frame. Never moves the robot.",
+    )
+    hc.add_argument("--config", required=True, type=Path, help="hardware TOML file, e.g. hardware/robot.toml")
+    hc.add_argument("--emulate", action="store_true", help="start the emulators on the config's ports first")
+
     sub.add_parser(
         "worlds",
         help="list the worlds and their bodies",
@@ -186,6 +211,14 @@ def _cmd_train(args) -> int:
     return 0
 
 
+def _cmd_hardware(args) -> int:
+    from lab.hardware import cli as hw
+
+    if args.hw_command == "emulate":
+        return hw.emulate(args.dir)
+    return hw.check(args.config, emulate=args.emulate)
+
+
 def _cmd_demo(args) -> int:
     from lab.demo import run_demo
 
@@ -200,7 +233,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         ap.print_help()
         return 0
-    handlers = {"demo": _cmd_demo, "render": _cmd_render, "train": _cmd_train, "worlds": _cmd_worlds}
+    handlers = {
+        "demo": _cmd_demo,
+        "hardware": _cmd_hardware,
+        "render": _cmd_render,
+        "train": _cmd_train,
+        "worlds": _cmd_worlds,
+    }
     try:
         return handlers[args.command](args)
     except LabError as e:

@@ -18,7 +18,7 @@ from lab.vision.database import (
     save_database,
     train_database,
 )
-from lab.vision.rectify import Rectifier, StereoCalibration
+from lab.vision.rectify import StereoCalibration, StereoRectifier, load_calibration
 from lab.vision.stereo import StereoParams, stereo_features, triangulate
 
 CAM = StereoCamera.from_fov(320, 240, 60.0, 0.12)
@@ -200,10 +200,11 @@ def test_real_camera_style_input_gives_the_same_accuracy(models, tmp_path):
     D = np.array([-0.18, 0.05, 0.0008, -0.0006, 0.0])
     R_LR = Ry(math.radians(0.8))  # right camera slightly toed in
     t_LR = np.array([0.12, 0.001, -0.0015])
-    calib = StereoCalibration((320, 240), K_raw, D, K_raw, D, R_LR.T, -R_LR.T @ t_LR)
+    calib = StereoCalibration.from_intrinsics(K_raw, D, K_raw, D, R_LR.T, -R_LR.T @ t_LR, (320, 240))
     path = tmp_path / "stereo.yaml"
     calib.save(path)
-    rect = Rectifier(StereoCalibration.load(path))
+    loaded = load_calibration(path, expected_size=(320, 240))
+    rect, rect_cam = StereoRectifier(loaded), loaded.camera_model()
     wide = StereoCamera.from_fov(640, 480, 80.0, 0.12)  # the ideal render covers the raw field of view
     direct, via_raw = [], []
     m = models[0]
@@ -215,8 +216,8 @@ def test_real_camera_style_input_gives_the_same_accuracy(models, tmp_path):
             raw_l = _distort(w.render(G_WL, wide)[0], wide.K, K_raw, D, (320, 240))
             raw_r = _distort(w.render(G_WR, wide)[0], wide.K, K_raw, D, (320, 240))
             left, right = rect.rectify(raw_l, raw_r)
-            f = stereo_features(left, right, rect.camera)
-            G_W_rect = G_WL @ se3(rect.R1.T)  # the rectified left frame is the raw one turned by R1
+            f = stereo_features(left, right, rect_cam)
+            G_W_rect = G_WL @ se3(loaded.R1.T)  # the rectified left frame is the raw one turned by R1
             p_O = transform_points(se3_inv(c.G_WO) @ G_W_rect, f.points_C)
             via_raw.append(_surface_distance(p_O[np.all(np.abs(p_O) < 0.16, 1)], m.size))
             f0 = stereo_features(*w.render_stereo(G_WL, CAM), CAM)
@@ -224,12 +225,14 @@ def test_real_camera_style_input_gives_the_same_accuracy(models, tmp_path):
             direct.append(_surface_distance(p_O[np.all(np.abs(p_O) < 0.16, 1)], m.size))
     d_direct, d_raw = np.median(np.concatenate(direct)), np.median(np.concatenate(via_raw))
     print(f"\nsurface distance median: rendered {d_direct * 1e3:.2f} mm, rectified raw {d_raw * 1e3:.2f} mm")
-    assert abs(rect.camera.baseline - 0.12) < 0.003
+    assert abs(rect_cam.baseline - 0.12) < 0.003
     assert d_raw <= 1.2 * d_direct + 1e-4
     with pytest.raises(ConfigError, match="calibration is for 320x240"):
         rect.rectify(np.zeros((480, 640, 3), np.uint8), np.zeros((480, 640, 3), np.uint8))
-    with pytest.raises(AssetError, match="does not exist"):
-        StereoCalibration.load(tmp_path / "missing.yaml")
+    with pytest.raises(ConfigError, match="not found"):
+        load_calibration(tmp_path / "missing.yaml")
+    with pytest.raises(ConfigError, match="is for 320x240 images but the camera delivers 640x480"):
+        load_calibration(path, expected_size=(640, 480))
 
 
 def test_bad_inputs_are_refused_clearly():

@@ -3,7 +3,7 @@
 ``stereo_features`` turns a rectified pair into the measurement D_k (3D points in the camera frame C
 with descriptors and covariances); ``get_database`` returns an object's trained database B_i (building
 and caching it on first use); ``Matcher`` gives the correspondences J_i; ``back_project`` the colour
-likelihood map of the global search; ``Rectifier`` turns a real camera's raw pairs into rectified ones.
+likelihood map of the global search; ``StereoRectifier`` turns a real camera's raw pairs into rectified ones.
 """
 
 from lab.vision.colour import back_project, chromaticity, colour_histogram
@@ -19,7 +19,7 @@ from lab.vision.database import (
     trainable_objects,
 )
 from lab.vision.dense import dense_points, disparity_map
-from lab.vision.rectify import Rectifier, StereoCalibration
+from lab.vision.rectify import StereoCalibration, StereoRectifier, load_calibration
 from lab.vision.stereo import Features3D, StereoParams, stereo_features, triangulate
 
 __all__ = [
@@ -27,9 +27,9 @@ __all__ = [
     "FeatureDatabase",
     "Features3D",
     "Matcher",
-    "Rectifier",
     "StereoCalibration",
     "StereoParams",
+    "StereoRectifier",
     "TrainingParams",
     "back_project",
     "chromaticity",
@@ -37,6 +37,7 @@ __all__ = [
     "dense_points",
     "disparity_map",
     "get_database",
+    "load_calibration",
     "load_database",
     "save_database",
     "stereo_features",

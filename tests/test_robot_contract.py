@@ -1,8 +1,9 @@
 """The Robot contract (tests/robot_contract.py) run on every implementation listed in IMPLEMENTATIONS.
 
-Today: the HardwareRobot on the PTU-D46 and Create 2 emulators (real pyserial I/O on ptys), with a
-synthetic ReplayStereoSource camera. To add the simulator, write a factory like ``hardware_emulated``
-(a generator taking ``tmp_path`` and yielding a ContractSubject) and add it to IMPLEMENTATIONS.
+The simulator (SimRobot in the open arena) and the HardwareRobot on the PTU-D46 and Create 2 emulators
+(real pyserial I/O on ptys, with a synthetic ReplayStereoSource camera): one suite, so a notebook behaves
+the same on both. To add an implementation, write a factory (a generator taking ``tmp_path`` and
+yielding a ContractSubject) and add it to IMPLEMENTATIONS.
 """
 
 from __future__ import annotations
@@ -44,7 +45,20 @@ def hardware_emulated(tmp_path):
         emu.close()
 
 
-IMPLEMENTATIONS = {"hardware-emulated": hardware_emulated}
+def simulator(tmp_path):
+    """SimRobot in the open arena (nothing to bump into); a safety trip is a simulated cliff."""
+    from lab.sim import OdometryNoise, SimRobot, SimWorld
+
+    world = SimWorld("arena")
+    robot = SimRobot(world, odometry_noise=OdometryNoise.none())
+    try:
+        yield ContractSubject(robot, trip_safety=lambda: robot.trip_safety("cliff"))
+    finally:
+        robot.close()
+        world.close()
+
+
+IMPLEMENTATIONS = {"hardware-emulated": hardware_emulated, "simulator": simulator}
 
 
 @pytest.fixture(params=sorted(IMPLEMENTATIONS))
