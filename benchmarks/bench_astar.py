@@ -132,7 +132,8 @@ def bench_map(name: str, grid: CostGrid, rng: np.random.Generator, n_queries: in
     )
     m_py = statistics.median(pure)
     print(
-        f"  median per query: ours (compiled) {1e3 * m_ours:8.2f} ms   ours (pure Python) {1e3 * m_py:8.2f} ms   "
+        f"  median per query: ours (compiled) {1e3 * m_ours:8.2f} ms   "
+        f"ours (pure Python) {1e3 * m_py:8.2f} ms   "
         f"networkx.astar_path {1e3 * m_nx:8.2f} ms   (pure Python vs networkx: {m_nx / m_py:.2f}x)"
     )
     print(
