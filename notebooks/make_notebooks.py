@@ -259,7 +259,7 @@ robot.command_pan_tilt(-0.09, math.radians(-11)); robot.wait_pan_tilt()
 ekf = PoseEKF(EKFConfig(chart=OrientationChart.ROTATION_VECTOR), rng=np.random.default_rng(1))
 matcher = Matcher(db)
 errors = []
-for k in range(8 if FAST else 20):
+for _ in range(8 if FAST else 20):
     frame = robot.capture_stereo()
     f = stereo_features(frame.left, frame.right, frame.camera)
     ekf.predict(frame.G_RC, frame.G_RC, np.eye(4), 0.1)
@@ -283,7 +283,6 @@ A filter written from the equations should agree with an independent implementat
         "code",
         """\
 from filterpy.kalman import ExtendedKalmanFilter
-from lab.estimation.synthetic import stereo_covariance
 
 mu0 = np.array([0.0, 0.0, 1.1, 0.2, 0.1, -0.1]); P0 = np.diag([0.02] * 3 + [0.05] * 3)
 truth = mu0 + np.array([0.01, -0.01, 0.02, 0.02, -0.01, 0.02])
