@@ -62,7 +62,8 @@ cam = frame.camera
 fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
 ax[0].imshow(frame.left); ax[0].set_title("left")
 ax[1].imshow(frame.right); ax[1].set_title("right")
-for a in ax: a.axis("off")
+for a in ax:
+    a.axis("off")
 """,
     ),
     (
@@ -110,7 +111,7 @@ f3d = stereo_features(frame.left, frame.right, cam)
 print(f"{len(f3d)} matched 3D features")
 both = np.hstack([frame.left, frame.right])
 plt.figure(figsize=(11, 4)); plt.imshow(both)
-for (ul, vl), d in zip(f3d.uv, f3d.disparity):
+for (ul, vl), d in zip(f3d.uv, f3d.disparity, strict=True):
     plt.plot([ul, ul - d + cam.width], [vl, vl], "-", lw=0.6)
 plt.axis("off"); plt.title("matches: same row, shifted by the disparity");
 """,
