@@ -1,0 +1,34 @@
+"""The identification figures draw what they are given (checked on the artists, not by eye)."""
+
+import matplotlib
+
+matplotlib.use("Agg")
+import numpy as np  # noqa: E402
+
+from lab.viz.identification import fig5, fig6, fig7  # noqa: E402
+
+
+def test_fig5_fig6_fig7_draw_their_data():
+    t = np.linspace(0, 10, 21)
+    P = np.tile([0.25, 0.25, 0.25, 0.25], (21, 1))
+    P[12:] = [0.02, 0.94, 0.02, 0.02]
+    modes = ["scanning"] * 5 + ["tracking"] * 16
+    est = np.c_[np.ones(21), np.zeros(21), 0.5 * np.ones(21), np.zeros(21)]
+    f = fig5(t, est, est + 0.01, P, modes, decisions=[2.0, 6.0], true_model=1)
+    ax = f.axes[2]
+    assert len(ax.lines) == 4 + 2  # four models and two planning markers
+    np.testing.assert_allclose(ax.lines[1].get_ydata(), P[:, 1])
+    assert len(ax.patches) == 2  # the scanning and the tracking band
+    a = np.radians(np.arange(0, 360, 10))
+    cand = np.c_[np.cos(a), np.sin(a), a + np.pi]
+    gains = np.linspace(0, 1, 36)
+    gains[3] = np.nan
+    f = fig6(
+        cand, gains, chosen=35, robot_xy_theta=(-1, 0, 0), object_xy=(0, 0), object_cov_xy=np.eye(2) * 0.01
+    )
+    sc = f.axes[0].collections[0]
+    assert len(sc.get_offsets()) == 35  # the blocked candidate is drawn apart
+    f = fig7(
+        [{"t": t, "posteriors": P, "true_model": 1}, {"t": t, "posteriors": P[:, ::-1], "true_model": 2}]
+    )
+    assert len(f.axes) == 2
