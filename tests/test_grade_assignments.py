@@ -12,12 +12,12 @@ import sys
 from pathlib import Path
 
 import pytest
+from grade_cases import ALL, CASES
 
 from lab.grading import get_assignment, grade_submission, list_assignments
 from lab.grading.release import release
-from grade_cases import ALL, CASES
 
-CONTRACT = Path("/work/shared/tools/check_contract.py")
+CONTRACT = Path(__file__).resolve().parents[2] / "shared" / "tools" / "check_contract.py"  # ../shared
 NAMES = ["stereo", "ekf", "planning", "search"]
 
 
@@ -41,7 +41,9 @@ def _check_report(report, tmp_path):
     assert report.execution_time_s < 60.0  # bounded by the assignment's budget_s (50 s)
     path = report.write_json(tmp_path / f"{report.assignment.name}.json")
     if CONTRACT.exists():
-        r = subprocess.run([sys.executable, str(CONTRACT), "grade", str(path)], capture_output=True, text=True)
+        r = subprocess.run(
+            [sys.executable, str(CONTRACT), "grade", str(path)], capture_output=True, text=True
+        )
         assert r.returncode == 0, r.stdout
     data = json.loads(path.read_text())
     assert data["score"] == pytest.approx(sum(t["score"] for t in data["tests"]))
@@ -96,7 +98,12 @@ def test_public_tests_pass_on_the_reference_and_fail_on_the_template(name, relea
     env_cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *public]
     ok = subprocess.run(env_cmd, cwd=a.folder, capture_output=True, text=True, timeout=300)
     assert ok.returncode == 0, ok.stdout[-2000:]
-    bad = subprocess.run(env_cmd + ["--rootdir", str(released / name)], cwd=released / name, capture_output=True,
-                         text=True, timeout=300)
+    bad = subprocess.run(
+        env_cmd + ["--rootdir", str(released / name)],
+        cwd=released / name,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert bad.returncode == 1 and " passed" not in bad.stdout.splitlines()[-1], bad.stdout[-2000:]
     assert "NotImplementedError" in bad.stdout

@@ -135,7 +135,8 @@ class _Child:
         }
         cmd = [
             sys.executable,
-            "-I",
+            "-I",  # isolated: no PYTHON* variables, no user site, no script folder on sys.path
+            "-u",  # unbuffered: what the student printed before a crash or a timeout is not lost
             str(_SANDBOX),
             str(req_r),
             str(resp_w),
@@ -334,7 +335,9 @@ class _Limits:
 
 
 def _start(limits: _Limits, cpu_s: float, import_deadline: float) -> tuple[_Child, list[str]]:
-    """A child with the module imported; raises ImportFailed (and closes the child) otherwise."""
+    """A child with the module imported; raises ImportFailed (and closes the child) otherwise.
+
+    ``cpu_s`` is the child's CPU-time backstop (``RLIMIT_CPU``), above every wall-clock limit it has."""
     child = _Child(limits.module_src, limits.memory_mb, int(cpu_s) + 2)
     try:
         hello = child.receive(import_deadline)
@@ -360,7 +363,7 @@ def _run_one(test: GradedTest, limits: _Limits, timeout_s: float) -> TestResult:
     child = None
     printed = ""
     try:
-        child, functions = _start(limits, timeout_s, t0 + limits.import_timeout_s)
+        child, functions = _start(limits, limits.import_timeout_s + timeout_s, t0 + limits.import_timeout_s)
         sub = Submission(child, limits.module, functions, timeout_s)
         note = test.func(sub)
         score, status, output = test.points, "passed", (str(note) if note else "")

@@ -66,7 +66,7 @@ def _to_wire(x, depth: int = 0):
             raise WireError(
                 f"cannot send a NumPy array of dtype {x.dtype} (only bool, integer, float or complex arrays)"
             )
-        a = np.ascontiguousarray(x)
+        a = np.asarray(x, order="C")  # keeps 0-d arrays 0-d (ascontiguousarray would not)
         return {
             "__ndarray__": base64.b64encode(a.tobytes()).decode("ascii"),
             "dtype": a.dtype.str,
