@@ -222,6 +222,18 @@ def test_a_module_that_hangs_on_import_fails_every_test_once(tmp_path):
     assert report.execution_time_s < 3 + 5  # one import timeout, not one per test
 
 
+def test_a_bug_in_a_graded_test_is_reported_as_a_grader_error(tmp_path):
+    toy = _toy(tmp_path, ["a", "b"])
+    tests = toy.tests_path.read_text()
+    toy.tests_path.write_text(
+        tests + "\n\n@suite.test('c is checked', points=1, target='a')\ndef c(sub):\n"
+        "    return {}['missing']\n"
+    )
+    report = grade_submission(toy, toy.module_path)
+    assert report.failed_ids() == {"c"}
+    assert report.by_id()["c"].output.startswith("GRADER ERROR") and "KeyError" in report.by_id()["c"].output
+
+
 def test_a_missing_module_fails_every_test_with_what_to_submit(tmp_path):
     toy = _toy(tmp_path, ["a", "b"])
     (tmp_path / "empty").mkdir()
