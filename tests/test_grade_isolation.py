@@ -234,6 +234,15 @@ def test_a_bug_in_a_graded_test_is_reported_as_a_grader_error(tmp_path):
     assert report.by_id()["c"].output.startswith("GRADER ERROR") and "KeyError" in report.by_id()["c"].output
 
 
+def test_a_submitted_file_under_another_name_is_graded_as_the_module(tmp_path):
+    toy = _toy(tmp_path, ["good", "bad"])
+    upload = tmp_path / "alice_hw3 (1).py"
+    upload.write_text("def good(x):\n    return [2 * v for v in x]\n\ndef bad(x):\n    return 1 / 0\n")
+    report = grade_submission(toy, upload)
+    assert report.failed_ids() == {"bad"}
+    assert "at toy.py line 5, in bad: return 1 / 0" in report.by_id()["bad"].output
+
+
 def test_a_missing_module_fails_every_test_with_what_to_submit(tmp_path):
     toy = _toy(tmp_path, ["a", "b"])
     (tmp_path / "empty").mkdir()

@@ -115,9 +115,9 @@ class _Timeout(Exception):
 class _Child:
     """A running ``sandbox.py`` with its private request and answer pipes."""
 
-    def __init__(self, module_src: Path, memory_mb: int, cpu_s: int):
+    def __init__(self, module_src: Path, module: str, memory_mb: int, cpu_s: int):
         self.dir = Path(tempfile.mkdtemp(prefix="lab-grade-"))
-        self.module_file = self.dir / module_src.name
+        self.module_file = self.dir / module  # under the assignment's name, whatever the upload was called
         shutil.copyfile(module_src, self.module_file)
         req_r, self.req_w = os.pipe()
         self.resp_r, resp_w = os.pipe()
@@ -338,7 +338,7 @@ def _start(limits: _Limits, cpu_s: float, import_deadline: float) -> tuple[_Chil
     """A child with the module imported; raises ImportFailed (and closes the child) otherwise.
 
     ``cpu_s`` is the child's CPU-time backstop (``RLIMIT_CPU``), above every wall-clock limit it has."""
-    child = _Child(limits.module_src, limits.memory_mb, int(cpu_s) + 2)
+    child = _Child(limits.module_src, limits.module, limits.memory_mb, int(cpu_s) + 2)
     try:
         hello = child.receive(import_deadline)
     except _Timeout:
