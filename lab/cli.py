@@ -139,6 +139,50 @@ def build_parser() -> argparse.ArgumentParser:
         help="list the worlds and their bodies",
         description="List the scene files in worlds/ with their named bodies.",
     )
+
+    g = sub.add_parser(
+        "grade",
+        help="grade a submission of an assignment (Gradescope results.json)",
+        description="Run an assignment's graded tests on a submission, each test in its own limited process, "
+        "print a summary and write Gradescope's results.json. With --batch, grade a folder with one "
+        "subfolder per student and write one CSV of scores.",
+    )
+    g.add_argument(
+        "assignment", help="assignment name (see `lab assignments list`); with --batch also a,b or all"
+    )
+    g.add_argument(
+        "submission",
+        type=Path,
+        help="folder holding the module (or the module file); with --batch, a folder of student folders",
+    )
+    g.add_argument("--json", type=Path, help="write Gradescope's results.json here")
+    g.add_argument("--batch", action="store_true", help="SUBMISSION holds one subfolder per student")
+    g.add_argument("--csv", type=Path, help="with --batch: the scores CSV (default SUBMISSION/scores.csv)")
+    g.add_argument("--out", type=Path, help="with --batch: write OUT/STUDENT/ASSIGNMENT.json for each")
+    g.add_argument("--jobs", type=int, default=None, help="tests run at once (default: min(4, CPUs))")
+    g.add_argument(
+        "--timeout-scale", type=float, default=1.0, help="multiply every time limit (slow machine)"
+    )
+    g.add_argument(
+        "--assignments", type=Path, help="assignments folder (default: $LAB_ASSIGNMENTS or assignments/)"
+    )
+    g.add_argument("--quiet", action="store_true", help="print nothing")
+
+    a = sub.add_parser(
+        "assignments",
+        help="list the assignments or write the student release",
+        description="`list`: the assignments with their points. `release OUT_DIR [NAME ...]`: copy each "
+        "assignment's student files into OUT_DIR/NAME with the solution blocks stripped and no graded tests, "
+        "and check that no solution code is left.",
+    )
+    a.add_argument("action", choices=("list", "release"))
+    a.add_argument("out_dir", type=Path, nargs="?", help="release: the folder to write")
+    a.add_argument("names", nargs="*", help="release: these assignments only (default: all)")
+    a.add_argument("--force", action="store_true", help="release: replace existing assignment folders")
+    a.add_argument(
+        "--assignments", type=Path, help="assignments folder (default: $LAB_ASSIGNMENTS or assignments/)"
+    )
+    a.add_argument("--quiet", action="store_true", help=argparse.SUPPRESS)
     return ap
 
 
@@ -227,6 +271,22 @@ def _cmd_demo(args) -> int:
     return 0
 
 
+def _cmd_grade(args) -> int:
+    from lab.grading.cli import run_grade
+
+    return run_grade(args)
+
+
+def _cmd_assignments(args) -> int:
+    from lab.grading.cli import run_assignments
+
+    if args.action == "release" and args.out_dir is None:
+        raise LabError(
+            "`lab assignments release` needs OUT_DIR, the folder to write the student release into"
+        )
+    return run_assignments(args)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
@@ -234,7 +294,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.print_help()
         return 0
     handlers = {
+        "assignments": _cmd_assignments,
         "demo": _cmd_demo,
+        "grade": _cmd_grade,
         "hardware": _cmd_hardware,
         "render": _cmd_render,
         "train": _cmd_train,

@@ -1,0 +1,25 @@
+"""Graded assignments: an autograder that runs each test's student code in a separate, limited process.
+
+* :mod:`lab.grading.assignments`: where the assignments are and what each is made of;
+* :mod:`lab.grading.suite`: how graded tests are written (points, visibility, checks with messages);
+* :mod:`lab.grading.runner`: grading one submission (the isolation design is in its docstring);
+* :mod:`lab.grading.sandbox`: the child process and its wire format;
+* :mod:`lab.grading.report`: Gradescope's results.json, the terminal summary, the class CSV;
+* :mod:`lab.grading.release`: the student release (solution blocks stripped, graded tests left out);
+* :mod:`lab.grading.cli`: ``lab grade`` and ``lab assignments``.
+"""
+
+from lab.grading.assignments import Assignment, assignments_dir, get_assignment, list_assignments
+from lab.grading.report import GradeReport, TestResult, write_scores_csv
+from lab.grading.runner import grade_submission
+
+__all__ = [
+    "Assignment",
+    "GradeReport",
+    "TestResult",
+    "assignments_dir",
+    "get_assignment",
+    "grade_submission",
+    "list_assignments",
+    "write_scores_csv",
+]

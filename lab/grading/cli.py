@@ -1,0 +1,92 @@
+"""The handlers of ``lab grade`` and ``lab assignments`` (their options are defined in :mod:`lab.cli`)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from lab.errors import ConfigError
+from lab.grading.assignments import Assignment, get_assignment, list_assignments
+from lab.grading.report import GradeReport, write_scores_csv
+from lab.grading.runner import grade_submission
+
+__all__ = ["run_grade", "run_assignments"]
+
+
+def _pick(spec: str, root) -> list[Assignment]:
+    if spec == "all":
+        return list_assignments(root)
+    return [get_assignment(name.strip(), root) for name in spec.split(",") if name.strip()]
+
+
+def run_grade(args) -> int:
+    """``lab grade ASSIGNMENT SUBMISSION``: one submission, or a class with ``--batch``."""
+    chosen = _pick(args.assignment, args.assignments)
+    sub = Path(args.submission)
+    if not sub.exists():
+        raise ConfigError(f"submission {sub} does not exist")
+    if args.batch:
+        return _batch(chosen, sub, args)
+    if len(chosen) != 1:
+        raise ConfigError("grade one assignment at a time (several, or 'all', only with --batch)")
+    report = grade_submission(chosen[0], sub, jobs=args.jobs, timeout_scale=args.timeout_scale)
+    if args.json:
+        report.write_json(args.json)
+    if not args.quiet:
+        print(report.summary())
+        if args.json:
+            print(f"wrote {args.json}")
+    return 0
+
+
+def _batch(chosen: list[Assignment], folder: Path, args) -> int:
+    if args.json:
+        raise ConfigError(
+            "--json is for one submission; with --batch use --csv (and --out for each results.json)"
+        )
+    if not folder.is_dir():
+        raise ConfigError(f"with --batch, {folder} must be a folder with one subfolder per student")
+    students = sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith("."))
+    if not students:
+        raise ConfigError(f"{folder} has no student subfolders")
+    rows: list[tuple[str, list[GradeReport]]] = []
+    for s in students:
+        reports = [grade_submission(a, s, jobs=args.jobs, timeout_scale=args.timeout_scale) for a in chosen]
+        rows.append((s.name, reports))
+        if args.out:
+            for rep in reports:
+                rep.write_json(Path(args.out) / s.name / f"{rep.assignment.name}.json")
+        if not args.quiet:
+            parts = ", ".join(f"{r.assignment.name} {r.score:g}/{r.max_score:g}" for r in reports)
+            total, top = sum(r.score for r in reports), sum(r.max_score for r in reports)
+            secs = sum(r.execution_time_s for r in reports)
+            print(f"{s.name}: {parts}; total {total:g}/{top:g} ({secs:.1f} s)", flush=True)
+    csv_path = write_scores_csv(args.csv or folder / "scores.csv", rows)
+    if not args.quiet:
+        print(f"wrote {csv_path} ({len(rows)} students)")
+    return 0
+
+
+def run_assignments(args) -> int:
+    """``lab assignments list`` and ``lab assignments release OUT_DIR [NAME ...]``."""
+    from lab.grading.release import release
+
+    if args.action == "list":
+        for a in list_assignments(args.assignments):
+            suite = a.load_suite()
+            print(
+                f"{a.name:10s} {a.module:12s} {len(suite.tests):2d} tests {suite.max_score:4g} points  "
+                f"{a.title}"
+            )
+        return 0
+    chosen = list_assignments(args.assignments)
+    if args.names:
+        chosen = [get_assignment(n, args.assignments) for n in args.names]
+    folders = release(chosen, args.out_dir, force=args.force)
+    for f in folders:
+        print(f"released {f}: {', '.join(sorted(p.name for p in f.iterdir()))}")
+    print(
+        "checked: no solution code, no solution markers, no graded tests",
+        file=sys.stderr if args.quiet else sys.stdout,
+    )
+    return 0

@@ -1,0 +1,157 @@
+"""What grading produces: Gradescope's ``results.json``, a terminal summary, and a class CSV.
+
+Gradescope's autograder reads ``/autograder/results/results.json``:
+
+.. code-block:: json
+
+    {"score": 17.0, "execution_time": 3.2, "output": "...", "visibility": "visible",
+     "tests": [{"name": "...", "number": "1", "score": 2.0, "max_score": 2.0, "status": "passed",
+                "output": "...", "visibility": "visible", "tags": ["measurement_model"],
+                "extra_data": {"id": "measurement_model_eq3", "duration_s": 0.2}}]}
+
+``score`` is the sum of the tests' scores; ``max_score`` and ``extra_data`` are extras that Gradescope
+ignores and our scripts read.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from lab.grading.suite import GradedTest
+
+if TYPE_CHECKING:
+    from lab.grading.assignments import Assignment
+
+__all__ = ["TestResult", "GradeReport", "write_scores_csv"]
+
+
+@dataclass
+class TestResult:
+    """The outcome of one graded test (``output`` may gain a note after all tests ran)."""
+
+    test: GradedTest
+    score: float
+    status: str  # "passed" or "failed"
+    output: str
+    duration_s: float
+
+    __test__ = False
+
+
+@dataclass
+class GradeReport:
+    """All results of one submission for one assignment.
+
+    Attributes
+    ----------
+    assignment : Assignment
+    submission : str
+    tests : list of TestResult
+        In the suite's order.
+    execution_time_s : float
+        Wall time of the whole grading run.
+    error : str or None
+        Set when no test could run (no module, or it does not import); every test then carries it.
+    """
+
+    assignment: Assignment
+    submission: str
+    tests: list[TestResult]
+    execution_time_s: float
+    error: str | None
+
+    @property
+    def score(self) -> float:
+        return float(sum(r.score for r in self.tests))
+
+    @property
+    def max_score(self) -> float:
+        return float(sum(r.test.points for r in self.tests))
+
+    def by_id(self) -> dict[str, TestResult]:
+        return {r.test.id: r for r in self.tests}
+
+    def failed_ids(self) -> set[str]:
+        return {r.test.id for r in self.tests if r.status != "passed"}
+
+    def to_gradescope(self) -> dict:
+        """Gradescope's results.json (plus ``max_score`` and ``extra_data``)."""
+        tests = [
+            {
+                "name": r.test.name,
+                "number": str(i + 1),
+                "score": round(r.score, 6),
+                "max_score": r.test.points,
+                "status": r.status,
+                "output": r.output,
+                "visibility": r.test.visibility.value,
+                "tags": sorted({r.test.target, *r.test.uses}),
+                "extra_data": {"id": r.test.id, "duration_s": round(r.duration_s, 3)},
+            }
+            for i, r in enumerate(self.tests)
+        ]
+        head = f"{self.assignment.name}: {self.score:g} / {self.max_score:g} points"
+        if self.error:
+            head += f"\n{self.error}"
+        hidden = sum(1 for r in self.tests if r.test.visibility.value != "visible")
+        if hidden:
+            head += f"\n{hidden} of {len(self.tests)} tests are shown after the due date or not at all."
+        return {
+            "score": round(self.score, 6),
+            "max_score": self.max_score,
+            "execution_time": round(self.execution_time_s, 2),
+            "output": head,
+            "visibility": "visible",
+            "stdout_visibility": "hidden",
+            "tests": tests,
+            "extra_data": {"assignment": self.assignment.name, "submission": self.submission},
+        }
+
+    def write_json(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(self.to_gradescope(), indent=2) + "\n")
+        tmp.replace(path)
+        return path
+
+    def summary(self) -> str:
+        """A readable summary for the terminal: one line per test, the message under each failure."""
+        lines = [f"{self.assignment.name} ({self.assignment.title})", f"submission: {self.submission}"]
+        width = max(len(r.test.name) for r in self.tests) if self.tests else 0
+        width = min(width, 70)
+        for r in self.tests:
+            mark = "PASS" if r.status == "passed" else "FAIL"
+            lines.append(f"  {mark} {r.score:4g}/{r.test.points:<3g} {r.test.name:<{width}}  [{r.test.id}]")
+            if r.status != "passed" and r.output:
+                for ln in r.output.splitlines()[:12]:
+                    lines.append(f"         {ln}")
+        pct = 100.0 * self.score / self.max_score if self.max_score else 0.0
+        lines.append(
+            f"score: {self.score:g} / {self.max_score:g} ({pct:.0f} %) in {self.execution_time_s:.1f} s"
+        )
+        return "\n".join(lines)
+
+
+def write_scores_csv(path: str | Path, rows: list[tuple[str, list[GradeReport]]]) -> Path:
+    """One CSV for a class: ``student``, one column ``assignment:test_id`` per graded test, ``total``,
+    ``max_score``. ``rows`` holds each student's reports (same assignments, same order, for everyone)."""
+    path = Path(path)
+    columns: list[str] = []
+    for _, reports in rows[:1]:
+        for rep in reports:
+            columns += [f"{rep.assignment.name}:{r.test.id}" for r in rep.tests]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["student", *columns, "total", "max_score"])
+        for student, reports in rows:
+            scores = [f"{r.score:g}" for rep in reports for r in rep.tests]
+            total = sum(rep.score for rep in reports)
+            top = sum(rep.max_score for rep in reports)
+            w.writerow([student, *scores, f"{total:g}", f"{top:g}"])
+    return path
