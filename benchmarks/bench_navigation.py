@@ -5,16 +5,17 @@ Run from the repository root::
     python benchmarks/bench_navigation.py [--poses 6] [--repeats 3] [--no-accuracy]
 
 Frames are rendered once (320 x 240, the robot's head tilted down 25 degrees, 7 pans from each of
-``--poses`` seeded poses in the room); the render time is printed but not counted. Then each frame goes
-through ``Navigator.observe`` (dense disparity by StereoSGBM, points to the world frame, ground-plane
-fit, surface-area support, ``Costmap.integrate``) ``--repeats`` times on a fresh navigator, and the
-stages are timed one by one the same way. Printed: the median and 90th percentile [ms] of the whole
-update and of each stage, and of the planning that follows a frame while driving (the inflated cost
-grid and an A* query across the room).
+``--poses`` seeded poses in the room); the render time is printed but not counted. Then each frame
+goes through ``Navigator.observe`` (full-width, left-right checked StereoSGBM disparity, points to the
+world frame, ground-plane fit, surface-area support, ``Costmap.integrate``) ``--repeats`` times on a
+fresh navigator, and the stages are timed one by one the same way. Printed: the median and 90th
+percentile [ms] of the whole update and of each stage, and of the planning that follows a frame while
+driving (the inflated cost grid and an A* query across the room).
 
-``--no-accuracy`` skips the second table: for every valid disparity pixel, the error of the point's
-depth and of its position on the floor against the simulator's depth buffer, by true depth, the
-measurement behind the navigator's 2 m ``max_range``.
+``--no-accuracy`` skips the last two tables: for every valid disparity pixel of plain StereoSGBM
+(``disparity_map``) and of the navigator's full-width, left-right checked one (``checked_disparity``),
+the error of the point's depth and of its position on the floor against the simulator's depth buffer,
+by true depth: the measurement behind the navigator's 2 m ``max_range``.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from lab.navigation import GridSpec, Navigator, astar
 from lab.navigation.costmap import CellState
 from lab.navigation.ground import fit_ground_plane
 from lab.sim import SimRobot, SimWorld
-from lab.vision.dense import dense_points, disparity_map
+from lab.vision.dense import checked_disparity, dense_points, disparity_map
 
 
 def percentiles(ms: list[float]) -> str:
@@ -84,7 +85,7 @@ def main():
     stages: dict[str, list[float]] = {
         k: []
         for k in (
-            "disparity (SGBM)",
+            "disparity (SGBM, LR)",
             "points to W",
             "ground plane",
             "support + integrate",
@@ -100,9 +101,11 @@ def main():
             g = np.random.default_rng(0)
             for f in frames:
                 t0 = time.perf_counter()
-                disparity_map(f.left, f.right)
+                (checked_disparity if cfg.lr_check else disparity_map)(f.left, f.right)
                 t1 = time.perf_counter()
-                P_C = dense_points(f.left, f.right, f.camera, step=cfg.pixel_step, max_depth=cfg.max_range)
+                P_C = dense_points(
+                    f.left, f.right, f.camera, cfg.pixel_step, cfg.max_range, checked=cfg.lr_check
+                )
                 G_WC = f.odom.G() @ f.G_RC
                 P_W = transform_points(G_WC, P_C)
                 t2 = time.perf_counter()
@@ -137,30 +140,34 @@ def main():
         return
     cam = frames[0].camera
     fb = cam.fx * cam.baseline
-    rows = []
-    for f, (G_WC, D) in zip(frames, depths, strict=True):
-        d = disparity_map(f.left, f.right)
-        v, u = np.nonzero(np.isfinite(d))
-        Z, Zt = fb / d[v, u], D[v, u]
-        P = transform_points(G_WC, np.stack([(u - cam.cx) * Z / cam.fx, (v - cam.cy) * Z / cam.fy, Z], 1))
-        Pt = transform_points(G_WC, np.stack([(u - cam.cx) * Zt / cam.fx, (v - cam.cy) * Zt / cam.fy, Zt], 1))
-        rows.append(np.stack([Zt, np.abs(Z - Zt), np.hypot(*(P[:, :2] - Pt[:, :2]).T)], 1))
-    E = np.concatenate(rows)
-    print("dense stereo error against the depth buffer, by true depth Z:")
-    print(
-        f"{'Z [m]':>9} {'points':>8} {'|dZ| p50 cm':>11} {'|dZ| p90 cm':>11} {'floor p90 cm':>12} "
-        f"{'gross > 0.2 m':>13}"
-    )
-    for lo in np.arange(0.5, 4.5, 0.5):
-        m = (E[:, 0] >= lo) & (E[:, 0] < lo + 0.5)
-        if m.sum() < 100:
-            continue
-        e = E[m]
+    for name, matcher in (("disparity_map", disparity_map), ("checked_disparity", checked_disparity)):
+        rows = []
+        for f, (G_WC, D) in zip(frames, depths, strict=True):
+            d = matcher(f.left, f.right)
+            v, u = np.nonzero(np.isfinite(d))
+            Z, Zt = fb / d[v, u], D[v, u]
+            P = transform_points(G_WC, np.stack([(u - cam.cx) * Z / cam.fx, (v - cam.cy) * Z / cam.fy, Z], 1))
+            Pt = transform_points(
+                G_WC, np.stack([(u - cam.cx) * Zt / cam.fx, (v - cam.cy) * Zt / cam.fy, Zt], 1)
+            )
+            rows.append(np.stack([Zt, np.abs(Z - Zt), np.hypot(*(P[:, :2] - Pt[:, :2]).T)], 1))
+        E = np.concatenate(rows)
+        print(f"dense stereo error against the depth buffer, by true depth Z ({name}):")
         print(
-            f"{lo:4.1f}-{lo + 0.5:3.1f} {m.sum():8d} {100 * np.median(e[:, 1]):11.1f} "
-            f"{100 * np.percentile(e[:, 1], 90):11.1f} {100 * np.percentile(e[:, 2], 90):12.1f} "
-            f"{100 * np.mean(e[:, 1] > 0.2):12.1f}%"
+            f"{'Z [m]':>9} {'points':>8} {'|dZ| p50 cm':>11} {'|dZ| p90 cm':>11} {'floor p90 cm':>12} "
+            f"{'gross > 0.2 m':>13}"
         )
+        for lo in np.arange(0.5, 4.5, 0.5):
+            m = (E[:, 0] >= lo) & (E[:, 0] < lo + 0.5)
+            if m.sum() < 100:
+                continue
+            e = E[m]
+            print(
+                f"{lo:4.1f}-{lo + 0.5:3.1f} {m.sum():8d} {100 * np.median(e[:, 1]):11.1f} "
+                f"{100 * np.percentile(e[:, 1], 90):11.1f} {100 * np.percentile(e[:, 2], 90):12.1f} "
+                f"{100 * np.mean(e[:, 1] > 0.2):12.1f}%"
+            )
+        print()
 
 
 if __name__ == "__main__":

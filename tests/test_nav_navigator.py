@@ -50,3 +50,21 @@ def test_default_grid_covers_the_lab_room_with_a_margin():
         Navigator(KinematicRobot(Pose2D(0.0, 0.0, 0.0)), small.spec, bounds=(0, 0, 1, 1))
     with pytest.raises(ConfigError, match="max_range"):
         NavigatorConfig(max_range=math.nan)
+
+
+def test_ground_plane_jumps_are_refused_until_they_persist(nav):
+    rng = np.random.default_rng(0)
+    G_WC = np.eye(4)
+    G_WC[:3, 3] = (1.0, 1.0, 0.7)
+
+    def floor(z):
+        xy = rng.uniform(0.0, 3.0, (2000, 2))
+        return np.column_stack([xy, z + rng.normal(0.0, 0.005, 2000)])
+
+    plane, refit = nav._ground_plane(floor(0.0), G_WC)
+    assert refit and abs(plane.z_at(1.0, 1.0)) < 0.01
+    for _ in range(2):  # a level plane 0.12 m higher (a low platform filling the view): refused twice
+        p, refit = nav._ground_plane(floor(0.12), G_WC)
+        assert not refit and p is plane
+    p, refit = nav._ground_plane(floor(0.12), G_WC)  # the third time in a row it is the floor
+    assert refit and abs(p.z_at(1.0, 1.0) - 0.12) < 0.01

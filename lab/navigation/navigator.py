@@ -26,6 +26,12 @@ StereoSGBM with 64 disparities; ``benchmarks/bench_navigation.py`` measures the 
   down to 0.83 beyond 2 m). Points are used up to ``max_range = 2.0`` m, along the optical axis and on
   the floor; the robot drives at 0.5 m/s and looks every 0.5 s, so it still sees an obstacle 1.5 m
   before it gets there.
+* **Checked disparity.** :func:`~lab.vision.dense.checked_disparity` pads the pair to match the full
+  image width (plain StereoSGBM leaves its 64 leftmost columns empty, a fifth of the view) and keeps a
+  disparity only when the right image's disparity agrees. Mismatches in weak texture next to a near
+  surface put points at the near surface's depth in front of a far wall, i.e. false obstacles in front
+  of the robot; the check halves those (measured: points placed over 0.5 m too near, from 0.42 % to
+  0.23 % of the points within 2 m) and, in trials, the goals given up as blocked (3 of 40 to 0 of 40).
 * **Nothing below the floor.** With 64 disparities nothing nearer than ``f b / 63 = 0.40`` m can be
   matched; a surface nearer than that (the robot passing close to a crate) aliases to a wrong, smaller
   disparity, i.e. to points farther along the ray, which point down: below the floor. Labelled as
@@ -107,6 +113,8 @@ class NavigatorConfig:
         Dense points deeper than this along the optical axis are dropped.
     pixel_step : int
         Dense points are taken every ``pixel_step`` pixels in both directions.
+    lr_check : bool
+        Use :func:`~lab.vision.dense.checked_disparity` (full image width, left-right consistent).
     min_obstacle_area : float [m^2]
         A view votes OBSTACLE for a cell only if its obstacle points there cover at least this much
         surface (see :meth:`Navigator._supported`); 0 leaves it to the point count alone.
@@ -116,7 +124,7 @@ class NavigatorConfig:
         A fitted plane tilted more than this is refused.
     plane_max_jump : float [m]
         A fitted plane whose height under the camera differs by more than this from the previous one's
-        is refused (the previous plane is kept).
+        is refused (the previous plane is kept), unless three level fits in a row disagree with it.
     tilt : float [rad]
         Tilt of the head while driving and scanning (negative: looking down).
     scan_pans : tuple of float [rad]
@@ -161,6 +169,7 @@ class NavigatorConfig:
     costmap: CostmapConfig = CostmapConfig(max_range=2.0, drop_depth=None)
     max_range: float = 2.0
     pixel_step: int = 2
+    lr_check: bool = True
     min_obstacle_area: float = 0.001
     ground_fit_range: float = 2.0
     plane_max_tilt: float = math.radians(3.0)
@@ -375,6 +384,7 @@ class Navigator:
         self.radius = robot.base_limits.radius + margin
         self._rng = np.random.default_rng(cfg.seed)
         self._grid: CostGrid | None = None
+        self._plane_rejects = 0
 
     @property
     def spec(self) -> GridSpec:
@@ -387,10 +397,21 @@ class Navigator:
         Dense points in the camera frame C are taken to the world by
         ``G_WC = G_WR(frame.odom) @ frame.G_RC``, labelled against the ground plane and binned into
         the costmap (obstacle priority, evidence accumulated over views).
+
+        Returns
+        -------
+        Observation
+            With ``skipped`` set (and the costmap unchanged) when no ground plane has been accepted yet
+            and this view shows none either (it faces a wall).
         """
         cfg = self.config
         P_C = dense_points(
-            frame.left, frame.right, frame.camera, step=cfg.pixel_step, max_depth=cfg.max_range
+            frame.left,
+            frame.right,
+            frame.camera,
+            step=cfg.pixel_step,
+            max_depth=cfg.max_range,
+            checked=cfg.lr_check,
         )
         G_WC = frame.odom.G() @ frame.G_RC
         P_W = transform_points(G_WC, P_C)  # p_W = G_WC p_C
@@ -431,12 +452,17 @@ class Navigator:
             fit = fit_ground_plane(P_W, self._rng)
         except NoGroundPlane:
             return self.plane, False
-        ok = fit.tilt <= cfg.plane_max_tilt
-        if ok and self.plane is not None:
-            cx, cy = G_WC[0, 3], G_WC[1, 3]
-            ok = abs(float(fit.z_at(cx, cy)) - float(self.plane.z_at(cx, cy))) <= cfg.plane_max_jump
-        if not ok:
+        if fit.tilt > cfg.plane_max_tilt:
             return self.plane, False
+        if self.plane is not None:
+            cx, cy = G_WC[0, 3], G_WC[1, 3]
+            if abs(float(fit.z_at(cx, cy)) - float(self.plane.z_at(cx, cy))) > cfg.plane_max_jump:
+                # a jump: keep the previous plane, unless level fits have disagreed with it several
+                # views in a row (then the previous one was the odd one out)
+                self._plane_rejects += 1
+                if self._plane_rejects < 3:
+                    return self.plane, False
+        self._plane_rejects = 0
         self.plane = fit
         return fit, True
 
