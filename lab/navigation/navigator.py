@@ -731,11 +731,12 @@ class Navigator:
             self.observe(robot.capture_stereo())
             s.frames += 1
             d = rp.update(self.planning_grid(), pose0)
-            if d.replanned:
+            if d.replanned and d.path.found:
                 s.replans += 1
-                if not d.path.found:
-                    return finish(NavOutcome.NO_PATH, d.path.reason, pose0, s.waypoints[-1], s.heading)
                 s.waypoints, s.heading = waypoints_of(d.waypoints), heading_of(d.waypoints)
+            elif d.replanned and not self.path_ahead_clear(s.waypoints, pose0, cfg.confirm_range):
+                # (a blockage farther along is decided on the way, as below)
+                return finish(NavOutcome.NO_PATH, d.path.reason, pose0, s.waypoints[-1], s.heading)
             k_frame = max(1, round(cfg.frame_period / cfg.control_dt))
 
             follower = self._follower()
