@@ -7,6 +7,9 @@ The object-search paper's Sec. III-D (the costmap ``M_c`` and A*), as a data flo
       --simplify_path--> waypoints --PathFollower / drive_to--> robot.drive(v, omega)
     and after every costmap update: Replanner.update(grid, pose) -> replan if the path ahead is blocked
 
+:class:`~lab.navigation.navigator.Navigator` runs the whole loop on a :class:`lab.robot.Robot` (stereo
+frames in, velocity and pan-tilt commands out): ``scan()``, ``go_to(goal)``, ``go_near(target)``.
+
 Grid geometry and frames follow ``docs/conventions.md`` (world frame W, metres, radians); cell
 ``(i, j)`` counts along W's x and y axes (:mod:`lab.navigation.grid`).
 """
@@ -31,6 +34,15 @@ from lab.navigation.follower import (
 )
 from lab.navigation.grid import GridSpec, OutsideMap
 from lab.navigation.ground import GroundPlane, NoGroundPlane, fit_ground_plane
+from lab.navigation.navigator import (
+    LAB_ROOM_BOUNDS,
+    Navigator,
+    NavigatorConfig,
+    NavOutcome,
+    NavResult,
+    Observation,
+    ScanResult,
+)
 from lab.navigation.paths import (
     ReplanDecision,
     Replanner,
@@ -40,6 +52,13 @@ from lab.navigation.paths import (
 )
 
 __all__ = [
+    "LAB_ROOM_BOUNDS",
+    "NavOutcome",
+    "NavResult",
+    "Navigator",
+    "NavigatorConfig",
+    "Observation",
+    "ScanResult",
     "CellState",
     "Command",
     "CostGrid",

@@ -141,9 +141,6 @@ class SimRobot(Robot):
         self._mast = pb.createMultiBody(0, -1, mvis, (0, 0, 0))
         self._mast_h = mast_h
         self.world._register("robot", self._body)
-        self._others = [
-            b for b in self.world._ids.values() if b not in (self._body, self.world._ids.get("floor"))
-        ]
         self._place(self._true_pose)
 
     def _place(self, pose: Pose2D):
@@ -158,7 +155,9 @@ class SimRobot(Robot):
     def _collides(self, margin: float = 0.0) -> bool:
         """Whether the base's footprint touches (or comes within ``margin`` [m] of) any other body."""
         pb = self.world.p
-        others = self._others + [c.base_id for c in self.world.carriers.values()]
+        skip = (self._body, self.world._ids.get("floor"))
+        # every registered body (carriers' bases included), also those added after the robot
+        others = [b for b in self.world._ids.values() if b not in skip]
         return any(pb.getClosestPoints(self._body, b, margin) for b in others)
 
     # --- Robot interface ------------------------------------------------------------------------

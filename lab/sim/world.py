@@ -206,6 +206,68 @@ class Truth:
         r = self._w.robot
         return 0 if r is None else r._collisions
 
+    def occupancy(self, spec, z_min: float, z_max: float, exclude=("floor", "robot")) -> np.ndarray:
+        """True occupancy of a floor grid: cells that a body's footprint overlaps within a height band.
+
+        A cell is occupied when the footprint (the vertical projection) of a body whose vertical extent
+        overlaps ``[z_min, z_max]`` overlaps the cell's square by more than a micrometre (bodies that
+        merely touch a cell's edge do not occupy it). Bodies are read from PyBullet's collision shapes
+        at their current poses, so moved bodies, added boxes, walls, each table's top and legs and the
+        carriers all count. Boxes must stand upright (rotated about z only); cylinders are upright.
+
+        Parameters
+        ----------
+        spec : lab.navigation.GridSpec
+            Or anything with ``origin_xy``, ``resolution`` and ``shape`` (see ``docs/conventions.md``).
+        z_min, z_max : float [m]
+            The height band, e.g. ``CostmapConfig.obstacle_min_height`` and ``obstacle_max_height``.
+        exclude : iterable of str
+            Body names left out (the floor, the robot).
+
+        Returns
+        -------
+        ndarray, shape spec.shape, bool
+        """
+        w = self._w
+        (ox, oy), r, (nx, ny) = spec.origin_xy, float(spec.resolution), spec.shape
+        X, Y = np.meshgrid(ox + (np.arange(nx) + 0.5) * r, oy + (np.arange(ny) + 0.5) * r, indexing="ij")
+        h = 0.5 * r
+        eps = 1e-6
+        occ = np.zeros((nx, ny), dtype=bool)
+        skip = {w._ids[n] for n in exclude if n in w._ids}
+        for body in sorted(set(w._ids.values()) - skip):
+            pos, q = w.p.getBasePositionAndOrientation(body)
+            R = quat_xyzw_to_R(q)
+            for shape in w.p.getCollisionShapeData(body, -1):
+                geom, dims, local_pos = shape[2], shape[3], shape[5]
+                c = np.asarray(pos) + R @ np.asarray(local_pos)
+                if geom == pybullet.GEOM_BOX:
+                    if abs(R[2, 2] - 1.0) > 1e-6:
+                        raise ConfigError(f"body {w.body_name(body)!r} is not upright")
+                    a, b, hz = 0.5 * dims[0], 0.5 * dims[1], 0.5 * dims[2]
+                    if c[2] + hz < z_min or c[2] - hz > z_max:
+                        continue
+                    cs, sn = R[0, 0], R[1, 0]
+                    dx, dy = X - c[0], Y - c[1]
+                    # separating axes: the cell's x and y axes and the box's own axes u, v
+                    sep = np.abs(dx) >= h + a * abs(cs) + b * abs(sn) - eps
+                    sep |= np.abs(dy) >= h + a * abs(sn) + b * abs(cs) - eps
+                    proj = h * (abs(cs) + abs(sn))
+                    sep |= np.abs(dx * cs + dy * sn) >= a + proj - eps
+                    sep |= np.abs(-dx * sn + dy * cs) >= b + proj - eps
+                    occ |= ~sep
+                elif geom == pybullet.GEOM_CYLINDER:
+                    height, radius = dims[0], dims[1]
+                    if c[2] + height / 2 < z_min or c[2] - height / 2 > z_max:
+                        continue
+                    # distance from the circle's centre to the nearest point of each cell's square
+                    ddx = np.maximum(np.abs(X - c[0]) - h, 0.0)
+                    ddy = np.maximum(np.abs(Y - c[1]) - h, 0.0)
+                    occ |= np.hypot(ddx, ddy) < radius - eps
+                else:
+                    raise ConfigError(f"body {w.body_name(body)!r}: collision shape {geom} is not supported")
+        return occ
+
     def depth(self, G_WC: np.ndarray, camera) -> np.ndarray:
         """Metric depth along the optical axis (H, W) [m] seen from ``G_WC`` (rendered at 1x)."""
         _, depth, _ = self._w.render(G_WC, camera, want_depth=True, supersample=1)
@@ -367,6 +429,55 @@ class SimWorld:
         c = Carrier(self, name, model, pose, box_yaw)
         self.carriers[name] = c
         return c
+
+    def add_box(
+        self,
+        name: str,
+        size,
+        xy,
+        yaw: float = 0.0,
+        z: float = 0.0,
+        texture: str | os.PathLike | None = "textures/metal.png",
+        color=(0.7, 0.7, 0.7),
+    ) -> int:
+        """Add a box to the world while it runs (an obstacle dropped in the robot's way).
+
+        Parameters
+        ----------
+        name : str
+            Unique body name (``body_id(name)``, ``set_body_pose(name, ...)``).
+        size : (sx, sy, sz) [m]
+        xy : (x, y) [m]
+            Centre of its footprint in the world.
+        yaw : float [rad]
+        z : float [m]
+            Height of its underside (0: standing on the floor).
+        texture : path or None
+            A tiled texture relative to the worlds folder (stereo needs texture to see a face); None
+            gives a plain box of ``color``.
+
+        Returns
+        -------
+        int
+            The PyBullet body id. The robot's collision check sees the box from the next step on.
+        """
+        size = tuple(float(v) for v in size)
+        x, y = (float(v) for v in xy)
+        if len(size) != 3 or not all(math.isfinite(v) and v > 0 for v in size):
+            raise ConfigError(f"box size must be three finite numbers > 0 m, got {size!r}")
+        if not all(math.isfinite(v) for v in (x, y, yaw, z)):
+            raise ConfigError(f"box pose must be finite, got xy={xy!r}, yaw={yaw!r}, z={z!r}")
+        if name in self._ids:
+            raise ConfigError(f"a body named {name!r} already exists in world {self.scene.name!r}")
+        pos = (x, y, float(z) + size[2] / 2)
+        if texture is not None:
+            from lab.paths import worlds_dir
+
+            bid = self._textured_box(size, worlds_dir() / texture, "tiled", 0.5, pos=pos, yaw=yaw)
+        else:
+            bid = self._plain_box(size, color, pos, yaw)
+        self._register(name, bid)
+        return bid
 
     def set_body_pose(self, name: str, G_W: np.ndarray) -> None:
         """Move a body (for trials that place objects elsewhere); ``G_W`` is its frame in the world."""
