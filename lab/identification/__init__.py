@@ -5,6 +5,7 @@ The data flow of one step, with the paper's three functions (Sec. IV)::
     frame -> stereo_features -> D_k                               (lab.vision)
     EKFBank.predict / update per model -> mu_bar, Sigma_bar         (lab.estimation)
     calc_current_entropy(P, D_k, scorers, states) -> Belief(P, H)   Eqs. (5), (7)-(9)   probabilities.py
+        (observe_frame does the updates and this in one call)                          step.py
     ModelHypotheses.from_estimates(P, estimates, G_WC)              (the models' poses in the world)
     calc_possible_control_actions(centre, camera, is_reachable)     the ring of goals   actions.py
     calc_expected_entropy(evaluator, actions, hypotheses) -> E[H+]  Eq. (10)
@@ -26,7 +27,7 @@ from lab.identification.actions import (
     calc_possible_control_actions,
     reachable_on,
 )
-from lab.identification.hypotheses import ModelHypotheses, NoObjectEstimate
+from lab.identification.hypotheses import ModelHypotheses, NoObjectEstimate, symmetry_log_weights, z_turns
 from lab.identification.lut import Eq15Constants, LookupTableEvaluator, eq15_log_likelihood
 from lab.identification.montecarlo import MonteCarloConfig, MonteCarloEvaluator, cross_correspondences
 from lab.identification.planner import (
@@ -36,6 +37,7 @@ from lab.identification.planner import (
     information_gain,
     next_best_action,
     plan_next_best_view,
+    ring_smoothed,
 )
 from lab.identification.probabilities import (
     Belief,
@@ -48,11 +50,13 @@ from lab.identification.probabilities import (
     calc_current_entropy,
     clutter_log_density,
     entropy,
+    pose_estimate_rv,
     posterior,
     state_for_scoring,
     uniform,
     update_model_probabilities,
 )
+from lab.identification.step import FrameObservation, observe_frame
 from lab.identification.tables import (
     LookupTables,
     ModelTables,
@@ -73,6 +77,7 @@ __all__ = [
     "CandidateAction",
     "Eq15Constants",
     "Explanation",
+    "FrameObservation",
     "LikelihoodForm",
     "LookupTableEvaluator",
     "LookupTables",
@@ -105,12 +110,17 @@ __all__ = [
     "load_tables",
     "nearest_viewpoint",
     "next_best_action",
+    "observe_frame",
     "plan_next_best_view",
+    "pose_estimate_rv",
     "posterior",
     "reachable_on",
+    "ring_smoothed",
     "save_model_tables",
     "state_for_scoring",
+    "symmetry_log_weights",
     "tables_path",
     "uniform",
     "update_model_probabilities",
+    "z_turns",
 ]

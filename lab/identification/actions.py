@@ -113,13 +113,14 @@ def aim_pan_tilt(camera: StereoCamera, pose: Pose2D, target_W, iterations: int =
 
 def _ring(centre_W, camera: StereoCamera, radius: float, step_deg: float) -> list[CandidateAction]:
     c = np.asarray(centre_W, dtype=float)
+    # every goal sees the centre from the same place relative to the robot: one aim serves the ring
+    pan, tilt = aim_pan_tilt(camera, Pose2D(c[0] - radius, c[1], 0.0), c)
+    G_RC = camera.G_RC(pan, tilt)
     out = []
     for k, az in enumerate(np.radians(np.arange(0.0, 360.0, step_deg))):
         x, y = c[0] + radius * math.cos(az), c[1] + radius * math.sin(az)
         pose = Pose2D(float(x), float(y), float(wrap_angle(az + math.pi)))  # facing the centre
-        pan, tilt = aim_pan_tilt(camera, pose, c)
-        G_WC = pose.G() @ camera.G_RC(pan, tilt)
-        out.append(CandidateAction(k, float(az), radius, pose, pan, tilt, G_WC))
+        out.append(CandidateAction(k, float(az), radius, pose, pan, tilt, pose.G() @ G_RC))
     return out
 
 

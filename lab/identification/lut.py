@@ -1,9 +1,11 @@
 r"""Expected entropy from the probability lookup tables: Eqs. (10) and (13)-(15) of the identification paper.
 
-For a candidate action ``u+`` and an assumed true model ``M_i``:
+For a candidate action ``u+`` and an assumed true model ``M_i`` (each of its pose hypotheses):
 
 1. the relative pose the action leads to, ``G_{C+,O_i}``, picks the table row of the nearest training
-   pose (:func:`~lab.identification.viewpoints.nearest_viewpoint`);
+   pose ("the relative pose which best matches the predicted state of M_i"); when the pose is
+   uncertain, the neighbouring rows too, weighted by the uncertainty of the viewing direction
+   (:func:`~lab.identification.viewpoints.viewpoint_weights`);
 2. ``W_ij``, the number of features of ``M_j`` that will correspond, is sampled from that row of the
    ``(i, j)`` table, for every ``j`` (:class:`~lab.identification.tables.LookupTables`: stratified
    quantile levels shared by all ``j``);
@@ -25,8 +27,8 @@ For a candidate action ``u+`` and an assumed true model ``M_i``:
 4. the posterior over the models (Eq. (7), with the same evidence weight and floor as the real update)
    and its entropy, averaged over the samples and weighted by ``P(M_i)``: Eq. (10).
 
-:math:`\Sigma_o` is the covariance of a feature's innovation at the ring distance (the stereo error at
-that depth on the optical axis, plus a pose term) and :math:`\delta_o` a residual with
+:math:`\Sigma_o` is the innovation covariance of a typical feature (the stereo error at the predicted
+depth plus the hypothesis's pose uncertainty) and :math:`\delta_o` a residual with
 :math:`\delta_o^T \Sigma_o^{-1} \delta_o = 3`, the mean of a chi-square(3) variable
 (:class:`Eq15Constants`).
 
@@ -47,7 +49,7 @@ from lab.identification.actions import CandidateAction
 from lab.identification.hypotheses import ModelHypotheses
 from lab.identification.probabilities import ScoringConfig, entropy, posterior
 from lab.identification.tables import LookupTables
-from lab.identification.viewpoints import nearest_viewpoint
+from lab.identification.viewpoints import direction_std, viewpoint_weights
 from lab.robot import StereoCamera
 from lab.vision.stereo import StereoParams, triangulation_covariance
 
@@ -58,40 +60,55 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 @dataclass(frozen=True)
 class Eq15Constants:
-    """``Sigma_o`` and ``delta_o`` of Eqs. (13)-(14), built from the camera's stereo error model.
+    """How ``Sigma_o`` and ``delta_o`` of Eqs. (13)-(14) are set for a candidate action and a hypothesis.
+
+    ``Sigma_o`` is the innovation covariance of a typical feature: the stereo error at the object's
+    predicted depth on the optical axis, plus the pose uncertainty the hypothesis will carry there,
+    ``C Sigma+ C^T`` for a feature ``feature_radius_m`` from O's centre (averaged over directions:
+    ``Sigma_p + (rho^2 / 3) (tr(Sigma_phi) I - Sigma_phi)``). Constant over the features of a
+    measurement, as Eq. (13) has it; it changes with the action and the hypothesis, so that an object
+    whose pose is uncertain is expected to teach less, as the Monte Carlo finds. ``delta_o`` is a
+    residual with ``delta_o^T Sigma_o^-1 delta_o = mahalanobis2`` (3, the mean of a chi-square(3)).
 
     Attributes
     ----------
-    depth_m : float [m]
-        Depth of the typical feature (the ring's distance).
-    pose_std_m : float [m]
-        Standard deviation added on every axis for the pose uncertainty ``C Sigma_bar C^T`` of a tracked
-        object (measured on the rendered frames: 1-2 cm).
+    feature_radius_m : float [m]
+        RMS distance of a database feature from O's centre (0.18 m for points on a 0.28 m cube's faces).
     mahalanobis2 : float
-        ``delta_o^T Sigma_o^-1 delta_o`` (3: the chi-square(3) mean).
     """
 
-    depth_m: float = 1.0
-    pose_std_m: float = 0.015
+    feature_radius_m: float = 0.18
     mahalanobis2: float = 3.0
 
     def __post_init__(self):
-        if not (self.depth_m > 0 and self.pose_std_m >= 0 and self.mahalanobis2 >= 0):
-            raise ConfigError("Eq15Constants needs depth_m > 0, pose_std_m >= 0 and mahalanobis2 >= 0")
+        if not (self.feature_radius_m >= 0 and self.mahalanobis2 >= 0):
+            raise ConfigError("Eq15Constants needs feature_radius_m >= 0 and mahalanobis2 >= 0")
 
-    def Sigma_o(self, camera: StereoCamera, stereo: StereoParams | None = None) -> np.ndarray:
-        """Eq. (13): ``Sigma_o``, shape (3, 3) [m^2]."""
+    def Sigma_o(
+        self, camera: StereoCamera, depth_m, Sigma_rv, stereo: StereoParams | None = None
+    ) -> np.ndarray:
+        """Eq. (13): ``Sigma_o`` (..., 3, 3) [m^2] for objects at ``depth_m`` (...) with pose
+        covariances ``Sigma_rv`` (..., 6, 6) over ``[x_r, phi]`` in the camera frame."""
         stereo = stereo or StereoParams()
-        uv = np.array([[camera.cx, camera.cy]])
-        disparity = np.array([camera.fx * camera.baseline / self.depth_m])
-        S = triangulation_covariance(uv, disparity, camera, stereo)[0]
-        return S + self.pose_std_m**2 * np.eye(3)
+        depth = np.asarray(depth_m, dtype=float)
+        Sigma_rv = np.asarray(Sigma_rv, dtype=float)
+        flat = depth.reshape(-1)
+        uv = np.tile([camera.cx, camera.cy], (len(flat), 1))
+        S_m = triangulation_covariance(uv, camera.fx * camera.baseline / flat, camera, stereo)
+        S_m = S_m.reshape(depth.shape + (3, 3))
+        S_p, S_phi = Sigma_rv[..., :3, :3], Sigma_rv[..., 3:, 3:]
+        tr = np.trace(S_phi, axis1=-2, axis2=-1)[..., None, None]
+        return S_m + S_p + self.feature_radius_m**2 / 3.0 * (tr * np.eye(3) - S_phi)
 
-    def delta_o(self, camera: StereoCamera, stereo: StereoParams | None = None) -> np.ndarray:
+    def log_N_o(self, Sigma_o) -> np.ndarray:
+        """``log N(delta_o; 0, Sigma_o)``: Eq. (15) with ``W = 1``, for (..., 3, 3) covariances."""
+        return -0.5 * (3 * _LOG_2PI + np.linalg.slogdet(Sigma_o)[1] + self.mahalanobis2)
+
+    def delta_o(self, Sigma_o) -> np.ndarray:
         """Eq. (14): a residual ``delta_o`` (3,) [m] with ``delta_o^T Sigma_o^-1 delta_o = mahalanobis2``
         (equal shares along the principal axes of ``Sigma_o``)."""
-        w, U = np.linalg.eigh(self.Sigma_o(camera, stereo))
-        return U @ (np.sqrt(w * self.mahalanobis2 / 3.0))
+        w, U = np.linalg.eigh(np.asarray(Sigma_o, dtype=float))
+        return U @ np.sqrt(w * self.mahalanobis2 / 3.0)
 
 
 def eq15_log_likelihood(W, Sigma_o, delta_o) -> np.ndarray:
@@ -143,31 +160,38 @@ class LookupTableEvaluator:
         if int(n_frames) != n_frames or n_frames < 1:
             raise ConfigError(f"n_frames must be a positive integer, got {n_frames}")
         self.tables = tables
+        self.camera = camera
         self.scoring = scoring or ScoringConfig()
         self.n_frames = int(n_frames)
         self.constants = constants or Eq15Constants()
-        Sigma_o, delta_o = self.constants.Sigma_o(camera), self.constants.delta_o(camera)
-        #: log N(delta_o; 0, Sigma_o): what one corresponding feature contributes, Eq. (15) with W = 1
-        self.log_N_o = float(eq15_log_likelihood(1, Sigma_o, delta_o))
 
     def expected_entropy(self, actions: Sequence[CandidateAction], hypotheses: ModelHypotheses) -> np.ndarray:
-        """``E[H+]`` of every action, Eq. (10), shape (A,) [nats]."""
+        """``E[H+]`` of every action, Eq. (10), shape (A,) [nats].
+
+        Each pose hypothesis ``h`` (of model ``i``) looks up the table rows of the training poses
+        near its predicted relative pose, weighted by how uncertain the viewing direction is
+        (:func:`~lab.identification.viewpoints.viewpoint_weights`; one row for a well-known pose).
+        """
         L = self.tables.n_models
         if hypotheses.n_models != L:
             raise ConfigError(f"the hypotheses have {hypotheses.n_models} models, the tables {L}")
         if len(actions) == 0:
             return np.zeros(0)
         G_WC = np.stack([a.G_WC for a in actions])
-        G_CO, _ = hypotheses.relative_to(G_WC)  # (A, L, 4, 4): each model's predicted relative pose
-        v = nearest_viewpoint(G_CO, self.tables.viewpoints)  # (A, L): the table row of each (u+, M_i)
-        # W[a, i, j, s]: features of M_j corresponding when M_i is true, at quantile level s
-        W = self.tables.W_quantiles[np.arange(L)[None, :], :, v, :]  # (A, L_i, L_j, S)
-        W = np.moveaxis(W, 2, 3).astype(float)  # (A, L_i, S, L_j): models last
-        n = W.max(axis=-1, keepdims=True)  # object features measured
-        log_c = self.scoring.log_clutter_density
-        ll = W * self.log_N_o + (n - W) * log_c  # Eq. (15) and the clutter term
+        G_CO, Sigma = hypotheses.relative_to(G_WC)  # (A, H, ...): each hypothesis's predicted relative pose
+        w = viewpoint_weights(G_CO, self.tables.viewpoints, direction_std(G_CO, Sigma))  # (A, H, V)
+        a, h, v = np.nonzero(w)  # the (action, hypothesis, table row) triples to evaluate
+        # Eqs. (13)-(15): one corresponding feature is worth log N(delta_o; 0, Sigma_o) - log c
+        Sigma_o = self.constants.Sigma_o(self.camera, np.linalg.norm(G_CO[..., :3, 3], axis=-1), Sigma)
+        lam = self.constants.log_N_o(Sigma_o) - self.scoring.log_clutter_density  # (A, H)
+        # W[e, s, j]: features of M_j corresponding when hypothesis h is true, at quantile level s
+        W = np.moveaxis(self.tables.W_quantiles[hypotheses.model[h], :, v, :], 1, 2).astype(float)
+        # log p(D~ | M_j) = W_ij log N_o + (n - W_ij) log c; n log c is the same for every j and cancels
+        ll = W * lam[a, h][:, None, None]
         with np.errstate(divide="ignore"):
             log_P = np.log(hypotheses.P)
         P_plus = posterior(log_P, self.n_frames * ll, self.scoring)  # Eq. (7) for every sample
-        H_plus = entropy(P_plus)  # (A, L_i, S)
-        return H_plus.mean(axis=-1) @ hypotheses.P  # Eq. (10): average over samples, weight by P(M_i)
+        H_e = entropy(P_plus).mean(axis=-1)  # average over the samples of W
+        EH = np.zeros(G_CO.shape[:2])
+        np.add.at(EH, (a, h), w[a, h, v] * H_e)  # mix the rows of each hypothesis
+        return EH @ hypotheses.probability  # Eq. (10): weight by P(M_i) P(pose | M_i)

@@ -43,7 +43,7 @@ from lab.estimation.fit import chi2_quantile
 from lab.identification.actions import CandidateAction
 from lab.identification.hypotheses import ModelHypotheses
 from lab.identification.probabilities import ScoringConfig, entropy, posterior
-from lab.identification.viewpoints import camera_direction_O, viewpoint_directions
+from lab.identification.viewpoints import direction_std, viewpoint_directions, viewpoint_weights
 from lab.robot import StereoCamera
 from lab.vision import FeatureDatabase, Matcher
 from lab.vision.stereo import StereoParams, triangulation_covariance
@@ -144,12 +144,12 @@ class MonteCarloEvaluator:
     def n_models(self) -> int:
         return len(self.dbs)
 
-    def _visible(self, i: int, G_CO: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _visible(self, i: int, G_CO: np.ndarray, sigma_dir: float) -> tuple[np.ndarray, np.ndarray]:
         """Features of model i that a frame taken at relative pose G_CO may show, and how likely.
 
-        ``seen_from`` is interpolated between the ring viewpoints around the camera's direction
-        (weights falling linearly from 1 at a viewpoint to 0 one ring step away), so that the prediction
-        varies smoothly with the pose and one training render's luck does not decide it; features
+        ``seen_from`` is averaged over the ring viewpoints around the camera's direction, weighted by
+        the direction's uncertainty plus half a ring step (:func:`viewpoint_weights`): the prediction
+        varies smoothly with the pose, and one training render's luck does not decide it. Features
         outside the image or the stereo range are dropped.
 
         Returns
@@ -158,12 +158,8 @@ class MonteCarloEvaluator:
         p_seen : ndarray, shape (n,)
         """
         db = self.dbs[i]
-        cos = viewpoint_directions(db.viewpoints) @ camera_direction_O(G_CO)
-        angle = np.arccos(np.clip(cos, -1.0, 1.0))
-        w = np.maximum(0.0, 1.0 - angle / self._ring_step[i])
-        if w.sum() == 0:  # farther than a ring step from every viewpoint: the nearest one alone
-            w[int(np.argmax(cos))] = 1.0
-        p_seen = db.seen_from @ (w / w.sum())
+        w = viewpoint_weights(G_CO, db.viewpoints, math.hypot(sigma_dir, 0.5 * self._ring_step[i]))
+        p_seen = db.seen_from @ w
         idx = np.flatnonzero(p_seen > 0)
         p = db.points_O[idx] @ G_CO[:3, :3].T + G_CO[:3, 3]
         z_lo, z_hi = self._z_range
@@ -187,13 +183,12 @@ class MonteCarloEvaluator:
         return out
 
     def _log_likelihoods(
-        self, i: int, idx: np.ndarray, d: np.ndarray, detected: np.ndarray, Sigma_m, G_CO, Sigma, shared
+        self, i: int, idx: np.ndarray, d: np.ndarray, detected: np.ndarray, Sigma_m, G_CO, Sigma, poses
     ) -> np.ndarray:
         """Eq. (12) plus clutter: log-likelihood (N, L) of the sampled sets under every model.
 
-        ``G_CO`` (L, 4, 4) and ``Sigma`` (L, 6, 6) are the models' poses; model ``j`` is scored at its
-        own (entry ``j``) or, when the scoring shares poses, at each of ``shared`` (the distinct ones),
-        keeping the best.
+        ``G_CO`` (H, 4, 4) and ``Sigma`` (H, 6, 6) are the pose hypotheses at the action; model ``j`` is
+        scored at each of ``poses[j]`` (indices into them) and keeps its best.
         """
         N = d.shape[0]
         L = self.n_models
@@ -208,8 +203,7 @@ class MonteCarloEvaluator:
             cand = np.sort(cand, axis=1)[:, ::-1][:, :K]  # valid candidates first
             valid = cand >= 0
             b = self.dbs[j].points_O[np.where(valid, cand, 0)]  # (n, K, 3)
-            poses = shared if self.scoring.share_poses else [j]
-            for q in poses:
+            for q in poses[j]:
                 R, t = G_CO[q, :3, :3], G_CO[q, :3, 3]
                 qb = b @ R.T
                 mu = qb + t  # mu^j_m: where M_j, at pose q, puts its feature, Eq. (3)
@@ -235,28 +229,37 @@ class MonteCarloEvaluator:
         return ll
 
     def expected_entropy(self, actions: Sequence[CandidateAction], hypotheses: ModelHypotheses) -> np.ndarray:
-        """``E[H+]`` of every action, Eq. (10), shape (A,) [nats]."""
+        """``E[H+]`` of every action, Eq. (10), shape (A,) [nats].
+
+        Every pose hypothesis ``h`` (of model ``i = model[h]``) is in turn the truth the measurements
+        are sampled from. With ``scoring.share_poses`` (as the real scoring, which tries every filter's
+        pose) each model is scored at that true pose, where it explains what it can; otherwise at its
+        own pose hypotheses.
+        """
         L = self.n_models
         if hypotheses.n_models != L:
             raise ConfigError(f"the hypotheses have {hypotheses.n_models} models, the evaluator {L}")
         if len(actions) == 0:
             return np.zeros(0)
-        G_CO, Sigma = hypotheses.relative_to(np.stack([a.G_WC for a in actions]))  # (A, L, ...)
+        G_CO, Sigma = hypotheses.relative_to(np.stack([a.G_WC for a in actions]))  # (A, H, ...)
+        sigma_dir = direction_std(G_CO, Sigma)  # (A, H)
         with np.errstate(divide="ignore"):
             log_P = np.log(hypotheses.P)
         H_now = entropy(hypotheses.P)
+        own = [np.flatnonzero(hypotheses.model == j) for j in range(L)]
         draws = self._draws()
         out = np.zeros(len(actions))
         for a in range(len(actions)):
-            shared = _distinct_poses(G_CO[a], Sigma[a])
             EH = 0.0
-            for i in range(L):
-                idx, p_seen = self._visible(i, G_CO[a, i])
+            for h, (i, p_h) in enumerate(zip(hypotheses.model, hypotheses.probability, strict=True)):
+                if p_h == 0:
+                    continue
+                idx, p_seen = self._visible(i, G_CO[a, h], sigma_dir[a, h])
                 if len(idx) == 0:  # nothing of the object in view: nothing learnt
-                    EH += hypotheses.P[i] * H_now
+                    EH += p_h * H_now
                     continue
                 z_pose, u_det, z_noise = draws[i]
-                R, t = G_CO[a, i, :3, :3], G_CO[a, i, :3, 3]
+                R, t = G_CO[a, h, :3, :3], G_CO[a, h, :3, 3]
                 p = self.dbs[i].points_O[idx] @ R.T + t  # predicted features in C+
                 uv = np.stack(
                     [
@@ -267,16 +270,17 @@ class MonteCarloEvaluator:
                 )
                 disparity = self.camera.fx * self.camera.baseline / p[:, 2]
                 Sigma_m = triangulation_covariance(uv, disparity, self.camera, self.stereo)  # (n, 3, 3)
-                # X~ ~ N(mu_i+, Sigma_i+): position plus a small rotation (rotation-vector chart)
-                delta = z_pose @ np.linalg.cholesky(Sigma[a, i] + 1e-12 * np.eye(6)).T  # (N, 6)
+                # X~ ~ N(mu_h+, Sigma_h+): position plus a small rotation (rotation-vector chart)
+                delta = z_pose @ np.linalg.cholesky(Sigma[a, h] + 1e-12 * np.eye(6)).T  # (N, 6)
                 R_s = rotvec_to_R_batch(delta[:, 3:]) @ R  # Exp(phi) R, (N, 3, 3)
                 b = self.dbs[i].points_O[idx]
                 d = np.einsum("snab,nb->sna", R_s[:, None], b) + (t + delta[:, :3])[:, None, :]
                 d = d + np.einsum("nab,snb->sna", np.linalg.cholesky(Sigma_m), z_noise[:, idx])  # + xi
                 detected = u_det[:, idx] < self.config.p_detect * p_seen  # measured and matched
-                ll = self._log_likelihoods(i, idx, d, detected, Sigma_m, G_CO[a], Sigma[a], shared)
+                poses = [[h]] * L if self.scoring.share_poses else own
+                ll = self._log_likelihoods(i, idx, d, detected, Sigma_m, G_CO[a], Sigma[a], poses)
                 P_plus = posterior(log_P, self.n_frames * ll, self.scoring)  # (N, L), Eq. (7)
-                EH += hypotheses.P[i] * float(np.mean(entropy(P_plus)))  # Eq. (10)
+                EH += p_h * float(np.mean(entropy(P_plus)))  # Eq. (10)
             out[a] = EH
         return out
 
@@ -307,13 +311,3 @@ def _ring_step(viewpoints) -> float:
     cos = np.clip(U @ U.T, -1.0, 1.0)
     np.fill_diagonal(cos, -1.0)
     return float(np.arccos(cos.max()))
-
-
-def _distinct_poses(G_CO: np.ndarray, Sigma: np.ndarray) -> list[int]:
-    """Indices of the distinct (pose, covariance) pairs among the models' (models without an estimate
-    borrow another's, and models agreeing on the pose need to be scored there once)."""
-    keep: list[int] = []
-    for q in range(len(G_CO)):
-        if not any(np.array_equal(G_CO[q], G_CO[k]) and np.array_equal(Sigma[q], Sigma[k]) for k in keep):
-            keep.append(q)
-    return keep

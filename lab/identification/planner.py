@@ -39,6 +39,7 @@ __all__ = [
     "information_gain",
     "next_best_action",
     "plan_next_best_view",
+    "ring_smoothed",
 ]
 
 
@@ -79,17 +80,52 @@ def information_gain(H, expected_entropy) -> np.ndarray:
     return np.maximum(0.0, float(H) - np.asarray(expected_entropy, dtype=float))
 
 
-def next_best_action(gains, tol: float = 1e-9) -> int:
+def next_best_action(gains, tie_tol: float = 0.05, tie_break=None) -> int:
     """Eq. (6): the index of the action with the largest information gain.
 
-    Ties (within ``tol``) go to the first, so equal gains give a deterministic answer.
+    Gains within ``tie_tol`` (relative) of the largest count as equally good: they differ by less than
+    the approximations behind them. Among those, the largest ``tie_break`` value wins (the planner
+    passes each goal's gain averaged with its neighbours on the ring, so that the middle of a plateau of
+    good goals is chosen rather than its edge, where a small pose error loses the view); then the first.
+
+    Parameters
+    ----------
+    gains : array_like, shape (A,) [nats]
+    tie_tol : float
+        Relative tolerance (0: exact ties only).
+    tie_break : array_like, shape (A,), optional
     """
     g = np.asarray(gains, dtype=float)
     if g.ndim != 1 or len(g) == 0:
         raise ConfigError("next_best_action needs a non-empty vector of gains")
     if not np.all(np.isfinite(g)):
         raise ConfigError(f"information gains must be finite, got {g}")
-    return int(np.flatnonzero(g >= g.max() - tol)[0])
+    top = g.max()
+    near = np.flatnonzero(g >= top - tie_tol * abs(top) - 1e-12)
+    if tie_break is None or len(near) == 1:
+        return int(near[0])
+    t = np.asarray(tie_break, dtype=float)[near]
+    return int(near[np.flatnonzero(t >= t.max() - 1e-12)[0]])
+
+
+def ring_smoothed(gains, actions: Sequence[CandidateAction]) -> np.ndarray:
+    """Each goal's gain averaged with its ring neighbours (weights 1/4, 1/2, 1/4); a neighbour that is
+    not a candidate (blocked) counts as no gain."""
+    g = np.asarray(gains, dtype=float)
+    by_key = {(round(a.radius_m, 6), a.index): k for k, a in enumerate(actions)}
+    n = int(round(360.0 / _ring_step_deg(actions)))  # goals on a full ring
+    out = np.empty_like(g)
+    for k, a in enumerate(actions):
+        side = [by_key.get((round(a.radius_m, 6), (a.index + d) % n)) for d in (-1, 1)]
+        out[k] = 0.5 * g[k] + sum(0.25 * g[s] for s in side if s is not None)
+    return out
+
+
+def _ring_step_deg(actions: Sequence[CandidateAction]) -> float:
+    for a in actions:
+        if a.index > 0:
+            return float(np.degrees(a.azimuth) / a.index)
+    return 360.0
 
 
 @dataclass(frozen=True)
@@ -146,5 +182,5 @@ def plan_next_best_view(
     EH = calc_expected_entropy(evaluator, actions, hypotheses)
     H = entropy(hypotheses.P)
     gain = information_gain(H, EH)
-    best = next_best_action(gain)
+    best = next_best_action(gain, tie_break=ring_smoothed(gain, actions))
     return Plan(actions, H, EH, gain, best, evaluator.name, time.perf_counter() - t0)

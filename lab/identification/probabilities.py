@@ -74,6 +74,7 @@ from lab.estimation import (
     data_log_likelihood,
     measurement_jacobian_rv,
     measurement_model,
+    rv_to_euler_jacobian,
 )
 from lab.estimation.fit import chi2_quantile
 from lab.robot import StereoCamera
@@ -90,6 +91,7 @@ __all__ = [
     "calc_current_entropy",
     "clutter_log_density",
     "entropy",
+    "pose_estimate_rv",
     "posterior",
     "state_for_scoring",
     "uniform",
@@ -241,12 +243,12 @@ def apply_floor(P, floor: float) -> np.ndarray:
         raise ConfigError(f"floor {floor} is too large for {L} models (need L * floor < 1)")
     low = P < floor
     out = P
-    for _ in range(L):  # the set of floored entries only grows; at most L rounds
+    for _ in range(L):  # the set of floored entries only grows: at most L rounds (usually 1 or 2)
         n_low = low.sum(axis=-1, keepdims=True)
         rest = np.where(low, 0.0, P).sum(axis=-1, keepdims=True)
-        out = np.where(low, floor, P * (1.0 - floor * n_low) / rest)
+        out = np.where(low, floor, P * ((1.0 - floor * n_low) / rest))
         new_low = low | (out < floor)
-        if np.array_equal(new_low, low):
+        if not np.any(new_low != low):
             break
         low = new_low
     return out
@@ -369,6 +371,18 @@ class ModelScore:
     n_explained: int
     n_features: int
     explanation: Explanation = field(repr=False)
+
+
+def pose_estimate_rv(mu, Sigma_rv, t: float = 0.0) -> PoseEstimate:
+    """A :class:`PoseEstimate` from a covariance over ``[x_r, phi]`` (the rotation-vector chart).
+
+    Its Euler covariance is derived (and may be huge near gimbal lock, where it is not used here).
+    """
+    mu = np.asarray(mu, dtype=float)
+    T_inv = rv_to_euler_jacobian(mu)
+    with np.errstate(over="ignore", invalid="ignore"):
+        Sigma = T_inv @ np.asarray(Sigma_rv, dtype=float) @ T_inv.T
+    return PoseEstimate(mu, np.nan_to_num(Sigma, posinf=1e12, neginf=-1e12), t, Sigma_rv=Sigma_rv)
 
 
 def state_for_scoring(predicted: PoseEstimate | None, result: UpdateResult | None) -> PoseEstimate | None:

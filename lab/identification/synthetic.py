@@ -90,7 +90,7 @@ def synthetic_box_databases(
 
 
 def synthetic_tables(
-    dbs: list[FeatureDatabase], p_match: float = 0.6, p_false: float = 0.01, n_levels: int = 32
+    dbs: list[FeatureDatabase], p_match: float = 0.6, p_false: float = 0.01, n_levels: int = 16
 ) -> LookupTables:
     """Lookup tables for :func:`synthetic_box_databases`, without rendering.
 

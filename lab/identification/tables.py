@@ -55,9 +55,8 @@ from pathlib import Path
 import numpy as np
 
 from lab.errors import AssetError, ConfigError
-from lab.estimation import PoseEstimate, rv_to_euler_jacobian
 from lab.geometry import G_to_pose6, se3_inv
-from lab.identification.probabilities import ModelScorer, ScoringConfig
+from lab.identification.probabilities import ModelScorer, ScoringConfig, pose_estimate_rv
 from lab.paths import cache_dir
 from lab.robot import StereoCamera
 from lab.vision import FeatureDatabase
@@ -293,7 +292,7 @@ class LookupTables:
         ``E[W_ij]`` at each training pose: the sum of the row.
     """
 
-    def __init__(self, names, viewpoints, P, n_levels: int = 32):
+    def __init__(self, names, viewpoints, P, n_levels: int = 16):
         self.names = tuple(names)
         L = len(self.names)
         if L == 0:
@@ -347,7 +346,7 @@ class LookupTables:
         return (rng.random((size, len(p))) < p).sum(axis=1)
 
     @classmethod
-    def from_model_tables(cls, tables: Sequence[ModelTables], n_levels: int = 32) -> LookupTables:
+    def from_model_tables(cls, tables: Sequence[ModelTables], n_levels: int = 16) -> LookupTables:
         """Assemble from one :class:`ModelTables` per true model (all built against the same models)."""
         if not tables:
             raise ConfigError("no model tables given")
@@ -373,14 +372,6 @@ def box_model_names() -> tuple[str, ...]:
     from lab.sim.scene import load_scene
 
     return tuple(m.name for m in load_scene("box_database").models)
-
-
-def _estimate(mu, Sigma_rv) -> PoseEstimate:
-    """A pose estimate from a rotation-vector covariance (the Euler one may be huge near gimbal lock)."""
-    T_inv = rv_to_euler_jacobian(mu)
-    with np.errstate(over="ignore", invalid="ignore"):
-        Sigma = T_inv @ Sigma_rv @ T_inv.T
-    return PoseEstimate(mu, np.nan_to_num(Sigma, posinf=1e12, neginf=-1e12), Sigma_rv=Sigma_rv)
 
 
 def _key(
@@ -483,7 +474,7 @@ def build_model_tables(
             G_WC = viewpoint_G_WC(eye(az, el, r), centre)
             left, right = world.render_stereo(G_WC, cam)
             f = stereo_features(left, right, cam, detector=det)
-            truth = _estimate(G_to_pose6(se3_inv(G_WC) @ G_WO), Sigma_gate)
+            truth = pose_estimate_rv(G_to_pose6(se3_inv(G_WC) @ G_WO), Sigma_gate)
             for j, s in enumerate(scorers):
                 e = s.explain(f, truth)
                 hits[j][v, np.unique(e.idx_db[e.explained])] += 1  # tau: feature l of M_j matched
@@ -579,7 +570,7 @@ def load_tables(
     params: TableParams | None = None,
     scoring: ScoringConfig | None = None,
     dbs: Sequence[FeatureDatabase] | None = None,
-    n_levels: int = 32,
+    n_levels: int = 16,
 ) -> LookupTables:
     """The cached tables of ``names`` (default: the box models), strictly: never builds.
 
@@ -643,7 +634,7 @@ def get_tables(
     dbs: Sequence[FeatureDatabase] | None = None,
     rebuild: bool = False,
     progress: bool = True,
-    n_levels: int = 32,
+    n_levels: int = 16,
 ) -> LookupTables:
     """The tables of ``names`` (default: the box models) from the cache, building what is missing,
     stale or corrupt (:func:`get_model_tables` for each true model)."""
