@@ -156,7 +156,7 @@ def test_an_identified_model_leaves_nothing_to_learn(synth):
         assert information_gain(entropy(P), ev.expected_entropy(actions, hyp)).max() < 0.03
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=15, deadline=None)
 @given(
     st.lists(st.floats(0.01, 1.0), min_size=4, max_size=4),
     st.floats(-180.0, 180.0),
@@ -320,3 +320,21 @@ def test_unknown_models_and_mismatched_inputs_are_refused(synth):
         LookupTables(["A", "A"], np.zeros((1, 2)), [[np.zeros((1, 3))] * 2] * 2)
     with pytest.raises(ConfigError, match="outside"):
         LookupTables(["A"], np.zeros((1, 2)), [[np.full((1, 3), 1.5)]])
+
+
+def test_symmetry_weights_rule_out_the_turn_that_shows_an_unseen_unique_face(synth):
+    dbs = synth[0]
+    from lab.identification import ModelScorer, symmetry_log_weights
+
+    scorers = [ModelScorer(db) for db in dbs]
+    rng = np.random.default_rng(7)
+    G_WO, G_WC = S.box_pose(0.0), S.camera_at(180.0)  # the -X face is seen
+    frames = [(S.observe(dbs[0], G_WO, G_WC, rng), G_WC) for _ in range(2)]
+    est = S.estimate(G_WO, G_WC)
+    lw = symmetry_log_weights(frames, scorers, [est, est, None, est], G_WC, z_turns(4))
+    assert lw.shape == (4, 4) and np.all(lw <= 0.0) and np.all(lw[2] == 0.0)
+    # turn 0 (the estimate), 90 and 270 deg show the shared page where it was seen: equally good;
+    # turning by 180 deg would have shown the unique face there: ruled out
+    for i in (0, 1, 3):
+        np.testing.assert_allclose(lw[i, [0, 1, 3]], 0.0, atol=0.05)
+        assert lw[i, 2] < -3.0

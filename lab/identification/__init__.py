@@ -6,7 +6,8 @@ The data flow of one step, with the paper's three functions (Sec. IV)::
     EKFBank.predict / update per model -> mu_bar, Sigma_bar         (lab.estimation)
     calc_current_entropy(P, D_k, scorers, states) -> Belief(P, H)   Eqs. (5), (7)-(9)   probabilities.py
         (observe_frame does the updates and this in one call)                          step.py
-    ModelHypotheses.from_estimates(P, estimates, G_WC)              (the models' poses in the world)
+    ModelHypotheses.from_estimates(P, estimates, G_WC[, z_turns(4), symmetry_log_weights(...)])
+                                    the models' poses in W (and their look-alike turns)  hypotheses.py
     calc_possible_control_actions(centre, camera, is_reachable)     the ring of goals   actions.py
     calc_expected_entropy(evaluator, actions, hypotheses) -> E[H+]  Eq. (10)
         LookupTableEvaluator(tables)   W from Table I, Eqs. (13)-(15)                    lut.py, tables.py

@@ -1,24 +1,29 @@
 r"""Expected entropy by Monte Carlo: Eqs. (10)-(12) of the identification paper.
 
-For a candidate action ``u+`` and an assumed true model ``M_i`` (probability ``P(M_i)``):
+For a candidate action ``u+`` and an assumed truth, a pose hypothesis ``h`` of model ``M_i``
+(probability ``P(M_i) P(h | M_i)``, :class:`~lab.identification.hypotheses.ModelHypotheses`):
 
-1. **Predict the measurement.** The action puts the camera at ``G_WC+``; model ``M_i``'s pose estimate
-   becomes ``G_{C+,O_i}`` with covariance ``Sigma_i+`` (:meth:`ModelHypotheses.relative_to`). The
-   features of ``M_i`` that would be seen are those its database saw from the ring viewpoint nearest to
-   that relative pose (``seen_from``), inside the image and the stereo range.
+1. **Predict the measurement.** The action puts the camera at ``G_WC+``; the hypothesis becomes
+   ``G_{C+,O}`` with covariance ``Sigma+`` (:meth:`ModelHypotheses.relative_to`). The features of
+   ``M_i`` that would be seen are those its database saw from the ring viewpoints around the camera's
+   direction seen from O (``seen_from``, averaged over the viewpoints by the direction's
+   uncertainty and half a ring step), inside the image and the stereo range.
 2. **Sample** ``N`` measurement sets ``D~ ~ p(D_{k+1} | theta, u+, M_i)``: a pose
-   ``X~ ~ N(mu_i+, Sigma_i+)`` per set, each visible feature detected with probability ``p_detect``, at
-   ``X~ (+) b_l`` plus stereo noise from the camera's error model (``Sigma_m`` at that pixel and depth).
+   ``X~ ~ N(mu+, Sigma+)`` per set, each visible feature measured and matched with probability
+   ``p_detect`` times its visibility, at ``X~ (+) b_l`` plus stereo noise from the camera's error
+   model (``Sigma_m`` at that pixel and depth).
 3. **Score against every model** ``M_j``, Eqs. (11)-(12): a sampled feature (a feature ``b_l`` of
    ``M_i``) corresponds to the features of ``M_j`` whose descriptors are within the scoring distance of
    ``b_l``'s (the cross-model correspondence structure, computed once from the databases: on a shared
    face every model has the twin of ``b_l``, on a unique face no other model has), among which the
-   geometric gate under ``M_j``'s own pose picks the nearest, exactly as the real scoring does
-   (:class:`~lab.identification.probabilities.ModelScorer`). Each explained feature contributes
-   ``N(d~_m; mu^j_m, C_m Sigma_j+ C_m^T + Sigma_m)`` (Eq. (12): independent features), each other one
+   geometric gate picks the nearest, exactly as the real scoring does
+   (:class:`~lab.identification.probabilities.ModelScorer`). ``M_j`` is placed at the true pose ``h``
+   (the real scoring shares the bank's poses, and the truth is among them) or, without pose sharing,
+   at its own hypotheses. Each explained feature contributes
+   ``N(d~_m; mu^j_m, C_m Sigma+ C_m^T + Sigma_m)`` (Eq. (12): independent features), each other one
    the clutter density.
 4. **Posterior and entropy** of every sample (Eq. (7), the same evidence weight and floor as the real
-   update), averaged and weighted by ``P(M_i)``:
+   update), averaged and weighted by the hypothesis's probability:
 
 .. math::
 
