@@ -29,7 +29,7 @@ import time
 import numpy as np
 
 from lab.estimation import EKFBank, EKFConfig, OrientationChart
-from lab.geometry import Pose2D, Rz, relative_pose2d, se3
+from lab.geometry import G_to_pose6, Pose2D, Rz, relative_pose2d, se3, se3_inv
 from lab.identification import (
     LookupTableEvaluator,
     ModelHypotheses,
@@ -44,6 +44,7 @@ from lab.identification import (
     next_best_action,
     observe_frame,
     plan_next_best_view,
+    pose_estimate_rv,
     ring_smoothed,
     symmetry_log_weights,
     uniform,
@@ -58,17 +59,20 @@ CAM = StereoCamera.from_fov(320, 240, 60.0, 0.12, mount_R=(0.0, 0.0, 0.7))  # th
 SYMMETRIES = z_turns(4)  # the boxes' side faces look alike: a filter's pose may be off by a quarter turn
 
 
-def run_scenario(model_index, box_yaw, dbs, matchers, scorers, lut, mcs, max_decisions, symmetric, frames=3):
-    """Decisions of one scenario: a list of dicts (one per decision)."""
+def run_scenario(
+    model_index, box_yaw, start, dbs, matchers, scorers, lut, mcs, max_decisions, symmetric, frames=3
+):
+    """Decisions of one scenario: a list of dicts (one per decision).
+
+    ``start`` is the robot's first pose; its first view is aimed at the true box centre (set-up)."""
     models = load_box_models()
     out = []
     with SimWorld("box_database") as world:
         carrier = world.add_carrier(models[model_index], Pose2D(0.0, 0.0, 0.0), box_yaw=box_yaw)
-        bank = EKFBank(
-            len(dbs), EKFConfig(chart=OrientationChart.ROTATION_VECTOR), rng=np.random.default_rng(0)
-        )
+        rng = np.random.default_rng(model_index)
+        bank = EKFBank(len(dbs), EKFConfig(chart=OrientationChart.ROTATION_VECTOR), rng=rng)
         P = uniform(len(dbs))
-        pose, target = Pose2D(-1.0, 0.0, 0.0), carrier.G_WO[:3, 3]  # set-up: first view aimed at the truth
+        pose, target = start, carrier.G_WO[:3, 3]
         prev_pose, prev_G_RC = pose, None
         history = []  # (features, G_WC) of every frame: the evidence about the look-alike poses
         for d in range(max_decisions + 1):
@@ -143,18 +147,27 @@ def part_rendered(args):
     mcs = [
         MonteCarloEvaluator(dbs, CAM, config=MonteCarloConfig(n_samples=args.samples, seed=s)) for s in (0, 1)
     ]
+    # each model faces the robot with each shared face (and a corner of two), from its own distance and
+    # side: 16 scenarios whose first views all differ
     yaws = (0.0, 90.0, -90.0, 45.0) if not args.quick else (0.0, 90.0)
     models = range(len(names)) if not args.quick else (0, 3)
+    distances = (0.9, 1.0, 1.1, 1.2)
+    sides_deg = (-15.0, 0.0, 15.0, 30.0)
     rows = []
     print(
         f"{'model':>5} {'yaw':>5} {'dec':>3} {'H':>5} {'az lut':>6} {'az mc':>6} {'mc(lut)/mc(best)':>16} "
         f"{'lut ms':>7} {'mc s':>6} {'mc seed gap':>11}"
     )
     for k in models:
-        for yaw in yaws:
+        for n, yaw in enumerate(yaws):
+            side = math.radians(sides_deg[(k + n) % 4])
+            r0 = distances[k]
+            start = Pose2D(-r0 * math.cos(side), -r0 * math.sin(side), side)  # facing the box
+            box_yaw = math.radians(yaw) + side  # the same face still turned towards the robot
             scenario = (
                 k,
-                math.radians(yaw),
+                box_yaw,
+                start,
                 dbs,
                 matchers,
                 scorers,
@@ -197,8 +210,9 @@ def part_rendered(args):
 
 def part_scale(args):
     print("\nscale: synthetic databases, one decision over 36 candidates")
-    print(f"{'L':>3} {'LUT median ms':>14} {'LUT p90 ms':>11} {'MC s (N=32)':>12}")
-    for L in (4, 10, 20):
+    print("(20x4: 20 models with 4 pose hypotheses each)")
+    print(f"{'L':>5} {'LUT median ms':>14} {'LUT p90 ms':>11} {'MC s (N=32)':>12}")
+    for L, turns in ((4, 1), (10, 1), (20, 1), (20, 4)):
         rng = np.random.default_rng(L)
         dbs = synthetic_box_databases(L, rng)
         tables = synthetic_tables(dbs)
@@ -210,22 +224,26 @@ def part_scale(args):
             P /= P.sum()
             G = se3(Rz(rng.uniform(-np.pi, np.pi)), (0.0, 0.0, 0.49))
             S = np.diag([2e-4] * 3 + [1e-3] * 3)
-            hyp = ModelHypotheses.one_pose_each(P, np.stack([G] * L), np.stack([S] * L))
+            if turns == 1:
+                hyp = ModelHypotheses.one_pose_each(P, np.stack([G] * L), np.stack([S] * L))
+            else:  # every model with its quarter turns: 4 L pose hypotheses
+                G_WC = CAM.G_RC(0.0, 0.0)
+                est = pose_estimate_rv(G_to_pose6(se3_inv(G_WC) @ G), S)
+                hyp = ModelHypotheses.from_estimates(P, [est] * L, G_WC, z_turns(turns))
             t0 = time.perf_counter()
             plan = plan_next_best_view(hyp, CAM, lut)
             times.append(time.perf_counter() - t0)
             assert len(plan.actions) == 36
         times.sort()
         t_mc = float("nan")
-        if L <= 10 and not args.quick:
+        if L <= 10 and turns == 1 and not args.quick:
             mc = MonteCarloEvaluator(dbs, CAM, config=MonteCarloConfig(n_samples=32))
             t0 = time.perf_counter()
             plan_next_best_view(hyp, CAM, mc)
             t_mc = time.perf_counter() - t0
-        print(
-            f"{L:3d} {1e3 * statistics.median(times):14.1f} {1e3 * times[int(0.9 * (len(times) - 1))]:11.1f} "
-            f"{t_mc:12.2f}"
-        )
+        label = str(L) if turns == 1 else f"{L}x{turns}"
+        med, p90 = statistics.median(times), times[int(0.9 * (len(times) - 1))]
+        print(f"{label:>5} {1e3 * med:14.1f} {1e3 * p90:11.1f} {t_mc:12.2f}")
 
 
 def main():

@@ -179,7 +179,7 @@ class LookupTableEvaluator:
             return np.zeros(0)
         G_WC = np.stack([a.G_WC for a in actions])
         G_CO, Sigma = hypotheses.relative_to(G_WC)  # (A, H, ...): each hypothesis's predicted relative pose
-        w = viewpoint_weights(G_CO, self.tables.viewpoints, direction_std(G_CO, Sigma))  # (A, H, V)
+        w = viewpoint_weights(G_CO, self.tables.viewpoints, direction_std(G_CO, Sigma), min_weight=0.02)
         a, h, v = np.nonzero(w)  # the (action, hypothesis, table row) triples to evaluate
         # Eqs. (13)-(15): one corresponding feature is worth log N(delta_o; 0, Sigma_o) - log c
         Sigma_o = self.constants.Sigma_o(self.camera, np.linalg.norm(G_CO[..., :3, 3], axis=-1), Sigma)
