@@ -134,6 +134,18 @@ def build_parser() -> argparse.ArgumentParser:
     hc.add_argument("--config", required=True, type=Path, help="hardware TOML file, e.g. hardware/robot.toml")
     hc.add_argument("--emulate", action="store_true", help="start the emulators on the config's ports first")
 
+    tb = sub.add_parser(
+        "tables",
+        help="build the lookup tables of the identification planner (cached)",
+        description="Render each box model around its training ring, match every render against every "
+        "model's feature database, and store the probability lookup tables (the identification paper's "
+        "Table I) in the cache (reused while the databases and parameters are unchanged).",
+    )
+    tb.add_argument("models", nargs="*", help="true models to build (default: all box models)")
+    tb.add_argument("--cache", type=Path, help="cache folder (default: $LAB_CACHE or ~/.cache/lab)")
+    tb.add_argument("--force", action="store_true", help="rebuild even when the cache is current")
+    tb.add_argument("--repeats", type=int, default=8, help="renders per model and training pose (default 8)")
+
     sub.add_parser(
         "worlds",
         help="list the worlds and their bodies",
@@ -263,6 +275,35 @@ def _cmd_hardware(args) -> int:
     return hw.check(args.config, emulate=args.emulate)
 
 
+def _cmd_tables(args) -> int:
+    import time
+
+    from lab.identification.tables import TableParams, box_model_names, get_model_tables, tables_path
+    from lab.vision.database import get_database
+
+    names = box_model_names()
+    unknown = [n for n in args.models if n not in names]
+    if unknown:
+        raise LabError(f"unknown model(s) {', '.join(unknown)}; box models: {', '.join(names)}")
+    if args.repeats < 1:
+        raise LabError(f"--repeats must be at least 1, got {args.repeats}")
+    db_folder = args.cache / "databases" if args.cache else None
+    folder = args.cache / "tables" if args.cache else None
+    dbs = [get_database(n, db_folder) for n in names]
+    params = TableParams(repeats=args.repeats)
+    t0 = time.perf_counter()
+    for n in args.models or names:  # one file per true model, built only when missing or stale
+        t1 = time.perf_counter()
+        t = get_model_tables(n, dbs, folder, params, rebuild=args.force)
+        V = len(t.viewpoints)
+        print(
+            f"{n}: {len(t.names)} tables x {V} training poses against {', '.join(t.names)} "
+            f"({time.perf_counter() - t1:.1f} s) -> {tables_path(n, folder)}"
+        )
+    print(f"done in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def _cmd_demo(args) -> int:
     from lab.demo import run_demo
 
@@ -299,6 +340,7 @@ def main(argv: list[str] | None = None) -> int:
         "grade": _cmd_grade,
         "hardware": _cmd_hardware,
         "render": _cmd_render,
+        "tables": _cmd_tables,
         "train": _cmd_train,
         "worlds": _cmd_worlds,
     }

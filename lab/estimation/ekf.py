@@ -371,7 +371,9 @@ def _information_update(Sigma_bar, y_w, C_w, logdet_m):
     return dx, Sigma, nis, loglik
 
 
-def data_log_likelihood(d_C, b_O, Sigma_d, mu_bar, Sigma_bar) -> float:
+def data_log_likelihood(
+    d_C, b_O, Sigma_d, mu_bar, Sigma_bar, chart: OrientationChart = OrientationChart.EULER
+) -> float:
     r"""Eq. (9) of the identification paper: the data likelihood of matched features, as a log.
 
     .. math::
@@ -390,7 +392,11 @@ def data_log_likelihood(d_C, b_O, Sigma_d, mu_bar, Sigma_bar) -> float:
     Sigma_d : array_like, shape (n, 3, 3) [m^2]
     mu_bar : array_like, shape (6,)
     Sigma_bar : array_like, shape (6, 6)
-        Predicted state and covariance.
+        Predicted state and covariance; the covariance over ``X`` (``EULER``) or over
+        ``[x_r, phi]`` (``ROTATION_VECTOR``, e.g. ``PoseEstimate.Sigma_rv``), as ``chart`` says.
+    chart : OrientationChart
+        The coordinates of ``Sigma_bar``'s orientation part (the likelihood is the same in both,
+        up to the linearisation; the rotation-vector chart stays finite at gimbal lock).
 
     Returns
     -------
@@ -401,7 +407,8 @@ def data_log_likelihood(d_C, b_O, Sigma_d, mu_bar, Sigma_bar) -> float:
     mu_bar = np.asarray(mu_bar, float)
     n = d.shape[0]
     r = d - measurement_model(mu_bar, b)
-    C = measurement_jacobian(mu_bar, b).reshape(n, 3, 6)
+    jac = measurement_jacobian if chart is OrientationChart.EULER else measurement_jacobian_rv
+    C = jac(mu_bar, b).reshape(n, 3, 6)
     y_w, C_w, logdet_m = _whitened(r, C, S)
     return _information_update(np.asarray(Sigma_bar, float), y_w, C_w, logdet_m)[3]
 

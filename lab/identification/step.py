@@ -1,0 +1,80 @@
+"""One perception step of the identification loop: a frame's features into the EKF bank and the model
+probabilities (the left half of the paper's Fig. 3, up to *calcCurrentEntropy*).
+
+The caller predicts the bank first (robot, pan-tilt and object motion since the last frame) and passes
+the predictions in; this function matches the frame against every model, updates each filter, and
+scores the frame against every model at the predicted poses (Eqs. (7)-(9)).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from lab.errors import ConfigError
+from lab.estimation import EKFBank, PoseEstimate, UpdateResult
+from lab.identification.probabilities import (
+    Belief,
+    ModelScorer,
+    ScoringConfig,
+    calc_current_entropy,
+    state_for_scoring,
+)
+from lab.vision import Features3D, Matcher
+
+__all__ = ["FrameObservation", "observe_frame"]
+
+
+@dataclass(frozen=True)
+class FrameObservation:
+    """What one frame did.
+
+    Attributes
+    ----------
+    belief : Belief
+        Model probabilities and entropy after the frame.
+    updates : tuple of UpdateResult
+        Each model's EKF update.
+    """
+
+    belief: Belief
+    updates: tuple[UpdateResult, ...] = field(repr=False)
+
+
+def observe_frame(
+    P,
+    features: Features3D,
+    bank: EKFBank,
+    predicted: Sequence[PoseEstimate | None],
+    matchers: Sequence[Matcher],
+    scorers: Sequence[ModelScorer],
+    config: ScoringConfig | None = None,
+) -> FrameObservation:
+    """Update every model's filter with the frame and the model probabilities with Eq. (7).
+
+    Parameters
+    ----------
+    P : array_like, shape (L,)
+        Model probabilities before the frame.
+    features : Features3D
+        The frame's ``D_k``.
+    bank : EKFBank
+        One filter per model, already predicted to the frame's time.
+    predicted : sequence of PoseEstimate or None
+        ``bank.predict(...)``'s output for this frame.
+    matchers, scorers : sequences, one per model
+        ``Matcher(db_i)`` (the EKF's correspondences) and ``ModelScorer(db_i)`` (the probabilities').
+    config : ScoringConfig, optional
+    """
+    L = len(bank)
+    if not (len(predicted) == len(matchers) == len(scorers) == L):
+        raise ConfigError(
+            f"need one prediction, matcher and scorer per model: {len(predicted)}, {len(matchers)}, "
+            f"{len(scorers)} for {L} filters"
+        )
+    updates = tuple(
+        bank.update(i, *matchers[i].match(features).pairs(features, scorers[i].db)) for i in range(L)
+    )
+    states = [state_for_scoring(p, u) for p, u in zip(predicted, updates, strict=True)]
+    belief = calc_current_entropy(P, features, scorers, states, config)
+    return FrameObservation(belief, updates)

@@ -1,0 +1,266 @@
+"""Model probabilities, Eqs. (5) and (7)-(9): properties with hypothesis, the scoring of a frame against
+every model on synthetic scenes (the model that explains more wins; look-alikes leave them equal), and
+bad input."""
+
+import math
+
+import ident_scenes as S
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lab.errors import ConfigError
+from lab.estimation import OrientationChart, data_log_likelihood, euler_to_rv_jacobian
+from lab.identification import (
+    LikelihoodForm,
+    ModelScorer,
+    ScoringConfig,
+    apply_floor,
+    calc_current_entropy,
+    clutter_log_density,
+    entropy,
+    posterior,
+    state_for_scoring,
+    uniform,
+    update_model_probabilities,
+)
+
+prob_vectors = st.integers(1, 25).flatmap(
+    lambda L: st.lists(st.floats(1e-12, 1.0), min_size=L, max_size=L).map(lambda v: np.array(v) / sum(v))
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(prob_vectors, st.floats(0.0, 0.99))
+def test_floor_keeps_the_sum_and_the_floor_and_is_idempotent(P, frac):
+    floor = frac / len(P) * 0.5
+    Q = apply_floor(P, floor)
+    assert Q.sum() == pytest.approx(1.0, abs=1e-12)
+    assert np.all(Q >= floor - 1e-15)
+    np.testing.assert_allclose(apply_floor(Q, floor), Q, atol=1e-15)
+    above = Q > floor * (1 + 1e-9)  # entries above the floor keep their ratios
+    if above.sum() >= 2:
+        r = Q[above] / P[above]
+        np.testing.assert_allclose(r, r[0], rtol=1e-9)
+    # along the last axis of a stack too
+    np.testing.assert_allclose(apply_floor(np.stack([P, P]), floor)[1], Q, atol=1e-15)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    prob_vectors,
+    st.data(),
+    st.sampled_from([1e-3, 1e-4, 0.0]),
+    st.floats(1e-3, 1.0),
+)
+def test_bayes_update_sums_to_one_and_respects_the_floor(prior, data, floor, kappa):
+    L = len(prior)
+    if L * floor >= 1:
+        return
+    ll = np.array(data.draw(st.lists(st.floats(-1e6, 1e6), min_size=L, max_size=L)))
+    cfg = ScoringConfig(floor=floor, evidence_weight=kappa)
+    prior = apply_floor(prior, floor)
+    P = update_model_probabilities(prior, ll, cfg)
+    assert P.sum() == pytest.approx(1.0, abs=1e-9)
+    assert np.all(P >= floor - 1e-15)
+    assert 0.0 <= entropy(P) <= math.log(L) + 1e-12
+    # the same as the batched form the planner uses
+    np.testing.assert_allclose(posterior(np.log(prior), ll[None], cfg)[0], P, atol=1e-12)
+    # equal likelihoods teach nothing
+    np.testing.assert_allclose(update_model_probabilities(prior, np.full(L, ll[0]), cfg), prior, atol=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(prob_vectors)
+def test_entropy_lies_in_0_log_L(P):
+    H = entropy(P)
+    assert 0.0 <= H <= math.log(len(P)) + 1e-12
+    assert entropy(np.eye(len(P))[0]) == 0.0
+    assert entropy(uniform(len(P))) == pytest.approx(math.log(len(P)))
+
+
+def test_bayes_rule_matches_the_textbook_formula():
+    prior = np.array([0.5, 0.3, 0.2])
+    ll = np.array([-10.0, -12.0, -9.0])
+    cfg = ScoringConfig(evidence_weight=1.0, floor=0.0)
+    post = prior * np.exp(ll)
+    np.testing.assert_allclose(update_model_probabilities(prior, ll, cfg), post / post.sum(), rtol=1e-12)
+    cfg = ScoringConfig(evidence_weight=0.5, floor=0.0)  # the evidence weight: likelihood ** kappa
+    post = prior * np.exp(0.5 * ll)
+    np.testing.assert_allclose(update_model_probabilities(prior, ll, cfg), post / post.sum(), rtol=1e-12)
+
+
+def test_a_floored_model_comes_back():
+    cfg = ScoringConfig()
+    P = update_model_probabilities(uniform(4), [0.0, -5000.0, 0.0, 0.0], cfg)  # one awful frame
+    assert P[1] == pytest.approx(cfg.floor)
+    for _ in range(3):  # a few frames in its favour (30 features more than the others explain)
+        P = update_model_probabilities(P, [0.0, 30 * 15.0, 0.0, 0.0], cfg)
+    assert P.argmax() == 1
+
+
+def test_clutter_density_is_uniform_over_the_stereo_frustum():
+    cam = S.CAMERA
+    log_c = clutter_log_density(cam, max_depth_m=5.0)
+    # by numerical integration of the frustum's slices
+    z = np.linspace(cam.fx * cam.baseline / 96.0, 5.0, 200001)
+    area = (cam.width * z / cam.fx) * (cam.height * z / cam.fy)
+    V = np.trapezoid(area, z)
+    assert log_c == pytest.approx(-math.log(V), abs=1e-6)
+    assert -4.5 < log_c < -4.1  # 1 / 74 m^3 for the robot's camera
+    with pytest.raises(ConfigError):
+        clutter_log_density(cam, max_depth_m=0.1)
+
+
+def test_rotation_vector_chart_gives_the_same_eq9_likelihood():
+    rng = np.random.default_rng(0)
+    mu = np.array([0.1, 0.0, 1.0, 0.3, 0.2, -0.4])
+    A = rng.normal(size=(6, 6)) * 0.05
+    Sigma = A @ A.T + 1e-4 * np.eye(6)
+    b = rng.uniform(-0.14, 0.14, (10, 3))
+    d = b + 0.01
+    Sd = np.tile(1e-4 * np.eye(3), (10, 1, 1))
+    T = euler_to_rv_jacobian(mu)
+    ll_euler = data_log_likelihood(d, b, Sd, mu, Sigma)
+    ll_rv = data_log_likelihood(d, b, Sd, mu, T @ Sigma @ T.T, chart=OrientationChart.ROTATION_VECTOR)
+    assert ll_rv == pytest.approx(ll_euler, rel=1e-9)
+
+
+# --- scoring frames against models -------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def scene():
+    dbs = S.databases()
+    return dbs, [ModelScorer(db) for db in dbs]
+
+
+def test_the_model_that_explains_more_wins(scene):
+    dbs, scorers = scene
+    rng = np.random.default_rng(1)
+    G_WO, G_WC = S.box_pose(0.0), S.camera_at(10.0)  # the unique +X face, nearly frontal
+    for k in range(4):
+        f = S.observe(dbs[k], G_WO, G_WC, rng)
+        est = S.estimate(G_WO, G_WC)
+        scores = [s.score(f, est) for s in scorers]
+        n = [s.n_explained for s in scores]
+        assert n[k] >= 20 and max(n[j] for j in range(4) if j != k) == 0, n
+        # every model is scored on all the measured features: explained ones by Eq. (9), others by c
+        for s in scores:
+            assert s.n_features == len(f)
+            rest = (len(f) - s.n_explained) * scorers[0].config.log_clutter_density
+            assert s.log_likelihood == pytest.approx(s.log_likelihood_explained + rest)
+        b = calc_current_entropy(uniform(4), f, scorers, [est] * 4)
+        assert b.map_model == k and b.P.sum() == pytest.approx(1.0)
+        assert b.H < math.log(4)
+
+
+def test_shared_faces_leave_the_probabilities_uniform(scene):
+    dbs, scorers = scene
+    rng = np.random.default_rng(2)
+    for az, yaw in ((180.0, 0.0), (90.0, 0.0), (270.0, 0.0), (0.0, 180.0)):
+        G_WO, G_WC = S.box_pose(yaw), S.camera_at(az)
+        f = S.observe(dbs[2], G_WO, G_WC, rng)
+        est = S.estimate(G_WO, G_WC)
+        P = uniform(4)
+        for _ in range(3):
+            b = calc_current_entropy(P, f, scorers, [est] * 4)
+            P = b.P
+        assert len(set(b.n_explained.tolist())) == 1 and b.n_explained[0] >= 20
+        np.testing.assert_allclose(P, 0.25, atol=1e-9)
+
+
+def test_aliases_are_counted_once_and_geometry_picks_the_face(scene):
+    """The shared page is on three faces: a measured feature has three look-alike candidates, and the
+    one the pose puts there explains it, once."""
+    dbs, scorers = scene
+    rng = np.random.default_rng(3)
+    G_WO, G_WC = S.box_pose(0.0), S.camera_at(180.0)  # the -X face
+    f = S.observe(dbs[0], G_WO, G_WC, rng, clutter=0)
+    e = scorers[0].explain(f, S.estimate(G_WO, G_WC))
+    n_shared = 3 * (len(dbs[0]) // 4)
+    face = n_shared // 3
+    assert e.n_explained == len(f)  # every feature explained exactly once
+    assert np.all(e.idx_db[e.explained] < face)  # by the -X copy (the first third), not +Y or -Y
+    # the pose turned by a quarter puts the -Y face where -X was: the same page, so it explains as much,
+    # by the -Y copy (the last third)
+    e_turned = scorers[0].explain(f, S.estimate(G_WO @ S.se3(S.Rz(-math.pi / 2)), G_WC))
+    assert e_turned.n_explained == len(f)
+    assert np.all((e_turned.idx_db >= 2 * face) & (e_turned.idx_db < 3 * face))
+
+
+def test_wrong_pose_explains_nothing_and_no_pose_explains_nothing(scene):
+    dbs, scorers = scene
+    rng = np.random.default_rng(4)
+    G_WO, G_WC = S.box_pose(0.0), S.camera_at(180.0)
+    f = S.observe(dbs[0], G_WO, G_WC, rng)
+    far = S.estimate(G_WO @ S.se3(None, (0.5, 0.0, 0.0)), G_WC)
+    assert scorers[0].explain(f, far).n_explained == 0
+    s = scorers[0].score(f, None)
+    assert s.n_explained == 0 and s.log_likelihood == pytest.approx(
+        len(f) * scorers[0].config.log_clutter_density
+    )
+
+
+def test_pose_sharing_scores_a_model_without_a_filter_at_the_others_pose(scene):
+    dbs, scorers = scene
+    rng = np.random.default_rng(5)
+    G_WO, G_WC = S.box_pose(0.0), S.camera_at(180.0)
+    f = S.observe(dbs[0], G_WO, G_WC, rng)
+    est = S.estimate(G_WO, G_WC)
+    states = [est, None, est, None]
+    shared = calc_current_entropy(uniform(4), f, scorers, states)
+    np.testing.assert_allclose(shared.P, 0.25, atol=1e-9)
+    own = calc_current_entropy(uniform(4), f, scorers, states, ScoringConfig(share_poses=False))
+    assert own.P[1] < 0.2 and own.P[0] > 0.3  # without sharing, no pose means no explanation
+
+
+def test_joint_and_per_feature_forms_agree_on_clean_data(scene):
+    dbs, scorers = scene
+    rng = np.random.default_rng(6)
+    G_WO, G_WC = S.box_pose(0.0), S.camera_at(0.0)
+    f = S.observe(dbs[0], G_WO, G_WC, rng, clutter=0)
+    est = S.estimate(G_WO, G_WC, Sigma=np.diag([1e-8] * 3 + [1e-8] * 3))  # pose known: no correlation
+    joint = ModelScorer(dbs[0], ScoringConfig(likelihood=LikelihoodForm.JOINT)).score(f, est)
+    per = scorers[0].score(f, est)
+    assert joint.n_explained == per.n_explained > 20
+    assert joint.log_likelihood == pytest.approx(per.log_likelihood, rel=1e-4)
+
+
+def test_state_for_scoring_prefers_the_fresh_initialisation():
+    from lab.estimation import UpdateOutcome, UpdateResult
+
+    pred = S.estimate(S.box_pose(0.0), S.camera_at(0.0))
+    init = S.estimate(S.box_pose(10.0), S.camera_at(0.0))
+    assert state_for_scoring(pred, UpdateResult(True, UpdateOutcome.UPDATED, "")) is pred
+    assert state_for_scoring(None, UpdateResult(False, UpdateOutcome.INITIALIZED, "", estimate=init)) is init
+    assert state_for_scoring(None, UpdateResult(False, UpdateOutcome.SKIPPED, "")) is None
+
+
+# --- bad input ---------------------------------------------------------------------------------------
+
+
+def test_bad_input_is_refused_with_a_clear_error(scene):
+    dbs, scorers = scene
+    with pytest.raises(ConfigError, match="one log-likelihood per model"):
+        update_model_probabilities(uniform(4), [0.0, 0.0, 0.0])
+    with pytest.raises(ConfigError, match="sum to 1"):
+        update_model_probabilities([0.5, 0.6], [0.0, 0.0])
+    with pytest.raises(ConfigError, match="finite"):
+        update_model_probabilities(uniform(2), [np.nan, 0.0])
+    with pytest.raises(ConfigError, match="too large"):
+        apply_floor(uniform(4), 0.3)
+    with pytest.raises(ConfigError):
+        ScoringConfig(evidence_weight=0.0)
+    with pytest.raises(ConfigError):
+        uniform(0)
+    with pytest.raises(ConfigError, match="one scorer and one state per model"):
+        calc_current_entropy(
+            uniform(4),
+            S.observe(dbs[0], S.box_pose(), S.camera_at(0), np.random.default_rng(0)),
+            scorers[:3],
+            [None] * 4,
+        )
+    # all models impossible (-inf): nothing learnt, the prior is kept
+    np.testing.assert_allclose(update_model_probabilities(uniform(3), [-np.inf] * 3), uniform(3))
