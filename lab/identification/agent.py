@@ -1,0 +1,372 @@
+"""The identification loop (identification paper, Fig. 3): perceive every frame, plan when the goal is
+reached, drive, and keep the head on the object.
+
+One control step (period ``dt``, the same on the simulator and on the real robot)::
+
+    frame    = robot.capture_stereo()                         # images, G_RC and odometry at capture
+    bank.predict(...)                                         # Eq. (1)-(2) for every model
+    D_k      = stereo_features(frame)                         # 3D SIFT features
+    bank.update(i, matches of D_k against B_i)  for each i    # EKF per model
+    belief   = calcCurrentEntropy(...)                        # Eq. (7)-(9), (5)
+    head     : tracking (Eq. (16)-(17)) or scanning           # HeadController
+    base     : follow the arc to the goal; HALT while scanning after a lost track
+    at goal  : plan = calcPossibleControlActions + calcExpectedEntropy, u* by Eq. (6)
+
+The robot drives on arcs of the ring around the probability-weighted object estimate, so the path to a
+goal never crosses the object. It stops when one model's probability stays above ``stop_probability``
+for ``dwell_s`` seconds, or when the action or time budget is spent.
+
+The agent uses only the :class:`lab.robot.Robot` interface: it runs unchanged on :class:`lab.sim.SimRobot`
+and on :class:`lab.hardware.HardwareRobot`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from lab.errors import ConfigError
+from lab.estimation import EKFBank, EKFConfig, OrientationChart
+from lab.geometry import Pose2D, relative_pose2d, wrap_angle
+from lab.identification.actions import ActionConfig, RingBlocked
+from lab.identification.head import HeadController, HeadMode
+from lab.identification.hypotheses import ModelHypotheses, NoObjectEstimate
+from lab.identification.planner import plan_next_best_view
+from lab.identification.probabilities import ModelScorer, ScoringConfig, uniform
+from lab.identification.step import observe_frame
+from lab.navigation.follower import PathFollower
+from lab.robot import Robot
+from lab.vision import Matcher, get_database, stereo_features
+
+__all__ = ["PlannerChoice", "AgentConfig", "StepRecord", "DecisionRecord", "IdentificationAgent"]
+
+
+class PlannerChoice(Enum):
+    """How the next goal is chosen: the paper's planners and two baselines."""
+
+    LUT = "lut"  # expected entropy from the lookup tables, Eq. (13)-(15)
+    MC = "mc"  # expected entropy by Monte Carlo, Eq. (10)-(12)
+    RANDOM = "random"  # a random ring position
+    CIRCLE = "circle"  # the next ring position, always in the same direction
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    """Budgets and rates of the loop.
+
+    Attributes
+    ----------
+    dt : float [s]
+        Control period: one stereo frame per step.
+    stop_probability : float
+        Identified when one model's probability stays at or above this ...
+    dwell_s : float [s]
+        ... for this long.
+    max_actions : int
+        Planning actions (goals) budget.
+    max_time_s : float [s]
+        Simulated (or real) time budget.
+    circle_step_deg : float
+        The circling baseline's step along the ring.
+    arrive_xy, arrive_theta_deg : float [m], [deg]
+        A goal is reached within these.
+    settle_s : float [s]
+        Frames of tracking before the first decision (the posterior takes in the first view).
+    final_observe_s : float [s]
+        Observation at the last goal once the action budget is spent.
+    """
+
+    dt: float = 0.2
+    stop_probability: float = 0.95
+    dwell_s: float = 1.0
+    max_actions: int = 8
+    max_time_s: float = 240.0
+    circle_step_deg: float = 60.0
+    arrive_xy: float = 0.15
+    arrive_theta_deg: float = 15.0
+    settle_s: float = 1.0
+    final_observe_s: float = 4.0
+
+    def __post_init__(self):
+        if not 0.02 <= self.dt <= 1.0:
+            raise ConfigError(f"dt must be within [0.02, 1] s, got {self.dt}")
+        if not 0.5 < self.stop_probability < 1.0:
+            raise ConfigError(f"stop_probability must be within (0.5, 1), got {self.stop_probability}")
+        if self.max_actions < 0:
+            raise ConfigError(f"max_actions must be >= 0, got {self.max_actions}")
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """What happened in one control step (the run's history)."""
+
+    t: float
+    posterior: np.ndarray = field(repr=False)
+    head_mode: str
+    base_mode: str  # "driving", "halted", "idle"
+    odom: tuple[float, float, float]
+    n_features: int
+    action: int | None  # index of the decision taken in this step, if any
+    estimates_W: np.ndarray = field(repr=False)  # (L, 4, 4) each model's object pose in W (NaN: none)
+
+
+@dataclass(frozen=True)
+class DecisionRecord:
+    """One planning decision: the candidates, their gains and the chosen goal."""
+
+    t: float
+    planner: str
+    candidates: np.ndarray = field(repr=False)  # (K, 3) x, y, heading of each candidate goal
+    gains: np.ndarray = field(repr=False)  # (K,) information gain [nats] (NaN for the baselines)
+    chosen: int
+    centre_W: np.ndarray = field(repr=False)  # (3,) the ring's centre
+    elapsed_s: float
+
+
+class IdentificationAgent:
+    """The closed loop of the identification paper on any :class:`Robot`.
+
+    Parameters
+    ----------
+    robot : Robot
+    model_names : sequence of str
+        The database models (default: the four boxes M0..M3).
+    planner : PlannerChoice or str
+    seed : int
+        Seeds RANSAC and the random planner.
+    evaluator : optional
+        An expected-entropy evaluator to use instead of building one (LUT or MC).
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        model_names=("M0", "M1", "M2", "M3"),
+        planner="lut",
+        seed: int = 0,
+        config: AgentConfig | None = None,
+        scoring: ScoringConfig | None = None,
+        action_config: ActionConfig | None = None,
+        evaluator=None,
+    ):
+        try:
+            self.planner = PlannerChoice(planner) if isinstance(planner, str) else planner
+        except ValueError:
+            raise ConfigError(
+                f"unknown planner {planner!r}; planners: {', '.join(p.value for p in PlannerChoice)}"
+            ) from None
+        self.robot = robot
+        self.names = tuple(model_names)
+        self.config = config or AgentConfig()
+        self.scoring = scoring or ScoringConfig()
+        self.action_config = action_config or ActionConfig()
+        self.rng = np.random.default_rng(seed)
+        self.dbs = [get_database(n) for n in self.names]
+        self.matchers = [Matcher(db) for db in self.dbs]
+        self.scorers = [ModelScorer(db, self.scoring) for db in self.dbs]
+        self.bank = EKFBank(
+            len(self.dbs), EKFConfig(chart=OrientationChart.ROTATION_VECTOR), rng=np.random.default_rng(seed)
+        )
+        self.head = HeadController(robot.camera, robot.pan_tilt_limits)
+        self.follower = PathFollower(
+            robot.base_limits,
+            goal_tolerance_xy=self.config.arrive_xy * 0.6,
+            goal_tolerance_theta=math.radians(self.config.arrive_theta_deg * 0.6),
+        )
+        self.evaluator = evaluator if evaluator is not None else self._make_evaluator()
+        self.P = uniform(len(self.dbs))
+        self.steps: list[StepRecord] = []
+        self.decisions: list[DecisionRecord] = []
+        self._prev = None
+        self._goal: Pose2D | None = None
+        self._ring_index = 0
+        self._above_since: float | None = None
+        self._tracking_since: float | None = None
+        self._arrival_t: float | None = None
+        self.identified: int | None = None
+        self.on_step = None  # optional callable(agent, frame) for live views
+
+    # --- set-up -----------------------------------------------------------------------------------
+    def _make_evaluator(self):
+        if self.planner is PlannerChoice.LUT:
+            from lab.identification.lut import LookupTableEvaluator
+            from lab.identification.tables import get_tables
+
+            return LookupTableEvaluator(get_tables(self.names, dbs=self.dbs), self.robot.camera, self.scoring)
+        if self.planner is PlannerChoice.MC:
+            from lab.identification.montecarlo import MonteCarloEvaluator
+
+            return MonteCarloEvaluator(self.dbs, self.robot.camera, self.scoring)
+        return None
+
+    # --- one step ---------------------------------------------------------------------------------
+    def _perceive(self, frame):
+        """Predict every model's filter to this frame, then update filters and probabilities with it."""
+        if self._prev is not None:
+            self.bank.predict(
+                self._prev.G_RC,
+                frame.G_RC,
+                relative_pose2d(self._prev.odom, frame.odom),
+                frame.t - self._prev.t,
+            )
+        self._prev = frame
+        predicted = self.bank.estimates
+        f = stereo_features(frame.left, frame.right, frame.camera, t=frame.t)
+        obs = observe_frame(self.P, f, self.bank, predicted, self.matchers, self.scorers, self.scoring)
+        self.P = obs.belief.P
+        return f, obs
+
+    def _object_origin_C(self) -> np.ndarray | None:
+        """The probability-weighted origin of the tracked models, in the current camera frame."""
+        est = self.bank.estimates
+        known = [i for i, e in enumerate(est) if e is not None]
+        if not known:
+            return None
+        w = np.array([self.P[i] for i in known])
+        w = w / w.sum()
+        return np.sum([wk * est[i].mu[:3] for wk, i in zip(w, known, strict=True)], axis=0)
+
+    def _hypotheses(self, frame) -> ModelHypotheses:
+        G_WC = frame.odom.G() @ frame.G_RC
+        return ModelHypotheses.from_estimates(self.P, self.bank.estimates, G_WC)
+
+    def _arc_path(self, centre_xy, goal: Pose2D, pose: Pose2D) -> np.ndarray:
+        """Waypoints along the ring from the robot's angle to the goal's, the short way round."""
+        cx, cy = centre_xy
+        r = math.hypot(goal.x - cx, goal.y - cy)
+        a0 = math.atan2(pose.y - cy, pose.x - cx)
+        a1 = math.atan2(goal.y - cy, goal.x - cx)
+        da = wrap_angle(a1 - a0)
+        n = max(2, int(abs(da) / math.radians(10)) + 1)
+        a = a0 + np.linspace(0.0, da, n)
+        pts = np.stack([cx + r * np.cos(a), cy + r * np.sin(a)], axis=1)
+        pts[0] = (pose.x, pose.y)
+        pts[-1] = (goal.x, goal.y)
+        return pts
+
+    def _decide(self, frame) -> bool:
+        """Choose the next goal (Eq. (6)); False when no decision is possible (no estimate, ring blocked)."""
+        try:
+            hyp = self._hypotheses(frame)
+        except NoObjectEstimate:
+            return False
+        centre = hyp.object_centre_W()
+        t0 = time.perf_counter()
+        try:
+            if self.planner in (PlannerChoice.LUT, PlannerChoice.MC):
+                plan = plan_next_best_view(hyp, self.robot.camera, self.evaluator, self.action_config)
+                actions, gains, best = plan.actions, np.asarray(plan.gain), plan.best
+            else:
+                from lab.identification.actions import calc_possible_control_actions
+
+                actions = calc_possible_control_actions(centre, self.robot.camera, self.action_config)
+                gains = np.full(len(actions), np.nan)
+                if self.planner is PlannerChoice.RANDOM:
+                    best = int(self.rng.integers(len(actions)))
+                else:
+                    here = math.atan2(frame.odom.y - centre[1], frame.odom.x - centre[0])
+                    want = here + math.radians(self.config.circle_step_deg)
+                    best = int(np.argmin([abs(wrap_angle(a.azimuth - want)) for a in actions]))
+        except RingBlocked:
+            return False
+        goal = actions[best].pose
+        self._goal = goal
+        self.follower.set_path(self._arc_path(centre[:2], goal, frame.odom), final_heading=goal.theta)
+        cands = np.array([[a.pose.x, a.pose.y, a.pose.theta] for a in actions])
+        self.decisions.append(
+            DecisionRecord(
+                frame.t, self.planner.value, cands, gains, best, np.asarray(centre), time.perf_counter() - t0
+            )
+        )
+        return True
+
+    def step(self) -> StepRecord:
+        """One control step (see the module docstring)."""
+        cfg = self.config
+        robot = self.robot
+        frame = robot.capture_stereo()
+        f, _ = self._perceive(frame)
+        cmd = self.head.command(robot.pan_tilt(), self._object_origin_C(), cfg.dt)
+        robot.command_pan_tilt(cmd.pan, cmd.tilt)
+        tracking = cmd.mode is HeadMode.TRACKING
+        if tracking:
+            self._tracking_since = frame.t if self._tracking_since is None else self._tracking_since
+        else:
+            self._tracking_since = None
+        arrived = self._arrived(frame.odom)
+        if arrived and self._goal is not None and self._arrival_t is None:
+            self._arrival_t = frame.t
+        action = None
+        settled = tracking and frame.t - self._tracking_since >= cfg.settle_s
+        if settled and arrived and len(self.decisions) < cfg.max_actions and self.identified is None:
+            if self._decide(frame):  # the gain is computed when the goal is reached (the paper's Fig. 3)
+                action = len(self.decisions) - 1
+                self._arrival_t = None
+        if not tracking:
+            robot.drive(0.0, 0.0)  # HALT until the track is re-established
+            base_mode = "halted"
+        elif not self._arrived(frame.odom):
+            c = self.follower.command(frame.odom, frame.t)
+            robot.drive(c.v, c.omega)
+            base_mode = "driving"
+        else:
+            robot.drive(0.0, 0.0)
+            base_mode = "idle"
+        est_W = np.full((len(self.dbs), 4, 4), np.nan)
+        G_WC = frame.odom.G() @ frame.G_RC
+        for i, e in enumerate(self.bank.estimates):
+            if e is not None:
+                est_W[i] = G_WC @ e.G_CO
+        odom = (frame.odom.x, frame.odom.y, frame.odom.theta)
+        rec = StepRecord(frame.t, self.P.copy(), cmd.mode.value, base_mode, odom, len(f), action, est_W)
+        self.steps.append(rec)
+        if self.on_step is not None:
+            self.on_step(self, frame)
+        if float(self.P.max()) >= cfg.stop_probability:
+            self._above_since = frame.t if self._above_since is None else self._above_since
+            if frame.t - self._above_since >= cfg.dwell_s:
+                self.identified = int(np.argmax(self.P))
+        else:
+            self._above_since = None
+        robot.step(cfg.dt)
+        return rec
+
+    def _arrived(self, pose: Pose2D) -> bool:
+        """At the current goal (or there is none), within the arrival tolerances."""
+        g = self._goal
+        if g is None:
+            return True
+        return math.hypot(pose.x - g.x, pose.y - g.y) <= self.config.arrive_xy and abs(
+            wrap_angle(pose.theta - g.theta)
+        ) <= math.radians(self.config.arrive_theta_deg)
+
+    def run(self) -> int | None:
+        """Step until identified or a budget is spent; returns the identified model's index or None.
+
+        With the action budget spent, the robot observes from its last goal for ``final_observe_s``.
+        """
+        cfg = self.config
+        t_end = self.robot.now() + cfg.max_time_s
+        if not self.robot.enabled:
+            self.robot.enable()
+        try:
+            while self.identified is None and self.robot.now() < t_end:
+                spent = len(self.decisions) >= cfg.max_actions
+                if (
+                    spent
+                    and self._arrival_t is not None
+                    and self.robot.now() - self._arrival_t > cfg.final_observe_s
+                ):
+                    break
+                self.step()
+        finally:
+            self.robot.stop()
+        return self.identified
+
+    @property
+    def n_actions(self) -> int:
+        return len(self.decisions)

@@ -1,0 +1,76 @@
+"""`lab identify`: a short episode writes a JSON that keeps the command-line contract, and figures."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+CHECKER = Path(__file__).resolve().parents[2] / "shared" / "tools" / "check_contract.py"
+
+
+def test_short_identify_episode_keeps_the_contract(tmp_path):
+    out = tmp_path / "out"
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "lab",
+            "identify",
+            "--true-model",
+            "2",
+            "--seed",
+            "3",
+            "--mover",
+            "static",
+            "--planner",
+            "circle",
+            "--max-actions",
+            "1",
+            "--max-time",
+            "12",
+            "--json",
+            str(tmp_path / "r.json"),
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert r.returncode == 0, r.stderr[-2000:]
+    res = json.loads((tmp_path / "r.json").read_text())
+    assert res["true_model"] == 2 and res["planner"] == "circle" and res["seed"] == 3
+    assert abs(sum(res["final_posterior"]) - 1) < 1e-9
+    assert res["history"] and all(h["ptu_state"] in ("tracking", "scanning") for h in res["history"])
+    assert res["actions"] <= 1 and res["collisions"] == 0
+    assert res["sim_time_s"] <= 12.5
+    for f in ("fig5_pose_and_probabilities.png", "fig6_information_gain_ring.png", "fig7_probabilities.png"):
+        assert (out / f).is_file() or f.startswith("fig6") and res["actions"] == 0
+    if CHECKER.is_file():
+        c = subprocess.run(
+            [sys.executable, str(CHECKER), "identify", str(tmp_path / "r.json")],
+            capture_output=True,
+            text=True,
+        )
+        assert c.returncode == 0, c.stdout
+
+
+def test_identify_bad_input_is_one_line():
+    r = subprocess.run(
+        [sys.executable, "-m", "lab", "identify", "--planner", "oracle"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert (
+        r.returncode == 2
+        and "invalid choice: 'oracle'" in r.stderr
+        and len(r.stderr.strip().splitlines()) == 1
+    )
+    r = subprocess.run(
+        [sys.executable, "-m", "lab", "identify", "--true-model", "7", "--max-time", "1"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode == 2 and "unknown true model 7; models: 0..3" in r.stderr
