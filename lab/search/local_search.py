@@ -51,6 +51,7 @@ __all__ = [
     "aim_at",
     "local_search",
     "local_views",
+    "make_matcher",
     "object_roi",
 ]
 
@@ -91,6 +92,14 @@ class LocalSearchConfig:
     alpha, beta : float
         The constant detection errors of Eq. (2) for the negative update after a failed search
         (false alarm and missed detection at close range).
+    neighbour_radius_m : float [m]
+        A failed search is a negative detection of the searched cell *and* of every cell whose centre
+        lies within this distance of it (one Bayes update per cell): the 9 views look at the searched
+        cell's neighbours as closely as at the cell. The default is the reach of the strongest colour
+        peak's growing beta (``lambda ln((1 - alpha) / beta_min)`` = 0.45 m, see the probability map).
+        0 is the paper's update of the one cell, which sends the robot on to each of the neighbours
+        that the global search's growing beta raised with the peak (the paper's Fig. 6 shows such a
+        revisit).
     process : ProcessNoise
         The EKF's static-object process noise (Eq. (4): ``X_k = X_{k-1} + eta``).
     """
@@ -110,6 +119,7 @@ class LocalSearchConfig:
     roi_margin_px: int = 20
     alpha: float = 0.05
     beta: float = 0.1
+    neighbour_radius_m: float = 0.45
     process: ProcessNoise = field(
         default_factory=lambda: ProcessNoise(sigma_v=0.0, sigma_w=0.0, eta_m=2e-3, eta_rad=5e-3)
     )
@@ -229,6 +239,12 @@ def object_roi(
     return x0, y0, x1 - x0, y1 - y0
 
 
+def make_matcher(db: FeatureDatabase) -> Matcher:
+    """The database's matcher: FLANN, or exact search for a tiny database (OpenCV's KD-tree asserts
+    when asked for about as many neighbours as the database holds: the glossy cup has 7 features)."""
+    return Matcher(db, method="flann" if len(db) >= 64 else "brute")
+
+
 def _stds(ekf: PoseEKF) -> tuple[float, float]:
     S = ekf.Sigma_rv
     pos = math.sqrt(max(0.0, float(np.linalg.eigvalsh(S[:3, :3])[-1])))
@@ -265,7 +281,7 @@ def local_search(
     LocalSearchResult
     """
     cfg = config or LocalSearchConfig()
-    matcher = matcher or Matcher(db)
+    matcher = matcher or make_matcher(db)
     detector = sift()
     t_start = robot.now()
     odom = robot.odometry()
