@@ -375,6 +375,15 @@ def frontier_cells(searched: np.ndarray) -> np.ndarray:
 # --- the agent ------------------------------------------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class _Target:
+    """Where to go next: a cell to search, or (``vantage``) a place to scan from."""
+
+    cell: tuple[int, int]
+    xy: tuple[float, float]
+    vantage: bool = False
+
+
 class SearchAgent:
     """The search loop of the module docstring.
 
@@ -457,8 +466,7 @@ class SearchAgent:
                 if target is None:
                     reason = "no reachable place left to search"
                     break
-                cell, xy = target
-                res = self._visit(cell, xy)
+                res = self._relocate(target) if target.vantage else self._visit(target.cell, target.xy)
                 if res is not None and res.found:
                     found = res
                     reason = "found"
@@ -512,7 +520,7 @@ class SearchAgent:
         cell = self.pmap.peak(exclude=self.excluded, near_xy=(pose.x, pose.y))
         if cell is None:
             return None
-        return cell, self.pmap.centre(cell)
+        return _Target(cell, self.pmap.centre(cell))
 
     def _near_scan_point(self, pose: Pose2D) -> bool:
         d = self.config.rescan_distance_m
@@ -531,7 +539,7 @@ class SearchAgent:
         d = np.min([np.hypot(X - x, Y - y) for x, y in self._scan_points], axis=0)
         score = np.where(ok, d, -1.0)
         i, j = np.unravel_index(int(np.argmax(score)), score.shape)
-        return ("vantage", (int(i), int(j))), self.pmap.centre((int(i), int(j)))
+        return _Target((int(i), int(j)), self.pmap.centre((int(i), int(j))), vantage=True)
 
     def _lawnmower_target(self, pose: Pose2D):
         if not self._lawnmower:
@@ -542,7 +550,7 @@ class SearchAgent:
             xy = self._lawnmower.pop(0)
             cell = self.pmap.cell_of(*xy)
             if not self._excluded[cell]:
-                return cell, self.pmap.centre(cell)
+                return _Target(cell, self.pmap.centre(cell))
         return None
 
     def _frontier_target(self, pose: Pose2D):
@@ -559,7 +567,7 @@ class SearchAgent:
         d = np.where(d < self.config.local_search.min_distance_m, d + 1e3, d)
         k = int(np.argmin(d))
         cell = (int(cand[k, 0]), int(cand[k, 1]))
-        return cell, self.pmap.centre(cell)
+        return _Target(cell, self.pmap.centre(cell))
 
     def _global_search(self) -> None:
         p = self.robot.odometry()
@@ -575,18 +583,21 @@ class SearchAgent:
         )
         self._snapshot("global search")
 
+    def _relocate(self, target: _Target) -> None:
+        """Drive to a new vantage point for the next global search."""
+        nav = self._navigate(target.xy, 0.0, self.config.vantage_reach_m)
+        self._nav_paths.append((target.xy, getattr(nav, "path_xy", None)))
+        if not nav.arrived:
+            self._excluded_temp[target.cell] = True
+            self._event("skip", target.cell, f"vantage point not reached ({nav.reason})")
+        else:
+            self._event(
+                "navigate", target.cell, f"to a new vantage point for the global search: {nav.reason}"
+            )
+
     def _visit(self, cell, xy) -> LocalSearchResult | None:
+        """Navigate to local-search range of the cell, search, and update the map on a miss."""
         lc = self.config.local_search
-        if isinstance(cell[0], str):  # a move to a new vantage point for the next global search
-            cell = cell[1]
-            nav = self._navigate(xy, 0.0, self.config.vantage_reach_m)
-            self._nav_paths.append((xy, getattr(nav, "path_xy", None)))
-            if not nav.arrived:
-                self._excluded_temp[cell] = True
-                self._event("skip", cell, f"vantage point not reached ({nav.reason})")
-            else:
-                self._event("navigate", cell, f"to a new vantage point for the global search: {nav.reason}")
-            return None
         nav = self._navigate(xy, lc.min_distance_m, lc.max_distance_m)
         self._nav_paths.append((xy, getattr(nav, "path_xy", None)))
         if not nav.arrived:

@@ -20,6 +20,10 @@ __all__ = [
     "SURFACES",
     "Support",
     "check_placement",
+    "circle_polygon",
+    "footprint",
+    "polygon_inside",
+    "polygons_overlap",
     "random_placement",
     "searchable_objects",
     "supports",
@@ -54,7 +58,8 @@ def _rectangle(cx: float, cy: float, sx: float, sy: float, yaw: float, grow: flo
     return corners @ np.array([[c, s], [-s, c]]) + (cx, cy)
 
 
-def _circle(cx: float, cy: float, r: float, grow: float = 0.0, n: int = 16) -> np.ndarray:
+def circle_polygon(cx: float, cy: float, r: float, grow: float = 0.0, n: int = 16) -> np.ndarray:
+    """A circle of radius ``r + grow`` [m] as a convex ``n``-gon (k, 2) that contains it."""
     a = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
     # the polygon circumscribes the circle, so the test is conservative
     R = (r + grow) / math.cos(math.pi / n)
@@ -65,11 +70,11 @@ def footprint(body: BodySpec, grow: float = 0.0, pose=None) -> np.ndarray:
     """The body's footprint on the floor as a convex polygon (k, 2) [m], grown by ``grow``."""
     x, y, _, yaw_deg = body.pose if pose is None else pose
     if body.shape == "cylinder":
-        return _circle(x, y, body.size[0], grow)
+        return circle_polygon(x, y, body.size[0], grow)
     return _rectangle(x, y, body.size[0], body.size[1], math.radians(yaw_deg), grow)
 
 
-def _overlap(a: np.ndarray, b: np.ndarray) -> bool:
+def polygons_overlap(a: np.ndarray, b: np.ndarray) -> bool:
     """Whether two convex polygons overlap (separating axis theorem)."""
     for poly in (a, b):
         edges = np.roll(poly, -1, axis=0) - poly
@@ -80,7 +85,7 @@ def _overlap(a: np.ndarray, b: np.ndarray) -> bool:
     return True
 
 
-def _inside(inner: np.ndarray, outer: np.ndarray) -> bool:
+def polygon_inside(inner: np.ndarray, outer: np.ndarray) -> bool:
     """Whether every vertex of ``inner`` lies inside the convex, counter-clockwise polygon ``outer``."""
     edges = np.roll(outer, -1, axis=0) - outer
     rel = inner[:, None, :] - outer[None, :, :]
@@ -146,12 +151,12 @@ def check_placement(
     sups = supports(scene)
     floor = sups[0]
     sx, sy = scene.room.size
-    if not _inside(fp, floor.polygon):
+    if not polygon_inside(fp, floor.polygon):
         raise ConfigError(
             f"placement ({x:.2f}, {y:.2f}) of {name} is outside the room or inside a wall "
             f"(the room spans x [{-sx / 2:.2f}, {sx / 2:.2f}], y [{-sy / 2:.2f}, {sy / 2:.2f}] m)"
         )
-    under = [s for s in sups[1:] if _overlap(fp, s.polygon)]
+    under = [s for s in sups[1:] if polygons_overlap(fp, s.polygon)]
     support = None
     if abs(z) <= _HEIGHT_TOL:
         if under:
@@ -159,7 +164,7 @@ def check_placement(
         support = floor
     else:
         for s in under:
-            if abs(z - s.z) <= _HEIGHT_TOL and _inside(fp, s.polygon):
+            if abs(z - s.z) <= _HEIGHT_TOL and polygon_inside(fp, s.polygon):
                 support = s
                 break
         if support is None:
@@ -175,10 +180,10 @@ def check_placement(
         bz0, bz1 = b.pose[2], b.pose[2] + b.height
         if bz1 <= z + 1e-6 or bz0 >= z_top - 1e-6:
             continue  # not at the same level
-        if _overlap(fp, footprint(b, clearance_m)):
+        if polygons_overlap(fp, footprint(b, clearance_m)):
             raise ConfigError(f"placement of {name} at ({x:.2f}, {y:.2f}, {z:.2f}) overlaps {b.name}")
     rx, ry, _ = scene.robot_start
-    if support is floor and _overlap(fp, _circle(rx, ry, robot_clearance_m)):
+    if support is floor and polygons_overlap(fp, circle_polygon(rx, ry, robot_clearance_m)):
         raise ConfigError(
             f"placement of {name} at ({x:.2f}, {y:.2f}) is within {robot_clearance_m} m of the robot's start"
         )

@@ -20,10 +20,11 @@ from lab.navigation.grid import GridSpec
 from lab.robot import Robot
 from lab.search.agent import AgentConfig, AgentResult, BudgetedRobot, SearchAgent, SearchEvent, Strategy
 from lab.search.placement import (
-    _circle,
-    _overlap,
     check_placement,
+    circle_polygon,
     footprint,
+    polygon_inside,
+    polygons_overlap,
     random_placement,
     searchable_objects,
     supports,
@@ -78,8 +79,6 @@ def path_obstacles(
     ox, oy = float(place[0]), float(place[1])
     length = math.hypot(ox - rx, oy - ry)
     room = supports(scene)[0].polygon
-    from lab.search.placement import _inside
-
     out_bodies, poses = list(scene.bodies), []
     ux, uy = ((ox - rx) / length, (oy - ry) / length) if length > 1e-9 else (1.0, 0.0)
     for k in range(n):
@@ -92,11 +91,12 @@ def path_obstacles(
                 f"obstacle_{k + 1}", "box", tuple(size), (x, y, 0.0, yaw), "obstacle", (0.45, 0.4, 0.35)
             )
             fp = footprint(body)
-            if not _inside(footprint(body, 0.35), room):
+            if not polygon_inside(footprint(body, 0.35), room):
                 continue
-            if any(_overlap(fp, footprint(b, 0.35)) for b in out_bodies if b.role != "decor"):
+            if any(polygons_overlap(fp, footprint(b, 0.35)) for b in out_bodies if b.role != "decor"):
                 continue
-            if _overlap(fp, _circle(rx, ry, 0.6)) or _overlap(fp, _circle(ox, oy, 1.0)):
+            near_start = polygons_overlap(fp, circle_polygon(rx, ry, 0.6))
+            if near_start or polygons_overlap(fp, circle_polygon(ox, oy, 1.0)):
                 continue
             out_bodies.append(body)
             poses.append((x, y, 0.0, yaw))
