@@ -209,6 +209,8 @@ def test_closed_loop_finds_the_toy_block(tmp_path):
     assert res.position_error_m <= 0.05 and res.orientation_error_deg <= 10.0
     assert res.collisions == 0 and res.global_searches >= 1 and res.local_searches >= 1
     assert res.sim_time_s <= 120.0
+    assert res.camera_frame_error["position_m"] <= 0.02 and res.camera_frame_error["orientation_deg"] <= 10.0
+    assert res.odometry_error_m < 0.05
     check_contract(res.to_json(), tmp_path)
 
 

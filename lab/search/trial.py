@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from lab.errors import ConfigError
-from lab.geometry import R_to_euler_zyx
+from lab.geometry import R_to_euler_zyx, se3_inv
 from lab.navigation.grid import GridSpec
 from lab.robot import Robot
 from lab.search.agent import AgentConfig, AgentResult, BudgetedRobot, SearchAgent, SearchEvent, Strategy
@@ -147,6 +147,11 @@ class SearchResult:
         floor, table or shelf.
     obstacles : tuple
         Placements of the extra obstacles (``--obstacles``).
+    camera_frame_error : dict or None
+        ``{"position_m", "orientation_deg"}``: the estimate's error in the camera frame at detection
+        (the local search's own error; ``position_error_m`` adds the odometry's drift to it).
+    odometry_error_m : float
+        Distance between the odometry's and the true robot position at the end of the run.
     events : tuple of SearchEvent
     trace : SearchTrace
     """
@@ -170,6 +175,8 @@ class SearchResult:
     place: tuple[float, float, float, float]
     surface: str
     obstacles: tuple = ()
+    camera_frame_error: dict | None = None
+    odometry_error_m: float = 0.0
     events: tuple[SearchEvent, ...] = field(default=(), repr=False)
     trace: SearchTrace | None = field(default=None, repr=False, compare=False)
 
@@ -196,6 +203,8 @@ class SearchResult:
             "place": [round(float(v), 4) for v in self.place],
             "surface": self.surface,
             "obstacles": [[round(float(v), 4) for v in o] for o in self.obstacles],
+            "camera_frame_error": self.camera_frame_error,
+            "odometry_error_m": round(float(self.odometry_error_m), 4),
             "events": [e.as_dict() for e in self.events],
             "map_snapshots": [
                 {
@@ -293,13 +302,21 @@ def run_search(
         agent = SearchAgent(budget, db, nav, ProbabilityMap(spec), cfg, rng=np.random.default_rng([seed, 1]))
         out = agent.run()
         G_true = w.truth.G_W(object)
+        G_WC_true = w.truth.G_WC()  # the head has not moved since the last frame of a found track
+        true_pose = w.truth.robot_pose()
+        odom = robot.odometry()
         collisions = int(w.truth.collisions)
         sim_time = robot.now()
         trajectory = np.array(budget.trajectory)
         path_length = budget.path_length_m
     pe = oe = None
+    cam_err = None
     if out.found:
         pe, oe = pose_errors(out.G_WO, G_true)
+        # the same pose in the camera frame: the perception error alone, without the odometry's drift
+        cpe, coe = pose_errors(out.local.estimate.G_CO, se3_inv(G_WC_true) @ G_true)
+        cam_err = {"position_m": round(cpe, 5), "orientation_deg": round(coe, 3)}
+    odometry_error = math.hypot(odom.x - true_pose.x, odom.y - true_pose.y)
     success = bool(out.found and pe <= SUCCESS_POSITION_M and oe <= SUCCESS_ORIENTATION_DEG)
     return SearchResult(
         object=object,
@@ -321,6 +338,8 @@ def run_search(
         place=place,
         surface=surface,
         obstacles=tuple(obstacle_poses),
+        camera_frame_error=cam_err,
+        odometry_error_m=odometry_error,
         events=out.events,
         trace=SearchTrace(out, spec, trajectory, scene),
     )
