@@ -3,12 +3,13 @@ r"""The coarse global search of the search paper (Sec. III-B): colour peaks, spa
 From where the robot stands, the pan-tilt head scans a set of views that covers the viewing
 hemisphere (:func:`scan_configurations`). In each view:
 
-1. **Back-projection.** Every pixel gets the likelihood that its red-green chromaticity belongs to the
-   object's model histogram (:func:`lab.vision.back_project`). We use Swain and Ballard's *ratio*
-   histogram with the whole scan's own histogram as the background: colours that are everywhere
-   (grey walls, the floor) score near 0, colours that are rare in the room and common on the object
-   score near 1. (With the plain model histogram every grey wall lights up: the objects' printed
-   faces hold a lot of white and grey.)
+1. **Back-projection.** Every pixel gets how much its red-green chromaticity looks like the object
+   (:func:`lab.vision.back_project`). The histogram back-projected is the likelihood ratio of the
+   object's model histogram against the whole scan's own histogram, scaled so the most object-like
+   colour is 1 (:func:`object_likelihood_ratio`, after Swain and Ballard's ratio histogram): colours
+   that are everywhere (grey walls, the floor) score near 0, colours that are rare in the room and
+   common on the object near 1. (With the plain model histogram every grey wall lights up: the
+   objects' printed faces hold a lot of white and grey.)
 2. **Fixed window.** A box filter of ``window_px`` x ``window_px`` pixels averages the back-projection:
    a cluster's score is the fraction of a window that looks like the object.
 3. **N_hist strongest clusters** by non-maximum suppression (:func:`strongest_clusters`): the
@@ -20,8 +21,9 @@ hemisphere (:func:`scan_configurations`). In each view:
    window that look most like the object (back-projection at least half the window's best); the
    pixel and disparity triangulate to ``p_C`` (:func:`lab.vision.triangulate`'s formulas), and
    ``p_W = G_WR(odometry) G_RC(pan, tilt) p_C``.
-5. **Map update.** A peak whose point is on the map and at a height where an object can stand
-   (``[min_height_m, max_height_m]``) is a positive detection of its cell with
+5. **Map update.** A peak whose point is on the map, at a height where an object can stand
+   (``[min_height_m, max_height_m]``), within ``max_range_m`` of the camera and not on the robot's own
+   base, and the strongest of its view in its cell, is a positive detection of that cell with
    ``P(y_uv = 1 | h_uv = 1) = P'_n`` (its strength) and the growing beta of
    :func:`lab.search.probability_map.update_global`.
 """
