@@ -1,0 +1,649 @@
+"""The closed search loop (the search paper's Fig. 4): global search, navigate to a peak, local search,
+update the map, repeat; with navigation injected and a time budget that always ends the run.
+
+The paper's strategy (:attr:`Strategy.PAPER`)::
+
+    loop until found or out of time:
+        if the map's maximum (over cells not excluded) < global_threshold / n_cells
+           (always at the start; afterwards only once a local search ran since the last global one):
+            if an earlier scan stood within rescan_distance_m: drive to a new vantage point first
+            global search from where the robot stands                  (global_search.py)
+        cell = the most probable cell (ties: the one nearest the robot)
+        navigate(cell centre, local-search range)                     (injected: costmap + A*)
+        if it did not arrive: exclude the cell (until the next global search; for good after
+                              max_nav_failures failures) and go on -- no observation, no Bayes update
+        local search facing the cell                                   (local_search.py)
+        found -> done; otherwise Eqs. (1)-(3) with y = 0 and the local search's constant alpha, beta
+                 for the cell (and its neighbours within neighbour_radius_m, see LocalSearchConfig),
+                 and a map snapshot (the paper's Fig. 6)
+
+Two baselines use the same navigation and local search but choose where to look without the colour
+search: :attr:`Strategy.LAWNMOWER` visits a boustrophedon lattice of points covering the map, and
+:attr:`Strategy.FRONTIER` goes to the nearest cell on the border of the area its local searches have
+covered (nearest-frontier exploration). Both still update ``M_p`` after each failed local search.
+
+**Navigation** is any callable ``navigate(target_xy, min_distance, max_distance)`` that drives the
+robot to a pose whose distance to ``target_xy`` [m] is within the band, facing it, and returns an
+object with ``arrived`` (bool), ``reason`` (str) and ``pose`` (:class:`~lab.geometry.Pose2D`), like
+:class:`NavOutcome` (an optional ``path_xy`` is kept for the figures). It must bound its own run time.
+
+**The budget.** :class:`BudgetedRobot` wraps the robot: once its clock passes the deadline, the next
+``step`` raises :class:`SearchBudgetExceeded` -- inside the navigator, a pan-tilt wait or a drive --
+and the agent ends the run there ("time budget"). A wall-clock limit can be added the same way. It also
+measures the odometry path length and keeps the trajectory for the figures.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Protocol
+
+import numpy as np
+
+from lab.errors import ConfigError, LabError
+from lab.geometry import Pose2D, wrap_angle
+from lab.robot import Robot
+from lab.search.global_search import GlobalSearchConfig, GlobalSearchResult, global_search
+from lab.search.local_search import LocalSearchConfig, LocalSearchResult, local_search, make_matcher
+from lab.search.probability_map import ProbabilityMap
+from lab.vision.database import FeatureDatabase
+
+__all__ = [
+    "AgentConfig",
+    "AgentResult",
+    "BudgetedRobot",
+    "MapSnapshot",
+    "NavOutcome",
+    "Navigate",
+    "SearchAgent",
+    "SearchBudgetExceeded",
+    "SearchEvent",
+    "Strategy",
+    "frontier_cells",
+    "lawnmower_targets",
+]
+
+
+class Strategy(Enum):
+    """How the agent picks the next place to look."""
+
+    PAPER = "paper"  # the probability map's peak, global colour search when the map is flat
+    LAWNMOWER = "lawnmower"  # boustrophedon coverage of the map
+    FRONTIER = "frontier"  # nearest border of the area already searched
+
+    @classmethod
+    def parse(cls, value) -> Strategy:
+        if isinstance(value, Strategy):
+            return value
+        try:
+            return cls(str(value))
+        except ValueError:
+            raise ConfigError(
+                f"unknown strategy {value!r}; strategies: {', '.join(s.value for s in cls)}"
+            ) from None
+
+
+@dataclass(frozen=True)
+class NavOutcome:
+    """What a navigation call reports (any object with these attributes will do).
+
+    Attributes
+    ----------
+    arrived : bool
+        The robot stands within the distance band of the target, facing it.
+    reason : str
+        Why not, or how it went.
+    pose : Pose2D
+        The odometry pose at the end.
+    path_xy : ndarray, shape (k, 2) [m] or None
+        The (first) planned path, for the figures.
+    """
+
+    arrived: bool
+    reason: str
+    pose: Pose2D
+    path_xy: np.ndarray | None = field(default=None, repr=False)
+
+
+class Navigate(Protocol):
+    def __call__(self, target_xy: tuple[float, float], min_distance: float, max_distance: float): ...
+
+
+class SearchBudgetExceeded(LabError):
+    """The search's time budget ran out (raised from :meth:`BudgetedRobot.step`)."""
+
+
+class BudgetedRobot(Robot):
+    """A :class:`~lab.robot.Robot` that refuses to step past a deadline, and measures the path.
+
+    Parameters
+    ----------
+    base : Robot
+        The robot to drive (every call is passed on to it).
+    max_time_s : float [s]
+        Robot-clock budget from now.
+    max_wall_s : float [s], optional
+        Wall-clock budget from now.
+    record_every_s : float [s]
+        Spacing of the recorded odometry trajectory.
+    """
+
+    def __init__(self, base: Robot, max_time_s: float, max_wall_s: float | None = None, record_every_s=0.2):
+        if not (math.isfinite(max_time_s) and max_time_s > 0):
+            raise ConfigError(f"the time budget must be a finite number > 0 s, got {max_time_s!r}")
+        self.base = base
+        self.t_start = base.now()
+        self.deadline = self.t_start + float(max_time_s)
+        self.wall_deadline = None if max_wall_s is None else time.perf_counter() + float(max_wall_s)
+        self.path_length_m = 0.0
+        p = base.odometry()
+        self._last = p
+        self.trajectory: list[tuple[float, float, float, float]] = [(self.t_start, p.x, p.y, p.theta)]
+        self._record_every = record_every_s
+
+    # budget and bookkeeping
+    def step(self, dt: float) -> None:
+        if self.base.now() >= self.deadline:
+            raise SearchBudgetExceeded(f"time budget of {self.deadline - self.t_start:.0f} s used up")
+        if self.wall_deadline is not None and time.perf_counter() >= self.wall_deadline:
+            raise SearchBudgetExceeded("wall-clock budget used up")
+        self.base.step(dt)
+        p = self.base.odometry()
+        self.path_length_m += math.hypot(p.x - self._last.x, p.y - self._last.y)
+        self._last = p
+        t = self.base.now()
+        if t - self.trajectory[-1][0] >= self._record_every:
+            self.trajectory.append((t, p.x, p.y, p.theta))
+
+    @property
+    def remaining_s(self) -> float:
+        return self.deadline - self.base.now()
+
+    # the Robot interface, passed on
+    @property
+    def camera(self):
+        return self.base.camera
+
+    @property
+    def pan_tilt_limits(self):
+        return self.base.pan_tilt_limits
+
+    @property
+    def base_limits(self):
+        return self.base.base_limits
+
+    @property
+    def cmd_timeout_s(self):  # type: ignore[override]
+        return self.base.cmd_timeout_s
+
+    def now(self) -> float:
+        return self.base.now()
+
+    def enable(self) -> None:
+        self.base.enable()
+
+    def disable(self) -> None:
+        self.base.disable()
+
+    @property
+    def enabled(self) -> bool:
+        return self.base.enabled
+
+    def capture_stereo(self, after=None):
+        return self.base.capture_stereo(after)
+
+    def odometry(self) -> Pose2D:
+        return self.base.odometry()
+
+    def pan_tilt(self):
+        return self.base.pan_tilt()
+
+    def command_pan_tilt(self, pan, tilt, speed=None) -> None:
+        self.base.command_pan_tilt(pan, tilt, speed)
+
+    def drive(self, v, omega) -> None:
+        self.base.drive(v, omega)
+
+    def stop(self) -> None:
+        self.base.stop()
+
+    def estop(self) -> None:
+        self.base.estop()
+
+    def clear_estop(self) -> None:
+        self.base.clear_estop()
+
+    def close(self) -> None:
+        self.base.close()
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    """Settings of the search loop.
+
+    Attributes
+    ----------
+    strategy : Strategy
+    global_threshold : float
+        Global search when the largest cell probability is below ``global_threshold / n_cells``
+        (twice the uniform value by default: the map holds no peak worth visiting).
+    global_search, local_search : configs of the two searches
+    lawnmower_spacing_m : float [m]
+        Lattice spacing of the lawnmower baseline.
+    coverage_radius_m : float [m]
+        The frontier baseline counts the cells within this distance in front of the robot (the
+        local search's hemisphere) as searched.
+    rescan_distance_m : float [m]
+        A repeated global search from within this distance of an earlier one would see the same
+        colours again and add the same evidence a second time (it is not an independent measurement):
+        the robot first drives to a new vantage point, the map cell farthest from every earlier scan
+        point and at least ``vantage_margin_m`` inside the map (within ``vantage_reach_m`` of it).
+    vantage_margin_m, vantage_reach_m : float [m]
+    max_nav_failures : int
+        A cell the navigator failed to reach this often is excluded for the rest of the run (once:
+        until the next global search).
+    max_actions : int
+        Safety bound on the loop (the time budget normally ends it first).
+    """
+
+    strategy: Strategy = Strategy.PAPER
+    global_threshold: float = 2.0
+    global_search: GlobalSearchConfig = field(default_factory=GlobalSearchConfig)
+    local_search: LocalSearchConfig = field(default_factory=LocalSearchConfig)
+    lawnmower_spacing_m: float = 1.6
+    coverage_radius_m: float = 1.4
+    rescan_distance_m: float = 1.5
+    vantage_margin_m: float = 0.8
+    vantage_reach_m: float = 0.6
+    max_nav_failures: int = 2
+    max_actions: int = 500
+
+    def __post_init__(self):
+        object.__setattr__(self, "strategy", Strategy.parse(self.strategy))
+        if not self.global_threshold > 0:
+            raise ConfigError(f"global_threshold must be > 0, got {self.global_threshold}")
+        if not self.lawnmower_spacing_m > 0 or not self.coverage_radius_m > 0:
+            raise ConfigError("lawnmower_spacing_m and coverage_radius_m must be > 0")
+
+
+@dataclass(frozen=True)
+class MapSnapshot:
+    """The probability map at time ``t`` [s], after ``label`` (e.g. a failed local search of ``cell``)."""
+
+    t: float
+    P: np.ndarray = field(repr=False)
+    label: str = ""
+    cell: tuple[int, int] | None = None
+    pose: Pose2D | None = None
+
+
+@dataclass(frozen=True)
+class SearchEvent:
+    """One step of the run, for the record: ``kind`` is global / navigate / skip / local / end."""
+
+    t: float
+    kind: str
+    cell: tuple[int, int] | None = None
+    detail: str = ""
+
+    def as_dict(self) -> dict:
+        return {
+            "t": round(self.t, 3),
+            "kind": self.kind,
+            "cell": None if self.cell is None else list(self.cell),
+            "detail": self.detail,
+        }
+
+
+@dataclass(frozen=True)
+class AgentResult:
+    """How a run of :class:`SearchAgent` ended, and its record.
+
+    Attributes
+    ----------
+    found : bool
+    reason : str
+        Why the run ended.
+    G_WO : ndarray, shape (4, 4) or None
+        The found object's pose in the world (odometry) frame.
+    local : LocalSearchResult or None
+        The successful local search.
+    global_searches, local_searches : int
+    events : tuple of SearchEvent
+    snapshots : tuple of MapSnapshot
+        After each global search and each failed local search.
+    globals_ : tuple of GlobalSearchResult
+    nav_paths : tuple of (target_xy, path_xy or None)
+    P_final : ndarray
+    t_start, t_end : float [s] (robot clock)
+    """
+
+    found: bool
+    reason: str
+    G_WO: np.ndarray | None = field(default=None, repr=False)
+    local: LocalSearchResult | None = field(default=None, repr=False)
+    global_searches: int = 0
+    local_searches: int = 0
+    events: tuple[SearchEvent, ...] = field(default=(), repr=False)
+    snapshots: tuple[MapSnapshot, ...] = field(default=(), repr=False)
+    globals_: tuple[GlobalSearchResult, ...] = field(default=(), repr=False)
+    nav_paths: tuple = field(default=(), repr=False)
+    P_final: np.ndarray | None = field(default=None, repr=False)
+    t_start: float = 0.0
+    t_end: float = 0.0
+
+
+# --- the baselines' target choice ------------------------------------------------------------------
+
+
+def lawnmower_targets(spec, spacing_m: float, start_xy) -> list[tuple[float, float]]:
+    """A boustrophedon lattice over the map: rows along x, ``spacing_m`` apart, starting with the row
+    and the end nearest ``start_xy`` [m]."""
+    x0, x1, y0, y1 = spec.extent
+    nx = max(1, int(round((x1 - x0) / spacing_m)))
+    ny = max(1, int(round((y1 - y0) / spacing_m)))
+    xs = x0 + (np.arange(nx) + 0.5) * (x1 - x0) / nx
+    ys = y0 + (np.arange(ny) + 0.5) * (y1 - y0) / ny
+    if abs(ys[-1] - start_xy[1]) < abs(ys[0] - start_xy[1]):
+        ys = ys[::-1]
+    first_reversed = abs(xs[-1] - start_xy[0]) < abs(xs[0] - start_xy[0])
+    out = []
+    for k, y in enumerate(ys):
+        row = xs[::-1] if (k % 2 == 0) == first_reversed else xs
+        out.extend((float(x), float(y)) for x in row)
+    return out
+
+
+def frontier_cells(searched: np.ndarray) -> np.ndarray:
+    """Unsearched cells with a searched 8-neighbour, shape (k, 2) (all cells when nothing is searched)."""
+    if not searched.any():
+        return np.argwhere(~searched)
+    p = np.pad(searched, 1)
+    nx, ny = searched.shape
+    near = np.zeros_like(searched)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            if di or dj:
+                near |= p[1 + di : 1 + di + nx, 1 + dj : 1 + dj + ny]
+    return np.argwhere(near & ~searched)
+
+
+# --- the agent ------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Target:
+    """Where to go next: a cell to search, or (``vantage``) a place to scan from."""
+
+    cell: tuple[int, int]
+    xy: tuple[float, float]
+    vantage: bool = False
+
+
+class SearchAgent:
+    """The search loop of the module docstring.
+
+    Parameters
+    ----------
+    robot : Robot
+        Enabled; usually a :class:`BudgetedRobot` (then the budget ends the run cleanly).
+    db : FeatureDatabase
+        The searched object's database (features and colour model).
+    navigate : callable
+        ``navigate(target_xy, min_distance, max_distance) -> NavOutcome``-like.
+    pmap : ProbabilityMap
+        The map ``M_p`` with its prior ``P_0`` (updated in place).
+    config : AgentConfig, optional
+    rng : numpy.random.Generator
+        Seeds the RANSAC starts of the local searches.
+    max_time_s : float [s], optional
+        Also end the run (between actions) once this much robot time has passed.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        db: FeatureDatabase,
+        navigate: Callable,
+        pmap: ProbabilityMap,
+        config: AgentConfig | None = None,
+        *,
+        rng: np.random.Generator,
+        max_time_s: float = math.inf,
+    ):
+        self.robot, self.db, self.navigate, self.pmap = robot, db, navigate, pmap
+        self.config = config or AgentConfig()
+        self.rng = rng
+        self.max_time_s = max_time_s
+        self.matcher = make_matcher(db)
+        shape = pmap.spec.shape
+        self._excluded_temp = np.zeros(shape, bool)
+        self._excluded = np.zeros(shape, bool)
+        self._nav_failures = np.zeros(shape, int)
+        self._searched = np.zeros(shape, bool)
+        self._events: list[SearchEvent] = []
+        self._snapshots: list[MapSnapshot] = []
+        self._globals: list[GlobalSearchResult] = []
+        self._nav_paths: list = []
+        self.global_searches = 0
+        self.local_searches = 0
+        self._local_since_global = 0
+        self._lawnmower: list[tuple[float, float]] | None = None
+        self._scan_points: list[tuple[float, float]] = []
+        self._relocating = False
+
+    # -- bookkeeping -------------------------------------------------------------------------------
+    def _event(self, kind: str, cell=None, detail: str = "") -> None:
+        self._events.append(
+            SearchEvent(self.robot.now(), kind, None if cell is None else tuple(cell), detail)
+        )
+
+    def _snapshot(self, label: str, cell=None) -> None:
+        self._snapshots.append(
+            MapSnapshot(self.robot.now(), self.pmap.P.copy(), label, cell, self.robot.odometry())
+        )
+
+    @property
+    def excluded(self) -> np.ndarray:
+        return self._excluded | self._excluded_temp
+
+    # -- the loop ----------------------------------------------------------------------------------
+    def run(self) -> AgentResult:
+        """Search until found, out of time (budget) or out of places to look; never raises for those."""
+        t0 = self.robot.now()
+        found: LocalSearchResult | None = None
+        reason = "action limit reached"
+        try:
+            for _ in range(self.config.max_actions):
+                if self.robot.now() - t0 >= self.max_time_s:
+                    reason = "time budget used up"
+                    break
+                target = self._next_target()
+                if target is None:
+                    reason = "no reachable place left to search"
+                    break
+                res = self._relocate(target) if target.vantage else self._visit(target.cell, target.xy)
+                if res is not None and res.found:
+                    found = res
+                    reason = "found"
+                    break
+        except SearchBudgetExceeded as e:
+            reason = str(e)
+        finally:
+            try:
+                self.robot.stop()
+            except LabError:
+                pass
+        self._event("end", detail=reason)
+        return AgentResult(
+            found is not None,
+            reason,
+            None if found is None else found.G_WO,
+            found,
+            self.global_searches,
+            self.local_searches,
+            tuple(self._events),
+            tuple(self._snapshots),
+            tuple(self._globals),
+            tuple(self._nav_paths),
+            self.pmap.P.copy(),
+            t0,
+            self.robot.now(),
+        )
+
+    def _next_target(self):
+        s = self.config.strategy
+        pose = self.robot.odometry()
+        if s is Strategy.PAPER:
+            return self._paper_target(pose)
+        if s is Strategy.LAWNMOWER:
+            return self._lawnmower_target(pose)
+        return self._frontier_target(pose)
+
+    def _paper_target(self, pose: Pose2D):
+        spec = self.pmap.spec
+        threshold = self.config.global_threshold / spec.n_cells
+        selectable = ~self.excluded
+        flat = not selectable.any() or float(self.pmap.P[selectable].max()) < threshold
+        if self.global_searches == 0 or (flat and self._local_since_global > 0):
+            if self._near_scan_point(pose) and not self._relocating:
+                vantage = self._new_vantage_point()
+                if vantage is not None:
+                    self._relocating = True  # drive there first; the scan comes on the next turn
+                    return vantage
+            self._relocating = False
+            self._global_search()
+        cell = self.pmap.peak(exclude=self.excluded, near_xy=(pose.x, pose.y))
+        if cell is None:
+            return None
+        return _Target(cell, self.pmap.centre(cell))
+
+    def _near_scan_point(self, pose: Pose2D) -> bool:
+        d = self.config.rescan_distance_m
+        return any(math.hypot(pose.x - x, pose.y - y) < d for x, y in self._scan_points)
+
+    def _new_vantage_point(self):
+        """The cell farthest from every earlier scan point, at least ``vantage_margin_m`` inside the map
+        (ties: nearest the robot); None when there is none left."""
+        spec = self.pmap.spec
+        X, Y = spec.cell_centers()
+        x0, x1, y0, y1 = spec.extent
+        m = self.config.vantage_margin_m
+        ok = (X >= x0 + m) & (X <= x1 - m) & (Y >= y0 + m) & (Y <= y1 - m) & ~self.excluded
+        if not ok.any():
+            return None
+        d = np.min([np.hypot(X - x, Y - y) for x, y in self._scan_points], axis=0)
+        score = np.where(ok, d, -1.0)
+        i, j = np.unravel_index(int(np.argmax(score)), score.shape)
+        return _Target((int(i), int(j)), self.pmap.centre((int(i), int(j))), vantage=True)
+
+    def _lawnmower_target(self, pose: Pose2D):
+        if not self._lawnmower:
+            self._lawnmower = lawnmower_targets(
+                self.pmap.spec, self.config.lawnmower_spacing_m, (pose.x, pose.y)
+            )
+        for _ in range(len(self._lawnmower)):
+            xy = self._lawnmower.pop(0)
+            cell = self.pmap.cell_of(*xy)
+            if not self._excluded[cell]:
+                return _Target(cell, self.pmap.centre(cell))
+        return None
+
+    def _frontier_target(self, pose: Pose2D):
+        cand = frontier_cells(self._searched)
+        cand = cand[~self.excluded[cand[:, 0], cand[:, 1]]] if len(cand) else cand
+        if len(cand) == 0:
+            if self._searched.all():
+                self._searched[:] = False  # everything seen once: start a second sweep
+                return self._frontier_target(pose)
+            return None
+        c = self.pmap.spec.centers_of(cand)
+        d = np.hypot(c[:, 0] - pose.x, c[:, 1] - pose.y)
+        # the nearest frontier cell that is not right under the robot (it must stand back to look)
+        d = np.where(d < self.config.local_search.min_distance_m, d + 1e3, d)
+        k = int(np.argmin(d))
+        cell = (int(cand[k, 0]), int(cand[k, 1]))
+        return _Target(cell, self.pmap.centre(cell))
+
+    def _global_search(self) -> None:
+        p = self.robot.odometry()
+        self._scan_points.append((p.x, p.y))
+        res = global_search(self.robot, self.db, self.pmap, self.config.global_search)
+        self.global_searches += 1
+        self._local_since_global = 0
+        self._excluded_temp[:] = False
+        self._globals.append(res)
+        used = res.used_peaks
+        self._event(
+            "global", detail=f"{len(used)} colour peaks used of {len(res.peaks)}; max P {self.pmap.max:.4f}"
+        )
+        self._snapshot("global search")
+
+    def _relocate(self, target: _Target) -> None:
+        """Drive to a new vantage point for the next global search."""
+        nav = self._navigate(target.xy, 0.0, self.config.vantage_reach_m)
+        self._nav_paths.append((target.xy, getattr(nav, "path_xy", None)))
+        if not nav.arrived:
+            self._excluded_temp[target.cell] = True
+            self._event("skip", target.cell, f"vantage point not reached ({nav.reason})")
+        else:
+            self._event(
+                "navigate", target.cell, f"to a new vantage point for the global search: {nav.reason}"
+            )
+
+    def _visit(self, cell, xy) -> LocalSearchResult | None:
+        """Navigate to local-search range of the cell, search, and update the map on a miss."""
+        lc = self.config.local_search
+        nav = self._navigate(xy, lc.min_distance_m, lc.max_distance_m)
+        self._nav_paths.append((xy, getattr(nav, "path_xy", None)))
+        if not nav.arrived:
+            self._nav_failures[cell] += 1
+            if self._nav_failures[cell] >= self.config.max_nav_failures:
+                self._excluded[cell] = True
+                how = "excluded for the rest of the run"
+            else:
+                self._excluded_temp[cell] = True
+                how = "skipped until the next global search"
+            self._event("skip", cell, f"not reached ({nav.reason}); {how}")
+            return None
+        self._event("navigate", cell, nav.reason)
+        res = local_search(self.robot, self.db, xy, self.rng, lc, self.matcher)
+        self.local_searches += 1
+        self._local_since_global += 1
+        self._mark_searched(xy)
+        if res.found:
+            self._event("local", cell, res.reason)
+            return res
+        for c in self._searched_cells(cell, lc.neighbour_radius_m):
+            self.pmap.update(c, 0, lc.alpha, lc.beta)  # Eqs. (1)-(3): searched, not found
+        self._event("local", cell, res.reason)
+        self._snapshot("local search failed", cell)
+        return res
+
+    def _searched_cells(self, cell, radius_m: float) -> list[tuple[int, int]]:
+        """The searched cell first, then the cells whose centres lie within ``radius_m`` of its centre."""
+        X, Y = self.pmap.spec.cell_centers()
+        cx, cy = self.pmap.centre(cell)
+        near = np.argwhere(np.hypot(X - cx, Y - cy) <= radius_m + 1e-9)
+        return [tuple(cell)] + [(int(i), int(j)) for i, j in near if (i, j) != tuple(cell)]
+
+    def _navigate(self, xy, min_distance: float, max_distance: float):
+        try:
+            return self.navigate(xy, min_distance, max_distance)
+        except SearchBudgetExceeded:
+            raise
+        except LabError as e:  # a navigator's clear refusal (outside the map, ...) is a failure to arrive
+            return NavOutcome(False, f"navigation error: {e}", self.robot.odometry())
+
+    def _mark_searched(self, target_xy) -> None:
+        """Cells within the coverage radius in front of the robot (the local search's hemisphere)."""
+        p = self.robot.odometry()
+        X, Y = self.pmap.spec.cell_centers()
+        d = np.hypot(X - p.x, Y - p.y)
+        bearing = math.atan2(target_xy[1] - p.y, target_xy[0] - p.x)
+        ang = np.abs(wrap_angle(np.arctan2(Y - p.y, X - p.x) - bearing))
+        self._searched |= (d <= self.config.coverage_radius_m) & ((ang <= math.radians(100)) | (d < 0.3))

@@ -1,0 +1,345 @@
+"""One search trial, end to end: build the world, place the object, search, and score against truth.
+
+:func:`run_search` is what ``lab search`` runs; :meth:`SearchResult.to_json` is exactly what it writes
+(the fields of the ``lab search`` contract in ``design.md``, and more). The agent never sees the truth:
+the object's true pose, the collision count and the errors are filled in here, after the run.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from lab.errors import ConfigError
+from lab.geometry import R_to_euler_zyx, se3_inv
+from lab.navigation.grid import GridSpec
+from lab.robot import Robot
+from lab.search.agent import AgentConfig, AgentResult, BudgetedRobot, SearchAgent, SearchEvent, Strategy
+from lab.search.placement import (
+    check_placement,
+    circle_polygon,
+    footprint,
+    polygon_inside,
+    polygons_overlap,
+    random_placement,
+    searchable_objects,
+    supports,
+)
+from lab.search.probability_map import ProbabilityMap
+from lab.search.training import search_database
+from lab.sim.scene import BodySpec, Scene, load_scene
+
+__all__ = ["SearchResult", "SearchTrace", "map_spec", "path_obstacles", "pose_errors", "run_search"]
+
+#: Success, as the acceptance counts it: found, within 5 cm and 10 degrees of the truth.
+SUCCESS_POSITION_M = 0.05
+SUCCESS_ORIENTATION_DEG = 10.0
+
+NavigatorFactory = Callable[[Robot, GridSpec], Callable]
+
+
+def map_spec(scene: Scene, resolution: float = 0.2) -> GridSpec:
+    """The probability map's grid: the room's floor in ``resolution`` cells (the paper's 20 cm)."""
+    if scene.room is None:
+        raise ConfigError(f"scene {scene.name!r} has no room to search")
+    sx, sy = scene.room.size
+    return GridSpec.from_bounds(-sx / 2, -sy / 2, sx / 2, sy / 2, resolution)
+
+
+def pose_errors(G_est: np.ndarray, G_true: np.ndarray) -> tuple[float, float]:
+    """Position error [m] and orientation error [deg] (the angle of ``R_est^T R_true``)."""
+    pe = float(np.linalg.norm(G_est[:3, 3] - G_true[:3, 3]))
+    R = G_est[:3, :3].T @ G_true[:3, :3]
+    oe = math.degrees(math.acos(float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+    return pe, oe
+
+
+def _pose_dict(G: np.ndarray) -> dict:
+    return {
+        "position_m": [round(float(v), 5) for v in G[:3, 3]],
+        "euler_zyx_deg": [round(math.degrees(float(v)), 4) for v in R_to_euler_zyx(G[:3, :3])],
+    }
+
+
+def path_obstacles(
+    scene: Scene, name: str, place, rng: np.random.Generator, n: int = 2, size=(0.3, 0.3, 0.5)
+) -> tuple[Scene, list[tuple[float, float, float, float]]]:
+    """Put ``n`` boxes on the straight line from the robot's start to the object (the "obstacles placed
+    in the planned path" of the paper's second set of trials).
+
+    Each box goes at a random point along the middle of the line (jittered sideways by up to 15 cm),
+    clear of other bodies by 0.35 m, at least 0.8 m from the start and 1.0 m from the object, so the
+    robot can still get past and stand near the object. Boxes that find no such spot are left out.
+    """
+    rx, ry, _ = scene.robot_start
+    ox, oy = float(place[0]), float(place[1])
+    length = math.hypot(ox - rx, oy - ry)
+    room = supports(scene)[0].polygon
+    out_bodies, poses = list(scene.bodies), []
+    ux, uy = ((ox - rx) / length, (oy - ry) / length) if length > 1e-9 else (1.0, 0.0)
+    for k in range(n):
+        for _ in range(200):
+            s = rng.uniform(0.8, max(0.8, length - 1.0))
+            lat = rng.uniform(-0.15, 0.15)
+            x, y = rx + s * ux - lat * uy, ry + s * uy + lat * ux
+            yaw = float(rng.uniform(0, 90))
+            body = BodySpec(
+                f"obstacle_{k + 1}", "box", tuple(size), (x, y, 0.0, yaw), "obstacle", (0.45, 0.4, 0.35)
+            )
+            fp = footprint(body)
+            if not polygon_inside(footprint(body, 0.35), room):
+                continue
+            if any(polygons_overlap(fp, footprint(b, 0.35)) for b in out_bodies if b.role != "decor"):
+                continue
+            near_start = polygons_overlap(fp, circle_polygon(rx, ry, 0.6))
+            if near_start or polygons_overlap(fp, circle_polygon(ox, oy, 1.0)):
+                continue
+            out_bodies.append(body)
+            poses.append((x, y, 0.0, yaw))
+            break
+    return replace(scene, bodies=tuple(out_bodies)), poses
+
+
+@dataclass(frozen=True)
+class SearchTrace:
+    """Everything a trial recorded beyond the JSON (for the figures): the agent's record, the map's grid,
+    the odometry trajectory ``(t, x, y, theta)`` and the world's scene."""
+
+    agent: AgentResult = field(repr=False)
+    spec: GridSpec = field(repr=False)
+    trajectory: np.ndarray = field(repr=False)
+    scene: Scene = field(repr=False)
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    """The outcome of one trial: the ``lab search`` JSON fields, and the trace for the figures.
+
+    Attributes
+    ----------
+    object : str
+    found : bool
+        The agent's claim.
+    true_pose, estimated_pose : dict or None
+        ``{"position_m": [x, y, z], "euler_zyx_deg": [alpha, beta, gamma]}`` of the object frame O in
+        the world (the estimate in the odometry frame, which the run started aligned with).
+    position_error_m, orientation_error_deg : float or None
+        Against the truth (None when not found).
+    path_length_m : float
+        Distance driven, from odometry.
+    global_searches, local_searches : int
+    collisions : int
+        Bumps, from the simulator's truth.
+    sim_time_s, wall_time_s : float [s]
+    seed : int
+    strategy : str
+    success : bool
+        Found within :data:`SUCCESS_POSITION_M` and :data:`SUCCESS_ORIENTATION_DEG`.
+    reason : str
+        Why the run ended.
+    place : tuple of 4 floats
+        The object's placement ``(x, y, z_underside, yaw_deg)``.
+    surface : str
+        floor, table or shelf.
+    obstacles : tuple
+        Placements of the extra obstacles (``--obstacles``).
+    camera_frame_error : dict or None
+        ``{"position_m", "orientation_deg"}``: the estimate's error in the camera frame at detection
+        (the local search's own error; ``position_error_m`` adds the odometry's drift to it).
+    odometry_error_m : float
+        Distance between the odometry's and the true robot position at the end of the run.
+    events : tuple of SearchEvent
+    trace : SearchTrace
+    """
+
+    object: str
+    found: bool
+    true_pose: dict
+    estimated_pose: dict | None
+    position_error_m: float | None
+    orientation_error_deg: float | None
+    path_length_m: float
+    global_searches: int
+    local_searches: int
+    collisions: int
+    sim_time_s: float
+    wall_time_s: float
+    seed: int
+    strategy: str
+    success: bool
+    reason: str
+    place: tuple[float, float, float, float]
+    surface: str
+    obstacles: tuple = ()
+    camera_frame_error: dict | None = None
+    odometry_error_m: float = 0.0
+    events: tuple[SearchEvent, ...] = field(default=(), repr=False)
+    trace: SearchTrace | None = field(default=None, repr=False, compare=False)
+
+    def to_json(self) -> dict:
+        """The JSON ``lab search --json`` writes (plain types only)."""
+        snaps = [] if self.trace is None else self.trace.agent.snapshots
+        return {
+            "object": self.object,
+            "found": bool(self.found),
+            "true_pose": self.true_pose,
+            "estimated_pose": self.estimated_pose,
+            "position_error_m": self.position_error_m,
+            "orientation_error_deg": self.orientation_error_deg,
+            "path_length_m": round(float(self.path_length_m), 4),
+            "global_searches": int(self.global_searches),
+            "local_searches": int(self.local_searches),
+            "collisions": int(self.collisions),
+            "sim_time_s": round(float(self.sim_time_s), 3),
+            "wall_time_s": round(float(self.wall_time_s), 3),
+            "seed": int(self.seed),
+            "strategy": self.strategy,
+            "success": bool(self.success),
+            "reason": self.reason,
+            "place": [round(float(v), 4) for v in self.place],
+            "surface": self.surface,
+            "obstacles": [[round(float(v), 4) for v in o] for o in self.obstacles],
+            "camera_frame_error": self.camera_frame_error,
+            "odometry_error_m": round(float(self.odometry_error_m), 4),
+            "events": [e.as_dict() for e in self.events],
+            "map_snapshots": [
+                {
+                    "t": round(s.t, 3),
+                    "label": s.label,
+                    "cell": None if s.cell is None else list(s.cell),
+                    "max_p": float(s.P.max()),
+                }
+                for s in snaps
+            ],
+        }
+
+
+def run_search(
+    object: str,
+    seed: int,
+    place=None,
+    strategy: str | Strategy = "paper",
+    max_time: float = 600.0,
+    navigate: NavigatorFactory | None = None,
+    *,
+    obstacles: bool = False,
+    world: str | Scene = "lab_room",
+    config: AgentConfig | None = None,
+    supersample: int = 2,
+    max_wall_time: float | None = None,
+    progress: bool = False,
+) -> SearchResult:
+    """Run one search trial in the simulator and score it.
+
+    Parameters
+    ----------
+    object : str
+        A searchable object (:func:`lab.search.placement.searchable_objects`).
+    seed : int
+        Seeds the placement (when ``place`` is None), the obstacles, the odometry noise and RANSAC.
+    place : (x, y, z_underside, yaw_deg), optional
+        Where to put the object; checked (inside the room, standing on the floor, a table or a shelf,
+        clear of other bodies and of the robot). Default: a seeded random valid placement on a random
+        surface.
+    strategy : {"paper", "lawnmower", "frontier"}
+    max_time : float [s]
+        Simulated-time budget; the run ends "not found" when it is used up.
+    navigate : callable ``(robot, spec) -> navigate``
+        Builds the navigation callable (see :mod:`lab.search.agent`) for the robot the search drives
+        (a :class:`~lab.search.agent.BudgetedRobot`) and the map's grid. Required.
+    obstacles : bool
+        Add boxes on the straight line from the start to the object (:func:`path_obstacles`).
+    world : str or Scene
+    config : AgentConfig, optional
+        Its ``strategy`` is replaced by ``strategy``.
+    supersample : int
+        Render supersampling (2: the local search matches about twice as many SIFT features on the
+        small objects as at 1; see ``tests/test_search_local.py``).
+    max_wall_time : float [s], optional
+        Also stop after this much wall-clock time.
+    progress : bool
+        Say on stderr when a database is being built.
+
+    Returns
+    -------
+    SearchResult
+    """
+    from lab.sim import RenderSettings, SimRobot, SimWorld
+
+    wall0 = time.perf_counter()
+    strategy = Strategy.parse(strategy)
+    scene = world if isinstance(world, Scene) else load_scene(world)
+    names = searchable_objects(scene)
+    if object not in names:
+        raise ConfigError(f"unknown object {object!r}; searchable objects: {', '.join(names)}")
+    if navigate is None:
+        raise ConfigError(
+            "run_search needs a navigator: navigate=lambda robot, spec: <callable(target_xy, min_d, max_d)>"
+        )
+    if not (isinstance(max_time, (int, float)) and math.isfinite(max_time) and max_time > 0):
+        raise ConfigError(f"max_time must be a finite number of seconds > 0, got {max_time!r}")
+    rng = np.random.default_rng(seed)
+    if place is None:
+        place = random_placement(scene, object, rng)
+    surface = check_placement(scene, object, place).kind
+    place = tuple(float(v) for v in place)
+    scene = scene.with_pose(object, place)
+    obstacle_poses: list = []
+    if obstacles:
+        scene, obstacle_poses = path_obstacles(scene, object, place, rng)
+    db = search_database(object, progress=progress)
+    cfg = replace(config or AgentConfig(), strategy=strategy)
+    spec = map_spec(scene)
+    with SimWorld(scene, RenderSettings(supersample=supersample)) as w:
+        robot = SimRobot(w, seed=seed)
+        robot.enable()
+        budget = BudgetedRobot(robot, max_time, max_wall_time)
+        nav = navigate(budget, spec)
+        agent = SearchAgent(budget, db, nav, ProbabilityMap(spec), cfg, rng=np.random.default_rng([seed, 1]))
+        out = agent.run()
+        G_true = w.truth.G_W(object)
+        G_WC_true = w.truth.G_WC()  # the head has not moved since the last frame of a found track
+        true_pose = w.truth.robot_pose()
+        odom = robot.odometry()
+        collisions = int(w.truth.collisions)
+        sim_time = robot.now()
+        trajectory = np.array(budget.trajectory)
+        path_length = budget.path_length_m
+    pe = oe = None
+    cam_err = None
+    if out.found:
+        pe, oe = pose_errors(out.G_WO, G_true)
+        # the same pose in the camera frame: the perception error alone, without the odometry's drift
+        cpe, coe = pose_errors(out.local.estimate.G_CO, se3_inv(G_WC_true) @ G_true)
+        cam_err = {"position_m": round(cpe, 5), "orientation_deg": round(coe, 3)}
+    odometry_error = math.hypot(odom.x - true_pose.x, odom.y - true_pose.y)
+    success = bool(out.found and pe <= SUCCESS_POSITION_M and oe <= SUCCESS_ORIENTATION_DEG)
+    return SearchResult(
+        object=object,
+        found=out.found,
+        true_pose=_pose_dict(G_true),
+        estimated_pose=None if out.G_WO is None else _pose_dict(out.G_WO),
+        position_error_m=None if pe is None else round(pe, 5),
+        orientation_error_deg=None if oe is None else round(oe, 3),
+        path_length_m=path_length,
+        global_searches=out.global_searches,
+        local_searches=out.local_searches,
+        collisions=collisions,
+        sim_time_s=sim_time,
+        wall_time_s=time.perf_counter() - wall0,
+        seed=int(seed),
+        strategy=strategy.value,
+        success=success,
+        reason=out.reason,
+        place=place,
+        surface=surface,
+        obstacles=tuple(obstacle_poses),
+        camera_frame_error=cam_err,
+        odometry_error_m=odometry_error,
+        events=out.events,
+        trace=SearchTrace(out, spec, trajectory, scene),
+    )

@@ -1,0 +1,257 @@
+"""The closed search loop: its logic with scripted searches on a kinematic robot (fast, exact), then
+end to end in the simulator with the ground-truth stand-in navigator, scored against truth."""
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from nav_fakes import KinematicRobot
+from search_standin import truth_navigator
+
+import lab.search.agent as agent_mod
+from lab.errors import ConfigError
+from lab.geometry import Pose2D
+from lab.navigation import GridSpec, drive_to
+from lab.search.agent import (
+    AgentConfig,
+    BudgetedRobot,
+    NavOutcome,
+    SearchAgent,
+    Strategy,
+    frontier_cells,
+    lawnmower_targets,
+)
+from lab.search.local_search import LocalSearchResult
+from lab.search.probability_map import ProbabilityMap
+from lab.search.trial import run_search
+from lab.sim.scene import load_scene
+
+SPEC = GridSpec.from_bounds(-3, -4, 3, 4, 0.2)
+
+
+# --- scripted searches ---------------------------------------------------------------------------------
+class Script:
+    """Stand-ins for the global and local searches: colour peaks at given places, the object at one."""
+
+    def __init__(self, robot, object_xy, peaks, local_time=8.0, global_time=12.0):
+        self.robot, self.object_xy, self.peaks = robot, object_xy, peaks
+        self.local_time, self.global_time = local_time, global_time
+        self.local_cells, self.globals = [], 0
+
+    def global_search(self, robot, db, pmap, config):
+        self.globals += 1
+        robot.step(self.global_time)
+        for xy, strength in self.peaks:
+            pmap.update_global(pmap.cell_of(*xy), strength, config.alpha, config.growth_m, config.beta_min)
+        return type("G", (), {"used_peaks": self.peaks, "peaks": self.peaks})()
+
+    def local_search(self, robot, db, target_xy, rng, config, matcher):
+        self.local_cells.append(SPEC.world_to_cell(*target_xy))
+        robot.step(self.local_time)
+        # the 9 views see the hemisphere in front, out to about 1.2 m
+        p = robot.odometry()
+        ox, oy = self.object_xy
+        bearing = math.atan2(target_xy[1] - p.y, target_xy[0] - p.x)
+        off = abs(math.remainder(math.atan2(oy - p.y, ox - p.x) - bearing, 2 * math.pi))
+        found = math.hypot(ox - p.x, oy - p.y) <= 1.2 and off <= math.radians(95)
+        G = np.eye(4)
+        G[:3, 3] = (*self.object_xy, 0.1)
+        return LocalSearchResult(found, "scripted", G if found else None)
+
+
+def straight_navigator(robot, refuse=()):
+    """Drive in a straight line to the near side of the distance band (the kinematic robot has no walls)."""
+
+    def navigate(target_xy, min_distance, max_distance):
+        p = robot.odometry()
+        d = math.hypot(target_xy[0] - p.x, target_xy[1] - p.y)
+        if any(math.hypot(target_xy[0] - x, target_xy[1] - y) < 0.15 for x, y in refuse):
+            return NavOutcome(False, "no path: UNREACHABLE", p)
+        r = 0.5 * (min_distance + max_distance)
+        k = max(0.0, (d - r) / d) if d > 1e-9 else 0.0
+        goal = (p.x + k * (target_xy[0] - p.x), p.y + k * (target_xy[1] - p.y))
+        heading = math.atan2(target_xy[1] - goal[1], target_xy[0] - goal[0])
+        res = drive_to(robot, np.array([[p.x, p.y], goal]), heading, timeout=60.0)
+        return NavOutcome(res.outcome.value == "arrived", res.outcome.value, res.pose)
+
+    return navigate
+
+
+def scripted_run(monkeypatch, object_xy, peaks, strategy="paper", max_time=300.0, refuse=(), navigate=None):
+    robot = BudgetedRobot(KinematicRobot(Pose2D(0.0, -3.0, math.pi / 2)), max_time)
+    robot.enable()
+    script = Script(robot, object_xy, peaks)
+    monkeypatch.setattr(agent_mod, "global_search", script.global_search)
+    monkeypatch.setattr(agent_mod, "local_search", script.local_search)
+    monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)
+    nav = navigate(robot) if navigate else straight_navigator(robot, refuse)
+    db = type("DB", (), {})()
+    agent = SearchAgent(
+        robot, db, nav, ProbabilityMap(SPEC), AgentConfig(strategy=strategy), rng=np.random.default_rng(0)
+    )
+    return agent.run(), script, robot
+
+
+def test_paper_visits_the_strongest_peak_first_and_moves_on(monkeypatch):
+    distractor, obj = (1.5, 0.5), (-1.5, 1.9)
+    out, script, _ = scripted_run(monkeypatch, obj, [(distractor, 0.9), (obj, 0.6)])
+    assert out.found and out.reason == "found"
+    assert script.local_cells[0] == SPEC.world_to_cell(*distractor)  # P'_n = 0.9 beats 0.6
+    assert script.local_cells[-1] == SPEC.world_to_cell(*obj)
+    assert out.global_searches == 1 and out.local_searches == 2
+    # the snapshot after the failed search: the distractor's cell lost mass, the object's gained
+    snap = [s for s in out.snapshots if s.label == "local search failed"][0]
+    before = [s for s in out.snapshots if s.label == "global search"][0]
+    dc, oc = SPEC.world_to_cell(*distractor), SPEC.world_to_cell(*obj)
+    assert snap.P[dc] < 0.2 * before.P[dc] and snap.P[oc] > before.P[oc]
+    assert np.isclose(snap.P.sum(), 1.0)
+
+
+def test_unreachable_peak_is_skipped_with_a_reason(monkeypatch):
+    distractor, obj = (1.5, 0.5), (-1.5, 1.9)
+    out, script, _ = scripted_run(monkeypatch, obj, [(distractor, 0.9), (obj, 0.6)], refuse=[distractor])
+    assert out.found
+    skips = [e for e in out.events if e.kind == "skip"]
+    assert skips and skips[0].cell == SPEC.world_to_cell(*distractor) and "UNREACHABLE" in skips[0].detail
+    assert SPEC.world_to_cell(*distractor) not in script.local_cells  # no observation, no Bayes update
+
+
+def test_all_peaks_failed_triggers_a_new_global_search(monkeypatch):
+    out, script, _ = scripted_run(monkeypatch, (2.5, 3.5), [((1.5, 0.5), 0.9)], max_time=200.0)
+    assert out.global_searches >= 2  # the map went flat after the one peak failed
+    assert any("vantage point" in e.detail for e in out.events)  # and it moved before scanning again
+    assert not out.found and "budget" in out.reason
+
+
+def test_budget_ends_a_run_even_inside_a_navigator_that_never_returns(monkeypatch):
+    def endless(robot):
+        def navigate(target_xy, lo, hi):
+            while True:  # drives in circles forever; only the budget stops it
+                robot.drive(0.2, 0.5)
+                robot.step(0.05)
+
+        return navigate
+
+    out, _, robot = scripted_run(monkeypatch, (0, 0), [((1.0, 1.0), 0.9)], max_time=60.0, navigate=endless)
+    assert not out.found and "budget" in out.reason
+    assert 60.0 <= robot.now() <= 60.0 + 0.06
+
+
+@pytest.mark.parametrize("strategy", ["lawnmower", "frontier"])
+def test_baselines_cover_the_room_until_they_find_it(monkeypatch, strategy):
+    out, script, robot = scripted_run(monkeypatch, (-1.9, 1.0), [], strategy=strategy, max_time=2000.0)
+    assert out.found and out.global_searches == 0
+    assert script.globals == 0
+    assert len(script.local_cells) == len(set(script.local_cells))  # never the same place twice
+    print(f"\n{strategy}: {out.local_searches} local searches, {robot.path_length_m:.1f} m")
+
+
+def test_lawnmower_and_frontier_targets():
+    t = lawnmower_targets(SPEC, 1.6, (0.0, -3.0))
+    assert len(t) == 4 * 5 and t[0][1] < -3.0 + 1.0  # starts on the row nearest the robot
+    assert all(abs(a[1] - b[1]) < 1e-9 or abs(a[0] - b[0]) < 1e-9 for a, b in zip(t, t[1:], strict=False))
+    searched = np.zeros((5, 5), bool)
+    assert len(frontier_cells(searched)) == 25
+    searched[2, 2] = True
+    assert {tuple(c) for c in frontier_cells(searched)} == {
+        (i, j) for i in (1, 2, 3) for j in (1, 2, 3) if (i, j) != (2, 2)
+    }
+
+
+def test_strategy_names():
+    assert Strategy.parse("frontier") is Strategy.FRONTIER
+    with pytest.raises(ConfigError, match="paper, lawnmower, frontier"):
+        Strategy.parse("random")
+
+
+# --- end to end in the lab room -------------------------------------------------------------------------
+SCENE = load_scene("lab_room")
+CONTRACT = {
+    "object": str,
+    "found": bool,
+    "true_pose": (list, dict),
+    "estimated_pose": (list, dict, type(None)),
+    "position_error_m": (int, float, type(None)),
+    "orientation_error_deg": (int, float, type(None)),
+    "path_length_m": (int, float),
+    "global_searches": int,
+    "local_searches": int,
+    "collisions": int,
+    "sim_time_s": (int, float),
+    "wall_time_s": (int, float),
+    "seed": int,
+}
+
+
+def check_contract(d: dict, tmp_path: Path) -> None:
+    """The fields of design.md's ``lab search`` contract; and the shared checker when it is there."""
+    d = json.loads(json.dumps(d))  # what a reader of the file gets
+    for k, typ in CONTRACT.items():
+        assert k in d and isinstance(d[k], typ) and not (typ is int and isinstance(d[k], bool)), k
+    tool = Path(__file__).resolve().parents[2] / "shared" / "tools" / "check_contract.py"
+    if tool.is_file():
+        f = tmp_path / "search.json"
+        f.write_text(json.dumps(d))
+        r = subprocess.run([sys.executable, str(tool), "search", str(f)], capture_output=True, text=True)
+        assert r.returncode == 0, r.stdout
+
+
+def test_closed_loop_finds_the_toy_block(tmp_path):
+    res = run_search(
+        "toy_block", seed=0, place=SCENE.body("toy_block").pose, max_time=120.0, navigate=truth_navigator
+    )
+    print(f"\n{json.dumps({k: v for k, v in res.to_json().items() if k not in ('events', 'map_snapshots')})}")
+    assert res.found and res.success, res.reason
+    assert res.position_error_m <= 0.05 and res.orientation_error_deg <= 10.0
+    assert res.collisions == 0 and res.global_searches >= 1 and res.local_searches >= 1
+    assert res.sim_time_s <= 120.0
+    assert res.camera_frame_error["position_m"] <= 0.02 and res.camera_frame_error["orientation_deg"] <= 10.0
+    assert res.odometry_error_m < 0.05
+    check_contract(res.to_json(), tmp_path)
+
+
+def test_glossy_cup_ends_not_found_at_its_budget_and_the_mass_moves_on(tmp_path):
+    res = run_search("glossy_cup", seed=1, max_time=100.0, navigate=truth_navigator)
+    assert not res.found and "budget" in res.reason
+    assert 100.0 <= res.sim_time_s <= 100.5 and res.collisions == 0
+    check_contract(res.to_json(), tmp_path)
+    snaps = res.trace.agent.snapshots
+    failed = [k for k, s in enumerate(snaps) if s.label == "local search failed"]
+    assert len(failed) >= 3
+    print(f"\nglossy cup: {len(failed)} failed local searches in {res.sim_time_s:.0f} s:")
+    for k in failed:
+        before, after = snaps[k - 1].P, snaps[k].P
+        c = snaps[k].cell
+        nxt = np.unravel_index(np.argmax(after), after.shape)
+        nxt_s = tuple(int(v) for v in nxt)
+        print(f"  cell {c}: {before[c]:.4f} -> {after[c]:.4f}; next peak {nxt_s} {after[nxt]:.4f}")
+        assert after[c] < 0.2 * before[c]  # the searched cell lost most of its mass ...
+        others = np.ones(after.shape, bool)
+        others[c] = False
+        assert after[others].sum() > before[others].sum()  # ... to the rest of the map
+    # the peak moves on: a cell that held several colour peaks may take two misses before another
+    # cell overtakes it, but the search goes from place to place
+    cells = [snaps[k].cell for k in failed]
+    assert len(set(cells)) >= 3, cells
+
+
+def test_bad_inputs_are_clear_errors():
+    nav = truth_navigator
+    with pytest.raises(ConfigError, match="unknown object 'teapot'.*cereal_box"):
+        run_search("teapot", 0, navigate=nav)
+    with pytest.raises(ConfigError, match="outside the room or inside a wall"):
+        run_search("book", 0, place=(3.2, 0.0, 0.0, 0.0), navigate=nav)
+    with pytest.raises(ConfigError, match="outside the room or inside a wall"):
+        run_search("book", 0, place=(2.98, 0.0, 0.0, 0.0), navigate=nav)
+    with pytest.raises(ConfigError, match="overlaps crate"):
+        run_search("book", 0, place=(0.9, -0.8, 0.0, 0.0), navigate=nav)
+    with pytest.raises(ConfigError, match="does not stand on anything"):
+        run_search("book", 0, place=(0.0, 0.0, 0.5, 0.0), navigate=nav)
+    with pytest.raises(ConfigError, match="strategies: paper, lawnmower, frontier"):
+        run_search("book", 0, strategy="random", navigate=nav)
+    with pytest.raises(ConfigError, match="needs a navigator"):
+        run_search("book", 0)

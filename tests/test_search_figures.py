@@ -1,0 +1,54 @@
+"""The paper's figures, drawn from a real trial (headless): they hold what the run recorded."""
+
+import numpy as np
+import pytest
+from search_standin import truth_navigator
+
+from lab.navigation import Costmap, GridSpec
+from lab.robot import StereoCamera
+from lab.search.figures import draw_pose, fig2_global_search, fig5_trial, fig6_snapshots, panorama
+from lab.search.trial import run_search
+from lab.sim.scene import load_scene
+
+
+@pytest.fixture(scope="module")
+def trial():
+    scene = load_scene("lab_room")
+    return run_search(
+        "toy_block", 0, place=scene.body("toy_block").pose, max_time=120.0, navigate=truth_navigator
+    )
+
+
+def test_fig2_shows_the_scan_peaks_and_the_map(trial):
+    g = trial.trace.agent.globals_[0]
+    fig = fig2_global_search(g, trial.trace.spec)
+    assert len(fig.axes) >= 6
+    # the map panel marks every used peak
+    map_ax = fig.axes[4]
+    assert len(map_ax.lines) == 1 + len(g.used_peaks)  # origin marker + one circle per peak
+
+
+def test_fig5_and_fig6(trial, tmp_path):
+    spec = GridSpec.from_bounds(-3, -4, 3, 4, 0.1)
+    occ = np.zeros(spec.shape, bool)
+    occ[10:15, 10:15] = True
+    fig = fig5_trial(trial, Costmap.from_occupancy(spec, occ).state, spec)
+    assert "6D pose" in fig.axes[2].get_title()
+    fig.savefig(tmp_path / "fig5.png")
+    fig6 = fig6_snapshots(trial)
+    fig6.savefig(tmp_path / "fig6.png")
+    assert (tmp_path / "fig5.png").stat().st_size > 10_000 and (tmp_path / "fig6.png").stat().st_size > 10_000
+    pano = panorama(trial.trace.agent.globals_[0])
+    assert pano.shape == (240, 6 * 320, 3)
+
+
+def test_draw_pose_draws_the_box_where_it_projects():
+    cam = StereoCamera.from_fov()
+    img = np.zeros((240, 320, 3), np.uint8)
+    G = np.eye(4)
+    G[:3, 3] = (0.0, 0.0, 1.0)
+    out = draw_pose(img, G, (0.2, 0.2, 0.2), cam)
+    ys, xs = np.nonzero(out.any(axis=2))
+    assert abs(xs.mean() - cam.cx) < 15 and abs(ys.mean() - cam.cy) < 15  # around the centre
+    assert xs.min() > cam.cx - 0.2 * cam.fx / 0.9 - 3  # and no wider than the near face
+    assert not img.any()  # a copy was drawn on
