@@ -140,6 +140,34 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("--record", type=Path, help="write an animation of the run (.gif, or .mp4 with ffmpeg)")
     idf.add_argument("--robot", type=Path, help="run on a real (or emulated) robot: its hardware TOML config")
 
+    se = sub.add_parser(
+        "search",
+        help="search the lab room for a named object (probability map, colour and SIFT search)",
+        description="Run the search paper's loop: a colour-histogram global search seeds a grid probability "
+        "map, the robot drives (stereo costmap + A*) to the most probable cells and runs the SIFT + EKF "
+        "local search there, until the object is found (with its 6D pose) or the time budget is spent.",
+    )
+    se.add_argument("--object", help="object to find (see --list-objects)")
+    se.add_argument("--list-objects", action="store_true", help="print the searchable objects and exit")
+    se.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    se.add_argument(
+        "--place",
+        type=lambda s: _floats(s, 4, "--place"),
+        metavar="X,Y,Z,YAW_DEG",
+        help="where to put the object (Z: the surface it stands on); default: seeded random",
+    )
+    se.add_argument("--obstacles", action="store_true", help="drop obstacles on the straight path")
+    se.add_argument(
+        "--strategy",
+        default="paper",
+        choices=("paper", "lawnmower", "frontier"),
+        help="where to search next (default: paper, the probability map's peak)",
+    )
+    se.add_argument("--max-time", type=float, default=600.0, help="sim-time budget in seconds (default 600)")
+    se.add_argument("--json", type=Path, help="write the result JSON here")
+    se.add_argument("--out", type=Path, help="write the figures here")
+    se.add_argument("--robot", type=Path, help="real robot: not supported for the search yet")
+
     hw = sub.add_parser(
         "hardware",
         help="the real robot: emulators and bring-up checks",
@@ -349,6 +377,44 @@ def _cmd_identify(args) -> int:
     return 0
 
 
+def _cmd_search(args) -> int:
+    import json as _json
+    import os as _os
+
+    from lab.search.placement import searchable_objects
+
+    names = searchable_objects()
+    if args.list_objects:
+        print("\n".join(names))
+        return 0
+    if args.object not in names:
+        raise LabError(f"unknown object {args.object!r}; searchable objects: {', '.join(names)}")
+    if args.robot is not None:
+        raise LabError("`lab search --robot` is not supported yet: the search runs in the simulator only")
+    from lab.search.navigation import navigator_factory
+    from lab.search.trial import run_search
+
+    res = run_search(
+        args.object,
+        args.seed,
+        place=args.place,
+        strategy=args.strategy,
+        max_time=args.max_time,
+        navigate=navigator_factory,
+        obstacles=args.obstacles,
+        progress=True,
+    )
+    data = res.to_json()
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        tmp = args.json.with_name(f".{args.json.name}.tmp{_os.getpid()}")
+        tmp.write_text(_json.dumps(data, indent=2))
+        _os.replace(tmp, args.json)
+    keys = ("object", "found", "position_error_m", "orientation_error_deg", "path_length_m", "sim_time_s")
+    print(_json.dumps({k: data.get(k) for k in keys}, indent=2))
+    return 0
+
+
 def _cmd_hardware(args) -> int:
     from lab.hardware import cli as hw
 
@@ -423,6 +489,7 @@ def main(argv: list[str] | None = None) -> int:
         "hardware": _cmd_hardware,
         "identify": _cmd_identify,
         "render": _cmd_render,
+        "search": _cmd_search,
         "tables": _cmd_tables,
         "train": _cmd_train,
         "worlds": _cmd_worlds,
