@@ -428,6 +428,10 @@ class HardwareRobot(Robot):
             self._v_target = self._w_target = self._v_out = self._w_out = 0.0
         if self._closed:
             return
+        self._halt_devices()
+
+    def _halt_devices(self) -> None:
+        """Best effort: zero the base and halt the head on whichever device is still connected."""
         if self.base.connected:
             try:
                 self.base.stop()
@@ -613,16 +617,7 @@ class HardwareRobot(Robot):
             self._lost = err
             self._enabled = False
             self._v_target = self._w_target = self._v_out = self._w_out = 0.0
-        if self.base.connected:
-            try:
-                self.base.stop()
-            except (ConnectionLost, DeviceTimeout):
-                pass
-        if self.ptu.connected:
-            try:
-                self.ptu.halt()
-            except (ConnectionLost, DeviceTimeout, ProtocolError, CommandRejected):
-                pass
+        self._halt_devices()
 
     def _servo_loop(self) -> None:
         period = 1.0 / self.config.robot.servo_rate_hz
