@@ -379,7 +379,6 @@ def _cmd_identify(args) -> int:
 
 def _cmd_search(args) -> int:
     import json as _json
-    import os as _os
 
     from lab.search.placement import searchable_objects
 
@@ -406,10 +405,9 @@ def _cmd_search(args) -> int:
     )
     data = res.to_json()
     if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        tmp = args.json.with_name(f".{args.json.name}.tmp{_os.getpid()}")
-        tmp.write_text(_json.dumps(data, indent=2))
-        _os.replace(tmp, args.json)
+        from lab.io import write_json_atomic
+
+        write_json_atomic(args.json, data)
     keys = ("object", "found", "position_error_m", "orientation_error_deg", "path_length_m", "sim_time_s")
     print(_json.dumps({k: data.get(k) for k in keys}, indent=2))
     return 0

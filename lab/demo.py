@@ -10,24 +10,18 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
 from lab.geometry import Pose2D
+from lab.io import write_json_atomic, write_text_atomic
 from lab.robot import StereoCamera
 from lab.sim import RenderSettings, SimRobot, SimWorld, load_box_models
 from lab.viz import disparity_map, disparity_picture, save_rgb
 
 __all__ = ["run_demo"]
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def run_demo(out: Path, seed: int = 0, supersample: int = 1) -> Path:
@@ -117,7 +111,7 @@ def run_demo(out: Path, seed: int = 0, supersample: int = 1) -> Path:
         ]
     summary["wall_time_s"] = time.perf_counter() - t0
     lines += ["## Numbers", "", "```json", json.dumps(summary, indent=2), "```", ""]
-    _write_atomic(out / "report.json", json.dumps(summary, indent=2))
+    write_json_atomic(out / "report.json", summary)
     report = out / "report.md"
-    _write_atomic(report, "\n".join(lines))
+    write_text_atomic(report, "\n".join(lines))
     return report

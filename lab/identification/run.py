@@ -8,9 +8,7 @@ Ground truth is used only to score the run (pose error) and by the mover, never 
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import time
 from pathlib import Path
 
@@ -18,16 +16,9 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D, se3_inv
+from lab.io import write_json_atomic
 
 __all__ = ["run_identify"]
-
-
-def _write_json_atomic(path: Path, data: dict) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(json.dumps(data, indent=2))
-    os.replace(tmp, path)
 
 
 def _pose_error(G_est: np.ndarray, G_true: np.ndarray) -> dict:
@@ -153,10 +144,10 @@ def run_identify(
         p = recorder.close()
         result["recording"] = None if p is None else str(p)
     if json_path is not None:
-        _write_json_atomic(Path(json_path), result)
+        write_json_atomic(Path(json_path), result)
     if out is not None and figures and steps:
         _figures(Path(out), agent, true_poses, true_model)
-        _write_json_atomic(Path(out) / "identify.json", result)
+        write_json_atomic(Path(out) / "identify.json", result)
     return result
 
 

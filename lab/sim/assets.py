@@ -16,13 +16,13 @@ in the order of :data:`FACES`.
 from __future__ import annotations
 
 import hashlib
-import os
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from lab.errors import AssetError, ConfigError
+from lab.io import write_bytes_atomic, write_text_atomic
 from lab.paths import cache_dir, worlds_dir
 
 __all__ = [
@@ -159,15 +159,7 @@ def write_png_atomic(path: Path, img_rgb: np.ndarray) -> None:
     ok, buf = cv2.imencode(".png", cv2.cvtColor(img_rgb, cv2.COLOR_RGB2BGR))
     if not ok:
         raise AssetError(f"could not encode {path}")
-    tmp = path.with_suffix(f".tmp{os.getpid()}.png")
-    tmp.write_bytes(buf.tobytes())
-    os.replace(tmp, path)
-
-
-def _write_text_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    write_bytes_atomic(path, buf.tobytes())
 
 
 def _face_frames(size):
@@ -276,11 +268,9 @@ def box_mesh(size, texture: Path, uv_mode: str = "atlas", tile_m: float = 1.0) -
         return obj_path
     folder.mkdir(parents=True, exist_ok=True)
     tex_path = folder / "texture.png"
-    tmp = folder / f".texture.tmp{os.getpid()}.png"
-    tmp.write_bytes(tex_bytes)
-    os.replace(tmp, tex_path)
-    _write_text_atomic(folder / "box.mtl", mtl)
-    _write_text_atomic(obj_path, obj)  # last: its presence means the folder is complete
+    write_bytes_atomic(tex_path, tex_bytes)
+    write_text_atomic(folder / "box.mtl", mtl)
+    write_text_atomic(obj_path, obj)  # last: its presence means the folder is complete
     return obj_path
 
 
