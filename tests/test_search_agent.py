@@ -37,8 +37,9 @@ SPEC = GridSpec.from_bounds(-3, -4, 3, 4, 0.2)
 class Script:
     """Stand-ins for the global and local searches: colour peaks at given places, the object at one."""
 
-    def __init__(self, robot, object_xy, peaks, local_time=8.0, global_time=12.0):
+    def __init__(self, robot, object_xy, peaks, local_time=8.0, global_time=12.0, visible=None):
         self.robot, self.object_xy, self.peaks = robot, object_xy, peaks
+        self.visible = visible or (lambda pose: True)  # from where the object's texture can be seen
         self.local_time, self.global_time = local_time, global_time
         self.local_cells, self.globals = [], 0
 
@@ -57,7 +58,7 @@ class Script:
         ox, oy = self.object_xy
         bearing = math.atan2(target_xy[1] - p.y, target_xy[0] - p.x)
         off = abs(math.remainder(math.atan2(oy - p.y, ox - p.x) - bearing, 2 * math.pi))
-        found = math.hypot(ox - p.x, oy - p.y) <= 1.2 and off <= math.radians(95)
+        found = math.hypot(ox - p.x, oy - p.y) <= 1.2 and off <= math.radians(95) and self.visible(p)
         G = np.eye(4)
         G[:3, 3] = (*self.object_xy, 0.1)
         return LocalSearchResult(found, "scripted", G if found else None)
@@ -81,10 +82,12 @@ def straight_navigator(robot, refuse=()):
     return navigate
 
 
-def scripted_run(monkeypatch, object_xy, peaks, strategy="paper", max_time=300.0, refuse=(), navigate=None):
+def scripted_run(
+    monkeypatch, object_xy, peaks, strategy="paper", max_time=300.0, refuse=(), navigate=None, visible=None
+):
     robot = BudgetedRobot(KinematicRobot(Pose2D(0.0, -3.0, math.pi / 2)), max_time)
     robot.enable()
-    script = Script(robot, object_xy, peaks)
+    script = Script(robot, object_xy, peaks, visible=visible)
     monkeypatch.setattr(agent_mod, "global_search", script.global_search)
     monkeypatch.setattr(agent_mod, "local_search", script.local_search)
     monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)
@@ -109,6 +112,15 @@ def test_paper_visits_the_strongest_peak_first_and_moves_on(monkeypatch):
     dc, oc = SPEC.world_to_cell(*distractor), SPEC.world_to_cell(*obj)
     assert snap.P[dc] < 0.2 * before.P[dc] and snap.P[oc] > before.P[oc]
     assert np.isclose(snap.P.sum(), 1.0)
+
+
+def test_a_cell_searched_again_is_approached_from_another_side(monkeypatch):
+    """The object shows its texture only to the north; the robot comes from the south first. The miss
+    leaves the strong colour peak's cell the most probable, and the second visit comes round to it."""
+    obj = (0.5, 0.5)
+    out, script, _ = scripted_run(monkeypatch, obj, [(obj, 0.9)], visible=lambda pose: pose.y > obj[1])
+    assert out.found and script.local_cells == [SPEC.world_to_cell(*obj)] * 2
+    assert any("another side" in e.detail for e in out.events if e.kind == "navigate")
 
 
 def test_unreachable_peak_is_skipped_with_a_reason(monkeypatch):

@@ -10,6 +10,7 @@ The paper's strategy (:attr:`Strategy.PAPER`)::
             global search from where the robot stands                  (global_search.py)
         cell = the most probable cell (ties: the one nearest the robot)
         navigate(cell centre, local-search range)                     (injected: costmap + A*)
+                                 (a cell searched before: from another side, revisit_turn_deg round)
         if it did not arrive: exclude the cell (until the next global search; for good after
                               max_nav_failures failures) and go on -- no observation, no Bayes update
         local search facing the cell                                   (local_search.py)
@@ -243,6 +244,10 @@ class AgentConfig:
         the robot first drives to a new vantage point, the map cell farthest from every earlier scan
         point and at least ``vantage_margin_m`` inside the map (within ``vantage_reach_m`` of it).
     vantage_margin_m, vantage_reach_m : float [m]
+    revisit_turn_deg : float [deg]
+        A cell searched again (the Bayes update may leave a cell with strong colour evidence the most
+        probable after one miss) is approached from this much further round it: the first view may
+        have shown the object's narrow side, or a face at a grazing angle.
     max_nav_failures : int
         A cell the navigator failed to reach this often is excluded for the rest of the run (once:
         until the next global search).
@@ -259,6 +264,7 @@ class AgentConfig:
     rescan_distance_m: float = 1.5
     vantage_margin_m: float = 0.8
     vantage_reach_m: float = 0.6
+    revisit_turn_deg: float = 120.0
     max_nav_failures: int = 2
     max_actions: int = 500
 
@@ -435,6 +441,7 @@ class SearchAgent:
         self._lawnmower: list[tuple[float, float]] | None = None
         self._scan_points: list[tuple[float, float]] = []
         self._relocating = False
+        self._stood_at: dict[tuple[int, int], tuple[float, float]] = {}
 
     # -- bookkeeping -------------------------------------------------------------------------------
     def _event(self, kind: str, cell=None, detail: str = "") -> None:
@@ -595,10 +602,27 @@ class SearchAgent:
                 "navigate", target.cell, f"to a new vantage point for the global search: {nav.reason}"
             )
 
+    def _approach(self, cell, xy):
+        """Navigate to local-search range of the cell. A cell searched before is approached from
+        another side (``revisit_turn_deg`` further round it from where the robot stood last time),
+        by asking for a spot near that side's point; when that fails, from wherever the navigator can."""
+        lc = self.config.local_search
+        last = self._stood_at.get(tuple(cell))
+        if last is not None:
+            r = 0.5 * (lc.min_distance_m + lc.max_distance_m)
+            a = math.atan2(last[1] - xy[1], last[0] - xy[0]) + math.radians(self.config.revisit_turn_deg)
+            side = (xy[0] + r * math.cos(a), xy[1] + r * math.sin(a))
+            nav = self._navigate(side, 0.0, 0.5 * (lc.max_distance_m - lc.min_distance_m))
+            p = nav.pose
+            if nav.arrived and lc.min_distance_m - 0.05 <= math.hypot(p.x - xy[0], p.y - xy[1]):
+                return nav, f"from another side: {nav.reason}"
+        nav = self._navigate(xy, lc.min_distance_m, lc.max_distance_m)
+        return nav, nav.reason
+
     def _visit(self, cell, xy) -> LocalSearchResult | None:
         """Navigate to local-search range of the cell, search, and update the map on a miss."""
         lc = self.config.local_search
-        nav = self._navigate(xy, lc.min_distance_m, lc.max_distance_m)
+        nav, how_arrived = self._approach(cell, xy)
         self._nav_paths.append((xy, getattr(nav, "path_xy", None)))
         if not nav.arrived:
             self._nav_failures[cell] += 1
@@ -610,7 +634,9 @@ class SearchAgent:
                 how = "skipped until the next global search"
             self._event("skip", cell, f"not reached ({nav.reason}); {how}")
             return None
-        self._event("navigate", cell, nav.reason)
+        self._event("navigate", cell, how_arrived)
+        p = self.robot.odometry()
+        self._stood_at[tuple(cell)] = (p.x, p.y)
         res = local_search(self.robot, self.db, xy, self.rng, lc, self.matcher)
         self.local_searches += 1
         self._local_since_global += 1
