@@ -249,3 +249,21 @@ def test_bad_inputs_are_refused_clearly():
 
 
 _ = translation
+
+
+def test_matcher_on_a_tiny_database_does_not_crash():
+    """FLANN fails on indexes about as small as k; small databases fall back to exact search."""
+    from dataclasses import replace
+
+    from lab.vision.stereo import Features3D
+
+    rng = np.random.default_rng(0)
+    D = (rng.random((7, 128)) * 100).astype(np.float32)
+    db = train_database("M0", TrainingParams(step_deg=90.0))
+    tiny = replace(db, points_O=db.points_O[:7], descriptors=D, seen_from=db.seen_from[:7])
+    q = np.vstack([D[:3] + 1.0, (rng.random((5, 128)) * 100).astype(np.float32)])
+    f = Features3D(np.zeros((8, 3)), q, np.zeros((8, 2)), np.ones(8), np.tile(np.eye(3), (8, 1, 1)))
+    m = Matcher(tiny)
+    assert m.method == "brute"
+    c = m.match(f)
+    assert {(i, j) for i, j in zip(c.idx_meas, c.idx_db, strict=True) if i < 3} == {(0, 0), (1, 1), (2, 2)}

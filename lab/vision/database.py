@@ -536,6 +536,8 @@ class Matcher:
         self.k = min(k, len(db))
         self._D = np.ascontiguousarray(db.descriptors, dtype=np.float32)
         self._checks = checks
+        if method == "flann" and len(db) < 64:  # FLANN asserts on tiny indexes; exact search is as fast there
+            self.method = method = "brute"
         if method == "flann" and len(db) >= 2:
             cv2.setRNGSeed(0)
             self._index = cv2.flann_Index(self._D, {"algorithm": 1, "trees": trees})
