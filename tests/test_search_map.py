@@ -18,6 +18,7 @@ from lab.search.probability_map import (
     constant_beta_field,
     detection_likelihood,
     growing_beta_field,
+    map_peaks,
     region_prior,
     uniform_prior,
     update,
@@ -239,8 +240,6 @@ def test_map_peaks_are_local_maxima_in_order():
     P[1, 1], P[5, 6], P[6, 2] = 5.0, 9.0, 3.0
     P[5, 5] = 4.0  # a shoulder of the (5, 6) peak, not a peak itself
     P[2, 6] = P[2, 7] = 2.0  # a plateau of two cells: one peak
-    from lab.search.probability_map import map_peaks
-
     assert map_peaks(P) == [(5, 6), (1, 1), (6, 2), (2, 6)]
     assert map_peaks(P, 2) == [(5, 6), (1, 1)]
     assert map_peaks(np.ones((3, 3))) == []  # a flat map has no peak
