@@ -6,8 +6,8 @@ For a candidate action ``u+`` and an assumed truth, a pose hypothesis ``h`` of m
 1. **Predict the measurement.** The action puts the camera at ``G_WC+``; the hypothesis becomes
    ``G_{C+,O}`` with covariance ``Sigma+`` (:meth:`ModelHypotheses.relative_to`). The features of
    ``M_i`` that would be seen are those its database saw from the ring viewpoints around the camera's
-   direction seen from O (``seen_from``, averaged over the viewpoints by the direction's
-   uncertainty and half a ring step), inside the image and the stereo range.
+   direction seen from O (``seen_from``, pooled over the neighbouring viewpoints, one ring step and
+   the direction's uncertainty wide), inside the image and the stereo range.
 2. **Sample** ``N`` measurement sets ``D~ ~ p(D_{k+1} | theta, u+, M_i)``: a pose
    ``X~ ~ N(mu+, Sigma+)`` per set, each visible feature measured and matched with probability
    ``p_detect`` times its visibility, at ``X~ (+) b_l`` plus stereo noise from the camera's error
@@ -152,10 +152,12 @@ class MonteCarloEvaluator:
     def _visible(self, i: int, G_CO: np.ndarray, sigma_dir: float) -> tuple[np.ndarray, np.ndarray]:
         """Features of model i that a frame taken at relative pose G_CO may show, and how likely.
 
-        ``seen_from`` is averaged over the ring viewpoints around the camera's direction, weighted by
-        the direction's uncertainty plus half a ring step (:func:`viewpoint_weights`): the prediction
-        varies smoothly with the pose, and one training render's luck does not decide it. Features
-        outside the image or the stereo range are dropped.
+        ``seen_from`` is one training render's yes or no per viewpoint, a noisy sample of whether a
+        feature is found from there (the number a viewpoint saw is 0.45-0.99 of what the rendered
+        tables measure, at random); it is pooled over the ring viewpoints around the camera's direction
+        with Gaussian weights of width one ring step, widened by the direction's uncertainty
+        (:func:`viewpoint_weights`), so the prediction varies smoothly with the pose. Features outside
+        the image or the stereo range are dropped.
 
         Returns
         -------
@@ -163,7 +165,7 @@ class MonteCarloEvaluator:
         p_seen : ndarray, shape (n,)
         """
         db = self.dbs[i]
-        w = viewpoint_weights(G_CO, db.viewpoints, math.hypot(sigma_dir, 0.5 * self._ring_step[i]))
+        w = viewpoint_weights(G_CO, db.viewpoints, math.hypot(sigma_dir, self._ring_step[i]))
         p_seen = db.seen_from @ w
         idx = np.flatnonzero(p_seen > 0)
         p = db.points_O[idx] @ G_CO[:3, :3].T + G_CO[:3, 3]

@@ -13,8 +13,15 @@ Every model is scored on the **same** measured feature set ``D_k`` (all the fram
 where ``D^i_k`` are the ``n^i_k`` measured features that model ``M_i`` *explains* and the other
 ``n_k - n^i_k`` are scored under a clutter density ``c``. Without the clutter term a model that explains
 fewer features would be scored on fewer numbers, and its likelihood could not be compared with the
-others'; with it, explaining a feature is worth ``log N(d) - log c`` (about 16 nats for a feature at
+others'; with it, explaining a feature is worth ``log N(d) - log c`` (about 15 nats for a feature at
 1 m), and the model that explains more of what is seen wins.
+
+**Eq. (9), per feature.** By default the Gaussian is evaluated as the product of each explained
+feature's marginal ``N(d_m; H_m(mu_bar), C_m Sigma_bar C_m^T + Sigma_m)`` (Eq. (12)'s independence,
+which the planning uses too). The joint form couples the features through the shared pose uncertainty
+``C Sigma_bar C^T``; then one feature that passes its own gate but disagrees with the pose the others
+imply costs hundreds of nats (measured: 170 nats for one feature on a shared face), which is more
+than a whole view of a unique face is worth. :class:`LikelihoodForm` selects either.
 
 **Explained.** A measured feature ``d`` is explained by ``M_i`` when a database feature ``b_l`` of
 ``M_i`` has a descriptor within ``max_descriptor_distance`` of ``d``'s *and* passes the geometric gate
@@ -61,7 +68,8 @@ weight, so expected and actual updates agree.
 **Floor.** After normalising in log space, no probability is allowed below ``floor`` (1e-3 by default):
 probabilities below it are raised to it and the others scaled down so that the sum stays 1
 (:func:`apply_floor`). A model knocked out by one bad frame (a mismatch, a lost track) comes back as
-soon as a few features favour it (log(1e-3) is ~7 nats, a couple of dozen explained features), and a
+soon as the evidence favours it (log(1e-3) is ~7 nats: some 60 features more than the others explain,
+two or three frames of its unique face), and a
 frame that carries no evidence leaves the probabilities exactly as they were (the floor is idempotent;
 it is not a mixing with the uniform distribution, which would drift every model towards 1/L).
 """
