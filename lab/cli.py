@@ -138,7 +138,12 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("--json", type=Path, help="write the result JSON here")
     idf.add_argument("--out", type=Path, help="write the figures (Fig. 5, 6, 7) and identify.json here")
     idf.add_argument("--record", type=Path, help="write an animation of the run (.gif, or .mp4 with ffmpeg)")
-    idf.add_argument("--robot", type=Path, help="run on a real (or emulated) robot: its hardware TOML config")
+    idf.add_argument(
+        "--robot",
+        type=Path,
+        help="run on a real robot: its hardware TOML config (hardware/robot.toml); hardware/rehearsal.toml "
+        "rehearses on device emulators with simulator-rendered frames (--true-model, --mover set its scene)",
+    )
 
     se = sub.add_parser(
         "search",
@@ -332,20 +337,22 @@ def _cmd_identify(args) -> int:
     if args.max_actions < 0:
         raise LabError(f"--max-actions must be >= 0, got {args.max_actions}")
     if args.robot is not None:
-        from lab.hardware.robot import HardwareRobot
-        from lab.identification.agent import AgentConfig, IdentificationAgent
+        from lab.hardware.run import identify_on_robot
 
-        with HardwareRobot(args.robot) as robot:
-            agent = IdentificationAgent(
-                robot,
-                planner=args.planner,
-                seed=args.seed,
-                config=AgentConfig(max_actions=args.max_actions, max_time_s=args.max_time),
-            )
-            identified = agent.run()
-        print(
-            f"identified model: {identified} after {agent.n_actions} actions; P = {agent.P.round(3).tolist()}"
+        res = identify_on_robot(
+            args.robot,
+            planner=args.planner,
+            seed=args.seed,
+            max_actions=args.max_actions,
+            max_time_s=args.max_time,
+            true_model=args.true_model,
+            mover=args.mover,
+            json_path=args.json,
+            progress=print,
         )
+        keys = ("true_model", "identified_model", "success", "actions", "sim_time_s", "wall_time_s")
+        summary = {k: res[k] for k in (*keys, "final_posterior", "pose_error", "watchdog_stops")}
+        print(_json.dumps(summary, indent=2))
         return 0
     from lab.identification.run import run_identify
 

@@ -19,11 +19,19 @@ from typing import Any
 
 from lab.errors import ConfigError
 
-__all__ = ["BaseConfig", "CameraConfig", "HardwareConfig", "PTUConfig", "RobotConfig", "load_config"]
+__all__ = [
+    "BaseConfig",
+    "CameraConfig",
+    "HardwareConfig",
+    "PTUConfig",
+    "RobotConfig",
+    "SimSceneConfig",
+    "load_config",
+]
 
 CREATE_BAUDS = (115200, 19200)
 PTU_BAUDS = (9600, 19200, 38400, 57600, 115200)
-CAMERA_SOURCES = ("side_by_side", "two_devices", "replay", "synthetic")
+CAMERA_SOURCES = ("side_by_side", "two_devices", "replay", "synthetic", "sim")
 
 
 @dataclass(frozen=True)
@@ -91,6 +99,20 @@ class CameraConfig:
 
 
 @dataclass(frozen=True)
+class SimSceneConfig:
+    """``[sim]``: the world a ``source = "sim"`` camera renders (a rehearsal, :mod:`lab.hardware.rehearsal`).
+
+    Poses are ``[x, y, heading_deg]`` in the world frame W: ``robot_start`` is where the base stands when
+    the Create emulator's true pose is (0, 0, 0); ``carrier_start`` is where the box's carrier stands.
+    """
+
+    world: str = "arena"
+    robot_start: tuple = (-1.2, 0.0, 0.0)
+    carrier_start: tuple = (0.0, 0.0, 0.0)
+    supersample: int = 1
+
+
+@dataclass(frozen=True)
 class HardwareConfig:
     """The whole file. ``path`` is where it was read from (None when built in code)."""
 
@@ -98,6 +120,7 @@ class HardwareConfig:
     base: BaseConfig = field(default_factory=BaseConfig)
     ptu: PTUConfig = field(default_factory=PTUConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
+    sim: SimSceneConfig = field(default_factory=SimSceneConfig)
     path: Path | None = None
 
     def with_ports(self, *, base: str | None = None, ptu: str | None = None) -> HardwareConfig:
@@ -107,7 +130,13 @@ class HardwareConfig:
         return dataclasses.replace(self, base=b, ptu=p)
 
 
-_SECTIONS = {"robot": RobotConfig, "base": BaseConfig, "ptu": PTUConfig, "camera": CameraConfig}
+_SECTIONS = {
+    "robot": RobotConfig,
+    "base": BaseConfig,
+    "ptu": PTUConfig,
+    "camera": CameraConfig,
+    "sim": SimSceneConfig,
+}
 _REQUIRED = {
     ("base", "port"): '"/dev/ttyUSB0"',
     ("ptu", "port"): '"/dev/ttyUSB1"',
@@ -258,6 +287,19 @@ def _check_values(c: HardwareConfig, where: str) -> None:
             f"[camera] {k} must be 3 numbers [m], got {list(v)}",
         )
     need(cam.source != "replay" or bool(cam.folder), '[camera] folder is required when source = "replay"')
+    sim = c.sim
+    for k in ("robot_start", "carrier_start"):
+        v = getattr(sim, k)
+        need(
+            len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v),
+            f"[sim] {k} must be [x_m, y_m, heading_deg], got {list(v)}",
+        )
+    need(sim.supersample in (1, 2, 3, 4), f"[sim] supersample must be 1, 2, 3 or 4, got {sim.supersample}")
+    if cam.source == "sim":
+        from lab.sim.scene import list_worlds
+
+        worlds = list_worlds()
+        need(sim.world in worlds, f"[sim] world {sim.world!r} is not a world; worlds: {', '.join(worlds)}")
 
 
 def _resolve_paths(c: HardwareConfig, root: Path) -> HardwareConfig:

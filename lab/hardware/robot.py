@@ -102,7 +102,43 @@ def make_camera_source(cfg: HardwareConfig) -> StereoSource:
         return TwoDeviceCamera(c.devices[0], c.devices[1], c.width, c.height, flush_grabs=c.flush_grabs)
     if c.source == "replay":
         return ReplayStereoSource.from_folder(c.folder)
+    if c.source == "sim":
+        raise ConfigError(
+            '[camera] source = "sim" renders the simulator from the emulators\' true state: run it through '
+            "lab.hardware.rehearsal.rehearsal() (lab identify --robot does), or choose another source"
+        )
     return ReplayStereoSource.synthetic(c.width, c.height)
+
+
+def _fraction(t: float, t0: float, t1: float) -> float:
+    """Where ``t`` lies between ``t0`` and ``t1``, clamped to [0, 1]."""
+    return 0.0 if t1 <= t0 else min(1.0, max(0.0, (t - t0) / (t1 - t0)))
+
+
+def _pan_tilt_at(t: float, a: PanTiltState, b: PanTiltState) -> PanTiltState:
+    """The head's state at ``t`` [s], linearly between readings ``a`` (before the frame) and ``b`` (after).
+
+    A camera delivers a frame some time after it was exposed (a rendered one: after the render); reading
+    the head only afterwards would pair the image with a later head angle.
+    """
+    s = _fraction(t, a.t, b.t)
+    return PanTiltState(
+        a.pan + s * (b.pan - a.pan),
+        a.tilt + s * (b.tilt - a.tilt),
+        t,
+        b.pan_target,
+        b.tilt_target,
+        a.moving or b.moving,
+    )
+
+
+def _pose_at(t: float, a: tuple[float, Pose2D], b: tuple[float, Pose2D]) -> Pose2D:
+    """The odometry pose at ``t`` [s], linearly between ``(t_a, pose_a)`` and ``(t_b, pose_b)``."""
+    (ta, pa), (tb, pb) = a, b
+    s = _fraction(t, ta, tb)
+    dth = math.atan2(math.sin(pb.theta - pa.theta), math.cos(pb.theta - pa.theta))
+    th = pa.theta + s * dth
+    return Pose2D(pa.x + s * (pb.x - pa.x), pa.y + s * (pb.y - pa.y), math.atan2(math.sin(th), math.cos(th)))
 
 
 _LIVE: weakref.WeakSet[HardwareRobot] = weakref.WeakSet()
@@ -537,9 +573,13 @@ class HardwareRobot(Robot):
         self._check_open()
         if after is not None:
             check_finite(after=after)
+        pt0, odom0 = self.pan_tilt(), (time.monotonic(), self.odometry())
         raw = self._source.read(after=after)
+        pt1, odom1 = self.pan_tilt(), (time.monotonic(), self.odometry())
         left, right = self._rectifier.rectify(raw.left, raw.right)
-        return StereoFrame(raw.t, left, right, self._camera, self.pan_tilt(), self.odometry())
+        return StereoFrame(
+            raw.t, left, right, self._camera, _pan_tilt_at(raw.t, pt0, pt1), _pose_at(raw.t, odom0, odom1)
+        )
 
     def odometry(self) -> Pose2D:
         """Wheel odometry since the first connect (kept across reconnects; motion while unplugged is lost)."""
