@@ -23,6 +23,12 @@ def emu(tmp_path):
     e.close()
 
 
+def _frames_after_the_stop(b: Create2) -> None:
+    """Wait for two stream frames received after now (the emulator has already stopped its wheels)."""
+    for _ in range(2):
+        assert b.wait_for_frame(timeout=2.0) is not None
+
+
 def _make(port, **kw):
     events = []
     b = Create2(port, on_event=lambda k, m: events.append((k, m)), **kw)
@@ -66,10 +72,13 @@ def test_odometry_across_encoder_wrap_matches_the_true_pose(tmp_path):
         b.connect()
         b.enable()
         b.drive_direct(right_mm_s=-60, left_mm_s=200)
-        time.sleep(0.5)
+        # driven until both counters wrapped (waited for, not timed: a loaded machine runs the emulator late)
+        assert wait_until(
+            lambda: 100 < e.encoder_counts()[0] < 65400 and 30 < e.encoder_counts()[1] < 65000, 10.0
+        )
         b.stop()
-        assert wait_until(lambda: e.wheel_speeds() == (0, 0), 0.2)
-        time.sleep(0.05)  # a few frames after the stop
+        assert wait_until(lambda: e.wheel_speeds() == (0, 0), 2.0)
+        _frames_after_the_stop(b)
         left, right = e.encoder_counts()
         assert left < 65400 and right > 30  # both wrapped (forward and backward)
         s = b.sensors()
@@ -88,12 +97,14 @@ def test_garbage_and_bad_checksums_are_counted_without_false_alarms(base, emu):
     base.enable()
     base.drive_direct(100, 100)
     n0, c0 = base.frames, base.corrupt_frames
+    # one fault after the other, each waited for until the emulator has sent it (two faults in one frame
+    # would count as one corrupt frame)
     emu.garbage_before_next = bytes([19, 24, 1, 2, 3, 19, 200, 0xFF, 19])
-    time.sleep(0.03)
+    assert wait_until(lambda: emu.garbage_before_next == b"", 2.0)
     emu.bad_checksum_next = 3
-    time.sleep(0.06)
+    assert wait_until(lambda: emu.bad_checksum_next == 0, 2.0)
     emu.truncate_next = 2
-    time.sleep(0.05)
+    assert wait_until(lambda: emu.truncate_next == 0, 2.0)
     emu.inject(bytes(range(256)))  # every byte value, including 19, on the wire
     # each bad frame counted, and the good ones keep coming (waited for, not timed: a loaded CI machine
     # delivers the 15 ms stream late)
@@ -233,8 +244,9 @@ def test_drive_opcode_bytes_on_the_wire(base, emu):
 def test_odometry_sign_conventions(base, emu):
     base.enable()
     base.drive_direct(right_mm_s=100, left_mm_s=-100)  # right forward, left back: counter-clockwise
-    time.sleep(0.2)
+    assert wait_until(lambda: emu.theta > 0.15, 5.0)
     base.stop()
-    time.sleep(0.05)
-    assert base.odometry().theta > 0.1 and emu.theta > 0.1
+    assert wait_until(lambda: emu.wheel_speeds() == (0, 0), 2.0)
+    _frames_after_the_stop(base)
+    assert base.odometry().theta == pytest.approx(emu.theta, abs=0.01) and emu.theta > 0.15
     assert math.hypot(base.odometry().x, base.odometry().y) < 0.002

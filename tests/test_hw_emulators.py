@@ -14,11 +14,11 @@ from lab.hardware.create2 import StreamParser
 from lab.hardware.emulators import Create2Emulator, PTUEmulator, start_emulators
 
 
-def _ask(s, cmd: bytes, wait=0.05) -> bytes:
+def _ask(s, cmd: bytes) -> bytes:
+    """Send a command and read its reply up to the line end (bounded by the port's timeout)."""
     s.reset_input_buffer()
     s.write(cmd)
-    time.sleep(wait)
-    return s.read(s.in_waiting)
+    return s.read_until(b"\r\n", 200)
 
 
 def test_close_never_hangs_with_a_client_blocked_in_read(tmp_path):
@@ -67,7 +67,7 @@ def test_unplug_and_replug_as_pyserial_sees_it(tmp_path):
 def test_ptu_factory_replies_match_the_manual(tmp_path):
     e = PTUEmulator(tmp_path / "p").start()
     try:
-        with serial.Serial(e.port, timeout=0.2) as s:
+        with serial.Serial(e.port, timeout=2.0) as s:
             assert _ask(s, b"PP ") == b"PP * Current Pan position is 0\r\n"  # echo on, verbose
             assert _ask(s, b"PP3200 ") == b"PP3200 ! Maximum allowable Pan position is 3090\r\n"
             assert _ask(s, b"PS3300 ") == b"PS3300 ! Pan speed cannot exceed 2902 positions/sec\r\n"
@@ -76,7 +76,7 @@ def test_ptu_factory_replies_match_the_manual(tmp_path):
             assert _ask(s, b"TX ") == b"* 604\r\n"
             assert _ask(s, b"PR ") == b"* 185.1428\r\n"
             assert _ask(s, b"XYZ ") == b"! Illegal Command\r\n"
-            assert _ask(s, b"R ", wait=0.3) == b"!T!T!P!P*\r\n"
+            assert _ask(s, b"R ") == b"!T!T!P!P*\r\n"
     finally:
         e.close()
 
@@ -85,7 +85,7 @@ def test_ptu_moves_at_its_speed_on_its_clock(tmp_path):
     e = PTUEmulator(tmp_path / "p", speed=1000).start()
     try:
         with serial.Serial(e.port, timeout=1.0) as s:
-            _ask(s, b"ED FT ")
+            assert _ask(s, b"ED ") == b"ED *\r\n" and _ask(s, b"FT ") == b"*\r\n"
             t0 = time.monotonic()
             s.write(b"PP500 A ")
             line = s.read_until(b"*\r\n*\r\n", 100)

@@ -305,7 +305,7 @@ def test_estop_is_latched_on_the_device_too(rig):
     assert robot.state == "estopped"
 
 
-def test_sigint_stops_the_base(rig):
+def test_sigint_stops_the_base(rig, record_property):
     robot, create = rig.robot, rig.emu.create
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         pytest.skip("the SIGINT hook is not installed (not the main thread)")
@@ -314,10 +314,17 @@ def test_sigint_stops_the_base(rig):
     assert wait_until(lambda: create.wheel_speeds() != (0, 0), 0.3)
     t = create.now()
     with pytest.raises(KeyboardInterrupt):
-        os.kill(os.getpid(), signal.SIGINT)
-        time.sleep(0.5)  # interrupted at once
-    assert wait_until(lambda: create.first_zero_drive_after(t) is not None, 0.3)
-    assert create.first_zero_drive_after(t).t - t < 0.1  # not the watchdog (0.5 s): the hook
+        # to the main thread itself: os.kill may hand a process signal to another thread, whose handler
+        # then runs whenever that thread is next scheduled (on a loaded machine, after any fixed sleep)
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+        for _ in range(500):
+            time.sleep(0.01)  # interrupted at once (bounded: 5 s)
+    assert wait_until(lambda: create.first_zero_drive_after(t) is not None, 2.0)
+    latency = create.first_zero_drive_after(t).t - t
+    record_property("sigint_stop_after_s", round(latency, 4))
+    # the hook stopped it, not the watchdog: no watchdog stop counted, and before the watchdog could fire
+    assert robot.watchdog_stops == 0 and not any(e.kind == "watchdog" for e in rig.events)
+    assert latency < robot.cmd_timeout_s
 
 
 def test_exit_and_exception_paths_stop_the_base(rig):
@@ -462,3 +469,84 @@ def test_emulate_runs_until_stopped(tmp_path):
         t.join(2.0)
     assert not t.is_alive() and lines[-1] == "emulators stopped"
     assert not (tmp_path / "ttyPTU").exists()
+
+
+def _emulated_toml(tmp_path, links, **replace):
+    """hardware/emulated.toml with its ports in ``links`` and an absolute calibration path, edited."""
+    text = (
+        EMULATED_TOML.read_text()
+        .replace("/tmp/lab-emulators", str(links))
+        .replace("calibration/", str(EMULATED_TOML.parent / "calibration") + "/")
+    )
+    for old, new in replace.items():
+        assert old in text
+        text = text.replace(old, new, 1)
+    return _write(tmp_path, text, "emulated.toml")
+
+
+@pytest.mark.parametrize(
+    "edit, what, message, fix",
+    [
+        (
+            {"[ptu]": "[ptu]\nbauds = 9600"},
+            "config",
+            "unknown key [ptu] 'bauds'; allowed: port, baudrate,",
+            "hardware/README.md lists every key",
+        ),
+        ({'port = "': 'porte = "'}, "config", "unknown key [base] 'porte'", "hardware/README.md"),
+        (
+            {"baudrate = 9600": "baudrate = 9601"},
+            "config",
+            "[ptu] baudrate 9601 is not a PTU-D46 rate",
+            "edit the file",
+        ),
+        (
+            {"width = 320\nheight = 240": "width = 640\nheight = 480"},
+            "calibration",
+            "is for 320x240 images but the camera delivers 640x480",
+            "calibrate (hardware/README.md step 6) or fix [camera] calibration",
+        ),
+        (
+            {"example_stereo_320x240.yml": "missing.yml"},
+            "calibration",
+            "missing.yml not found",
+            "fix [camera] calibration",
+        ),
+    ],
+)
+def test_check_names_each_bad_configuration_in_one_line(tmp_path, edit, what, message, fix):
+    lines = []
+    path = _emulated_toml(tmp_path, tmp_path / "links", **edit)
+    assert check(path, out=lines.append, emulate=True) == 1
+    fails = [line for line in lines if line.startswith("FAIL")]
+    assert len(fails) == 1, lines  # the one thing to fix, and nothing else fails because of it
+    assert fails[0].startswith(f"FAIL  {what}: ") and message in fails[0]
+    assert fix in fails[0].split("  -> fix: ")[1]
+    assert all("\n" not in line for line in lines)
+
+
+def test_check_names_a_base_at_the_wrong_baud_rate(tmp_path):
+    lines = []
+    links = tmp_path / "links"
+    path = _emulated_toml(tmp_path, links)
+    with start_emulators(links) as emu:
+        emu.create.baud_mismatch = True  # the robot answers, but at another rate: garbage
+        emu.create.stream_ids, emu.create.mode = (7, 35), 1
+        assert check(path, out=lines.append) == 1
+    fails = [line for line in lines if line.startswith("FAIL")]
+    assert len(fails) == 1 and fails[0].startswith("FAIL  Create 2: "), lines
+    assert "wrong baud rate" in fails[0] and "[base] baudrate" in fails[0] and "\n" not in fails[0]
+
+
+def test_cli_with_a_bad_robot_config_prints_one_line(tmp_path, capsys):
+    from lab.cli import main
+
+    path = _emulated_toml(tmp_path, tmp_path / "links", **{"[ptu]": "[ptu]\nbauds = 9600"})
+    assert main(["identify", "--robot", str(path), "--max-actions", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("lab identify: error: ") and "unknown key [ptu] 'bauds'" in err and "\n" not in err
+    no_robot = _emulated_toml(tmp_path, tmp_path / "nowhere")  # nothing on these ports
+    assert main(["identify", "--robot", str(no_robot), "--max-actions", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("lab identify: error: ") and "not found" in err and "[ptu] port" in err
+    assert "\n" not in err
