@@ -166,6 +166,11 @@ def build_parser() -> argparse.ArgumentParser:
     se.add_argument("--max-time", type=float, default=600.0, help="sim-time budget in seconds (default 600)")
     se.add_argument("--json", type=Path, help="write the result JSON here")
     se.add_argument("--out", type=Path, help="write the figures here")
+    se.add_argument(
+        "--record",
+        type=Path,
+        help="write an animation of the run (.gif, or .mp4 with ffmpeg): one frame per event",
+    )
     se.add_argument("--robot", type=Path, help="real robot: not supported for the search yet")
 
     hw = sub.add_parser(
@@ -335,6 +340,11 @@ def _cmd_identify(args) -> int:
         from lab.hardware.robot import HardwareRobot
         from lab.identification.agent import AgentConfig, IdentificationAgent
 
+        recorder = None
+        if args.record is not None:
+            from lab.viz.recorder import Recorder
+
+            recorder = Recorder(args.record)
         with HardwareRobot(args.robot) as robot:
             agent = IdentificationAgent(
                 robot,
@@ -342,7 +352,13 @@ def _cmd_identify(args) -> int:
                 seed=args.seed,
                 config=AgentConfig(max_actions=args.max_actions, max_time_s=args.max_time),
             )
+            if recorder is not None:
+                from lab.viz.live import LiveView
+
+                LiveView.for_identification(agent, rate_hz=None, recorder=recorder, widget=False)
             identified = agent.run()
+        if recorder is not None:
+            print(f"recording: {recorder.close()}")
         print(
             f"identified model: {identified} after {agent.n_actions} actions; P = {agent.P.round(3).tolist()}"
         )
@@ -402,6 +418,7 @@ def _cmd_search(args) -> int:
         navigate=navigator_factory,
         obstacles=args.obstacles,
         progress=True,
+        record=args.record,
     )
     data = res.to_json()
     if args.json is not None:

@@ -83,10 +83,11 @@ def run_identify(
         )
         recorder = None
         if record is not None:
+            from lab.viz.live import LiveView
             from lab.viz.recorder import Recorder
 
-            recorder = Recorder(record)
-            agent.on_step = lambda a, frame: recorder.add(frame.left, frame.t)
+            recorder = Recorder(record)  # the live view drawn at every step: one frame per step
+            LiveView.for_identification(agent, rate_hz=None, recorder=recorder, widget=False)
         truth = []  # (G_WC, G_WO) true at each frame's capture: for scoring and figures only
         agent_step = agent.step
 
