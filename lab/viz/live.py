@@ -155,6 +155,7 @@ class LiveView:
         self._last_event = None  # search: the last SearchEvent seen
         self._odom: list[tuple[float, float, float]] = []  # search: the robot's poses at events
         self.camera_image: np.ndarray | None = None  # the camera panel's picture, as last drawn (RGB)
+        self._prev = None  # the observer this view was chained after
         self._dpi = 80
         self._fig = None
         self._size = (w / self._dpi, h / self._dpi)
@@ -162,22 +163,44 @@ class LiveView:
     # --- construction ---------------------------------------------------------------------------
     @classmethod
     def for_identification(cls, agent, **kw) -> LiveView:
-        """A view of an :class:`~lab.identification.agent.IdentificationAgent`, hooked in as its observer."""
+        """A view of an :class:`~lab.identification.agent.IdentificationAgent`, hooked in as its observer
+        (an observer already there, e.g. a recording's view, is called first: they chain)."""
         view = cls("identification", agent, **kw)
+        view._prev = agent.on_step
         agent.on_step = view
         return view
 
     @classmethod
-    def for_search(cls, agent, **kw) -> LiveView:
-        """A view of a :class:`~lab.search.agent.SearchAgent`, hooked in as its observer."""
+    def for_search(cls, agent, follow_robot: bool = True, **kw) -> LiveView:
+        """A view of a :class:`~lab.search.agent.SearchAgent`, hooked in as its observer.
+
+        The agent reports events (a global search, an arrival, a local search), which are seconds to
+        minutes apart; with ``follow_robot`` and a ``rate_hz``, the view also redraws at that rate while
+        the robot drives or scans, from the robot's steps (its ``step`` is wrapped on this instance;
+        :meth:`close` unwraps it). A recording (``rate_hz=None``) draws one frame per event only.
+        """
         kw.setdefault("navigator", getattr(agent.navigate, "navigator", None))
         view = cls("search", agent, **kw)
+        view._prev = agent.observer
         agent.observer = view
+        if follow_robot and view.rate_hz is not None:
+            robot = agent.robot
+            base_step = robot.step
+
+            def step(dt: float) -> None:
+                base_step(dt)
+                if view._due(robot.now()):
+                    view.update()
+
+            robot.step = step
+            view._robot_wrapped = robot
         return view
 
     # --- the observer protocol ------------------------------------------------------------------
     def __call__(self, agent, item) -> None:
         """Called by the agent: ``item`` is the step's StereoFrame (identification) or a SearchEvent."""
+        if self._prev is not None:
+            self._prev(agent, item)
         self.n_calls += 1
         t = float(item.t)
         if self.kind == "identification":
@@ -186,14 +209,20 @@ class LiveView:
             self._last_event = item
             p = agent.robot.odometry()
             self._odom.append((p.x, p.y, p.theta))
-        if self.rate_hz is not None and self._next_t is not None and t < self._next_t - 1e-9:
-            return
-        if self.rate_hz is not None:
-            period = 1.0 / self.rate_hz
-            self._next_t = t + period if self._next_t is None else self._next_t + period
-            while self._next_t <= t + 1e-9:
-                self._next_t += period
-        self.update()
+        if self._due(t):
+            self.update()
+
+    def _due(self, t: float) -> bool:
+        """Is a redraw due at sim time ``t`` [s]? (Advances the schedule of redraws when it is.)"""
+        if self.rate_hz is None:
+            return True
+        if self._next_t is not None and t < self._next_t - 1e-9:
+            return False
+        period = 1.0 / self.rate_hz
+        self._next_t = t + period if self._next_t is None else self._next_t + period
+        while self._next_t <= t + 1e-9:
+            self._next_t += period
+        return True
 
     def update(self) -> np.ndarray:
         """Draw now and push the picture to the widget, the recorder and the window; returns it (RGB)."""
@@ -228,13 +257,13 @@ class LiveView:
         return self._widget
 
     def _t(self) -> float:
-        item = self._last_frame if self.kind == "identification" else self._last_event
-        if item is not None:
-            return float(item.t)
+        """Sim time of the picture [s]: the frame's (identification), the robot's clock (search)."""
+        if self.kind == "identification" and self._last_frame is not None:
+            return float(self._last_frame.t)
         try:
             return float(self.agent.robot.now())
-        except Exception:  # noqa: BLE001 - a closed robot: no clock, time 0 for the picture
-            return 0.0
+        except Exception:  # noqa: BLE001 - a closed robot: the last event's time, or 0
+            return 0.0 if self._last_event is None else float(self._last_event.t)
 
     def _show_window(self, rgb: np.ndarray) -> None:  # pragma: no cover - needs a display
         import matplotlib.pyplot as plt
@@ -251,11 +280,14 @@ class LiveView:
         self._win.figure.canvas.flush_events()
 
     def close(self) -> None:
-        """Detach from the agent (its observer back to None) and free the figure."""
+        """Detach from the agent (its observer back to the one before) and free the figure."""
         if self.kind == "identification" and getattr(self.agent, "on_step", None) is self:
-            self.agent.on_step = None
+            self.agent.on_step = self._prev
         if self.kind == "search" and getattr(self.agent, "observer", None) is self:
-            self.agent.observer = None
+            self.agent.observer = self._prev
+        robot = self.__dict__.pop("_robot_wrapped", None)
+        if robot is not None and "step" in vars(robot):
+            del robot.step  # the class's step again
         self._fig = None
 
     # --- drawing --------------------------------------------------------------------------------
