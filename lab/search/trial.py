@@ -237,6 +237,7 @@ def run_search(
     max_wall_time: float | None = None,
     progress: bool = False,
     record=None,
+    attach: Callable | None = None,
 ) -> SearchResult:
     """Run one search trial in the simulator and score it.
 
@@ -271,6 +272,9 @@ def run_search(
     record : str or Path, optional
         Write an animation of the run there (``.gif``, or ``.mp4`` with ffmpeg): the live view
         (:mod:`lab.viz.live`) drawn at every event, stamped with the sim time.
+    attach : callable, optional
+        ``attach(agent)`` once the agent is built, before it runs: e.g. a notebook's live view,
+        ``attach=lambda agent: display(LiveView.for_search(agent).widget)``.
 
     Returns
     -------
@@ -315,6 +319,8 @@ def run_search(
 
             recorder = Recorder(record)
             LiveView.for_search(agent, rate_hz=None, recorder=recorder, widget=False)
+        if attach is not None:
+            attach(agent)
         out = agent.run()
         G_true = w.truth.G_W(object)
         G_WC_true = w.truth.G_WC()  # the head has not moved since the last frame of a found track
