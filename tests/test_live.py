@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 from types import SimpleNamespace
@@ -191,3 +192,42 @@ def test_teleop_panel_buttons_drive_the_carrier():
             panel.press("jump")
         with pytest.raises(ConfigError, match="drives a teleop mover"):
             TeleopPanel(make_mover("static", c))
+
+
+def test_search_view_follows_the_robot_between_events_at_its_rate(monkeypatch):
+    """A kinematic robot drives for 3 s of sim time between the agent's events: the view redraws at
+    2 Hz from the robot's steps, drawing the robot where its odometry says; close() unwraps the robot."""
+    from nav_fakes import KinematicRobot
+
+    import lab.search.agent as agent_mod
+    from lab.navigation import GridSpec
+    from lab.search.agent import BudgetedRobot, SearchAgent, SearchEvent
+    from lab.search.probability_map import ProbabilityMap
+
+    monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)
+    robot = BudgetedRobot(KinematicRobot(Pose2D(0.0, -2.0, math.pi / 2)), 60.0)
+    robot.enable()
+    db = SimpleNamespace(name="toy_block")
+    agent = SearchAgent(
+        robot, db, lambda *a: None, ProbabilityMap(GridSpec.from_bounds(-3, -4, 3, 4, 0.2)),
+        rng=np.random.default_rng(0),
+    )  # fmt: skip
+    view = LiveView.for_search(agent, rate_hz=2.0)
+    w = view.widget
+    assert agent.observer is view and "step" in vars(robot)
+    agent._event("global", detail="scripted")  # an event draws at once (t = 0)
+    robot.drive(0.2, 0.0)
+    for _ in range(30):
+        robot.drive(0.2, 0.0)
+        robot.step(0.1)
+    assert view.n_calls == 1 and view.n_draws == 7  # t = 0 (event), then 0.5, 1.0, ..., 3.0 s
+    p = robot.odometry()
+    assert p.y > -1.5
+    x, y = view._a["map_robot"].get_data()
+    assert (x[0], y[0]) == (p.x, p.y)
+    assert cv2.imdecode(np.frombuffer(w.value, np.uint8), cv2.IMREAD_COLOR).shape == (540, 960, 3)
+    view.close()
+    assert agent.observer is None and "step" not in vars(robot)
+    robot.step(0.1)
+    assert view.n_draws == 7
+    assert isinstance(agent._events[0], SearchEvent)
