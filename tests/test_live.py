@@ -231,3 +231,12 @@ def test_search_view_follows_the_robot_between_events_at_its_rate(monkeypatch):
     robot.step(0.1)
     assert view.n_draws == 7
     assert isinstance(agent._events[0], SearchEvent)
+
+
+def test_bad_record_path_is_one_clear_line_before_the_run(tmp_path):
+    r = subprocess.run(
+        [sys.executable, "-m", "lab", "search", "--object", "toy_block", "--record", str(tmp_path / "r.avi")],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "r.avi: the file must end in .gif or .mp4" in r.stderr

@@ -294,6 +294,11 @@ def run_search(
         )
     if not (isinstance(max_time, (int, float)) and math.isfinite(max_time) and max_time > 0):
         raise ConfigError(f"max_time must be a finite number of seconds > 0, got {max_time!r}")
+    recorder = None
+    if record is not None:  # a bad path is refused before anything is built
+        from lab.viz.recorder import Recorder
+
+        recorder = Recorder(record)
     rng = np.random.default_rng(seed)
     if place is None:
         place = random_placement(scene, object, rng)
@@ -312,12 +317,9 @@ def run_search(
         budget = BudgetedRobot(robot, max_time, max_wall_time)
         nav = navigate(budget, spec)
         agent = SearchAgent(budget, db, nav, ProbabilityMap(spec), cfg, rng=np.random.default_rng([seed, 1]))
-        recorder = None
-        if record is not None:
+        if recorder is not None:
             from lab.viz.live import LiveView
-            from lab.viz.recorder import Recorder
 
-            recorder = Recorder(record)
             LiveView.for_search(agent, rate_hz=None, recorder=recorder, widget=False)
         if attach is not None:
             attach(agent)
