@@ -158,6 +158,7 @@ class LiveView:
         self._prev = None  # the observer this view was chained after
         self._dpi = 80
         self._fig = None
+        self.n_full_draws = 0  # renders that redrew the axes (the others blit the data only)
         self._size = (w / self._dpi, h / self._dpi)
 
     # --- construction ---------------------------------------------------------------------------
@@ -299,9 +300,50 @@ class LiveView:
             self._draw_identification()
         else:
             self._draw_search()
-        canvas = self._fig.canvas
-        canvas.draw()
+        # Blitting: the axes, ticks and labels change only when a limit does (rarely: the limits move
+        # in coarse steps); the data artists are "animated" and drawn over a saved background.
+        fig, canvas = self._fig, self._fig.canvas
+        if self._dirty or self._bg is None:
+            canvas.draw()  # everything but the animated artists
+            self._bg = canvas.copy_from_bbox(fig.bbox)
+            self._dirty = False
+            self.n_full_draws += 1
+        else:
+            canvas.restore_region(self._bg)
+        for art in self._dyn:
+            fig.draw_artist(art)
         return np.ascontiguousarray(np.asarray(canvas.buffer_rgba())[..., :3])
+
+    def _animate(self, art, first: bool = False):
+        """Mark an artist as redrawn at every render (drawn first, under the others, when ``first``)."""
+        art.set_animated(True)
+        if first:
+            self._dyn.insert(0, art)
+        else:
+            self._dyn.append(art)
+        return art
+
+    def _set_lims(self, ax, xlim, ylim) -> None:
+        """Set the axes' limits; a change makes the next render a full one (new ticks)."""
+        if not (np.allclose(ax.get_xlim(), xlim) and np.allclose(ax.get_ylim(), ylim)):
+            ax.set_xlim(*xlim)
+            ax.set_ylim(*ylim)
+            self._dirty = True
+
+    def _image(self, key: str, ax, img: np.ndarray, **kw):
+        """Show ``img`` in ``ax`` (an animated image made on first use; a new size re-makes it)."""
+        a = self._a
+        im = a.get(key)
+        if im is not None and im.get_array().shape[:2] != img.shape[:2]:
+            self._dyn.remove(im)
+            im.remove()
+            im = None
+        if im is None:
+            im = a[key] = self._animate(ax.imshow(img, interpolation="nearest", **kw), first=True)
+            self._dirty = True  # imshow sets the axes' limits
+        else:
+            im.set_data(img)
+        return im
 
     def _build(self) -> None:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -314,7 +356,7 @@ class LiveView:
             2,
             width_ratios=(1.0, 1.15),
             left=0.06,
-            right=0.98,
+            right=0.93,
             bottom=0.08,
             top=0.93,
             wspace=0.18,
@@ -322,10 +364,21 @@ class LiveView:
         )
         self._fig = fig
         self._a = {}
+        self._dyn = []
+        self._bg = None
+        self._dirty = True
         if self.kind == "identification":
             self._build_identification(fig, gs)
         else:
             self._build_search(fig, gs)
+        a = self._a
+        a["suptitle"] = fig.suptitle(" ", fontsize=9)
+        # every data artist made in _build_*, and the titles (their text changes): animated
+        for k, v in list(a.items()):
+            if k in ("scene", "cam", "prob", "costax", "cross") or v is None:
+                continue
+            for art in v if isinstance(v, list) else [v]:
+                self._animate(art)
 
     # identification -------------------------------------------------------------------------------
     def _build_identification(self, fig, gs) -> None:
@@ -351,7 +404,7 @@ class LiveView:
         a["scene_text"] = ax.text(0.02, 0.98, "", transform=ax.transAxes, va="top", fontsize=7)
         cam = fig.add_subplot(gs[0, 1])
         cam.set_axis_off()
-        cam.set_title("left camera", fontsize=9)
+        a["cam_title"] = cam.set_title("left camera", fontsize=8)
         a["cam"] = cam
         a["img"] = None
         a["feat"] = cam.scatter(np.zeros(0), np.zeros(0), s=4, color="w", alpha=0.6, lw=0)
@@ -376,7 +429,9 @@ class LiveView:
             )[0]
             for i in range(L)
         ]
-        pr.legend(loc="center left", fontsize=7)
+        # outside the axes, drawn once with the background (the lines never cross it)
+        pr.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=7, borderaxespad=0.0)
+        a["prob_title"] = pr.set_title(" ", fontsize=8)
         a["bands"] = None
         a["decisions"] = pr.plot([], [], color="c", ls=":", lw=1)[0]
 
@@ -434,10 +489,11 @@ class LiveView:
             pts.append(cand[:, :2])
         pts.append(np.array([[x, y]]))
         allp = np.concatenate(pts)
-        mid = 0.5 * (allp.min(axis=0) + allp.max(axis=0))
-        half = 0.5 * float(np.max(allp.max(axis=0) - allp.min(axis=0))) + 0.5  # square: equal aspect
-        a["scene"].set_xlim(mid[0] - half, mid[0] + half)
-        a["scene"].set_ylim(mid[1] - half, mid[1] + half)
+        # square limits (equal aspect) on a 0.5 m lattice: they move rarely, each move a full redraw
+        q = 0.5
+        mid = np.round(0.5 * (allp.min(axis=0) + allp.max(axis=0)) / q) * q
+        half = q * math.ceil((0.5 * float(np.max(allp.max(axis=0) - allp.min(axis=0))) + 0.4) / q)
+        self._set_lims(a["scene"], (mid[0] - half, mid[0] + half), (mid[1] - half, mid[1] + half))
         rec = steps[-1] if steps else None
         gain_txt = ""
         if decisions:
@@ -455,10 +511,7 @@ class LiveView:
             if i_top is not None:
                 img = self._draw_pose(img, frame, i_top)
             self.camera_image = img
-            if a["img"] is None:
-                a["img"] = a["cam"].imshow(img, interpolation="nearest")
-            else:
-                a["img"].set_data(img)
+            self._image("img", a["cam"], img)
             f = getattr(ag, "last_features", None)
             a["feat"].set_offsets(f.uv if f is not None and len(f) else np.zeros((0, 2)))
             if i_top is not None:
@@ -468,10 +521,9 @@ class LiveView:
             a["matched"].set_offsets(matched)
             a["used"].set_offsets(used)
             name = ag.names[i_top] if i_top is not None else "none"
-            a["cam"].set_title(
+            a["cam_title"].set_text(
                 f"left camera: {0 if f is None else len(f)} features, {len(matched)} matched to {name}, "
                 f"{len(used)} used",
-                fontsize=8,
             )
         # --- probabilities against time, with the scanning spans
         pr = a["prob"]
@@ -481,23 +533,25 @@ class LiveView:
             for i, ln in enumerate(a["lines"]):
                 if i < P.shape[1]:
                     ln.set_data(t, P[:, i])
-            t0, t1 = float(t[0]), max(float(t[-1]), float(t[0]) + 1.0)
-            pr.set_xlim(t0, t1)
+            t0 = float(t[0])
+            t1 = t0 + 20.0 * max(1, math.ceil((float(t[-1]) - t0) / 20.0))  # in 20 s steps
+            self._set_lims(pr, (t0, t1), (-0.02, 1.02))
             if a["bands"] is not None:
+                self._dyn.remove(a["bands"])
                 a["bands"].remove()
             scanning = np.array([s.head_mode == "scanning" for s in steps])
-            a["bands"] = pr.fill_between(t, 0, 1, where=scanning, step="post", color="gold", alpha=0.25, lw=0)
+            bands = pr.fill_between(t, 0, 1, where=scanning, step="post", color="gold", alpha=0.25, lw=0)
+            a["bands"] = self._animate(bands, first=True)
             td = [d.t for d in decisions]
             a["decisions"].set_data(np.repeat(td, 3), np.tile([0.0, 1.0, np.nan], len(td)))
         state = steps[-1].head_mode if steps else "-"
         ident = getattr(ag, "identified", None)
         best = int(np.argmax(P_now))
-        pr.set_title(
+        a["prob_title"].set_text(
             f"model probabilities ({state}; shaded: scanning)   max: {ag.names[best]} {P_now[best]:.2f}"
             + ("" if ident is None else f"   identified: {ag.names[ident]}"),
-            fontsize=8,
         )
-        self._fig.suptitle(f"identification, planner {ag.planner.value}   t = {self._t():.1f} s", fontsize=10)
+        a["suptitle"].set_text(f"identification, planner {ag.planner.value}   t = {self._t():.1f} s")
 
     def _top_model(self) -> int | None:
         """The most probable model that has a pose estimate (None when no filter has one)."""
@@ -564,6 +618,7 @@ class LiveView:
         cam = fig.add_subplot(gs[:, 1])
         cam.set_axis_off()
         a["cam"] = cam
+        a["cam_title"] = cam.set_title(" ", fontsize=8)
         a["img"] = None
         a["peaks"] = cam.scatter(np.zeros(0), np.zeros(0), s=160, facecolors="none", edgecolors="red", lw=1.5)
 
@@ -597,41 +652,26 @@ class LiveView:
         if nav is not None:
             state = np.asarray(nav.costmap.state, float)
             shade = np.select([state == 2, state == 1], [0.0, 1.0], 0.6)  # obstacle, free, unknown
-            if a["cost"] is None:
-                x0, x1, y0, y1 = nav.costmap.spec.extent
-                a["cost"] = a["costax"].imshow(
-                    shade.T,
-                    origin="lower",
-                    extent=(x0, x1, y0, y1),
-                    cmap="gray",
-                    vmin=0,
-                    vmax=1,
-                    interpolation="nearest",
-                )
-            else:
-                a["cost"].set_data(shade.T)
+            x0, x1, y0, y1 = nav.costmap.spec.extent
+            self._image("cost", a["costax"], shade.T, origin="lower", extent=(x0, x1, y0, y1), cmap="gray",
+                        vmin=0, vmax=1)  # fmt: skip
         a["cost_traj"].set_data(traj[:, 0], traj[:, 1])
         a["cost_robot"].set_data([p.x], [p.y])
         a["cost_plan"].set_data(plan[:, 0], plan[:, 1])
         if nav is None:
             x0, x1, y0, y1 = ag.pmap.spec.extent
-            a["costax"].set_xlim(x0, x1)
-            a["costax"].set_ylim(y0, y1)
+            self._set_lims(a["costax"], (x0, x1), (y0, y1))
         # camera: the found pose, else the last global scan's back-projection peaks
         img, uv, title = self._search_picture(globals_)
         if img is not None:
             self.camera_image = img
-            if a["img"] is None:
-                a["img"] = a["cam"].imshow(img, interpolation="nearest")
-            else:
-                a["img"].set_data(img)
+            self._image("img", a["cam"], img)
             a["peaks"].set_offsets(uv)
-        a["cam"].set_title(title, fontsize=8)
+        a["cam_title"].set_text(title)
         what = "" if ev is None else f"{ev.kind}: {ev.detail}"
-        self._fig.suptitle(
+        a["suptitle"].set_text(
             f"search for {ag.db.name}   t = {self._t():.1f} s   global {ag.global_searches}, "
-            f"local {ag.local_searches}\n{what[:110]}",
-            fontsize=9,
+            f"local {ag.local_searches}\n{what[:110]}"
         )
 
     def _planned_path(self, target, p) -> np.ndarray:
