@@ -24,7 +24,7 @@ import pytest
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
-from lab.viz.live import LiveView, TeleopPanel, _ellipse_xy, identification_inliers
+from lab.viz.live import LiveView, TeleopPanel, _ellipse_xy, identification_inliers, in_background
 from lab.viz.recorder import read_animation
 
 STAMP_ROWS = 40  # the recorder's time stamp sits in the bottom rows of each frame
@@ -36,17 +36,35 @@ def _changed(a: np.ndarray, b: np.ndarray) -> bool:
 
 
 def test_identify_record_has_one_frame_per_step_and_the_picture_changes(tmp_path):
+    """In the background, as a notebook runs it: the recording's view, a chained notebook view at 2 Hz,
+    and the teleop panel turning the box from the start of the run."""
     from lab.identification.run import run_identify
 
-    res = run_identify(
-        2, seed=3, mover="static", planner="circle", max_actions=1, max_time_s=3.0, figures=False,
-        record=tmp_path / "run.gif",
+    seen = {}
+
+    def attach(agent, carrier):
+        seen["view"] = LiveView.for_identification(agent)  # chained after the recording's view
+        seen["widget"] = seen["view"].widget
+        seen["carrier"], seen["yaw0"] = carrier, carrier.box_yaw
+        TeleopPanel(carrier.mover).buttons["box left"].click()
+
+    run = in_background(
+        run_identify, 2, seed=3, mover="teleop", planner="circle", max_actions=1, max_time_s=3.0,
+        figures=False, record=tmp_path / "run.gif", attach=attach,
     )  # fmt: skip
+    res = run.result(timeout=900)
     frames = read_animation(res["recording"])
-    assert len(frames) == len(res["history"]) >= 10
+    n = len(res["history"])
+    assert len(frames) == n >= 10
     assert len({f.shape for f in frames}) == 1
     changed = [_changed(a, b) for a, b in zip(frames, frames[1:], strict=False)]
     assert sum(changed) >= 0.8 * len(changed)  # the scene, camera and probabilities move every step
+    view = seen["view"]
+    assert view.n_calls == n and 2 <= view.n_draws <= n // 2 + 1  # 2 Hz of sim time at 5 steps/s
+    assert seen["widget"].value[:8] == b"\x89PNG\r\n\x1a\n"
+    turned = seen["carrier"].box_yaw - seen["yaw0"]  # truth, for the test only
+    rate = TeleopPanel(seen["carrier"].mover).speeds.box_turn_rate
+    assert turned == pytest.approx(rate * res["sim_time_s"])
 
 
 @pytest.mark.slow
