@@ -120,19 +120,32 @@ def _run_steps(agent, view, n: int):
     return frames
 
 
-def test_view_in_a_widget_on_the_simulator(tmp_path):
+def _sim_agent(world):
     from lab.identification.agent import IdentificationAgent
-    from lab.sim import SimRobot, SimWorld, load_box_models
+    from lab.sim import SimRobot, load_box_models
 
     models = load_box_models()
+    world.add_carrier(models[1], Pose2D(0.0, 0.0, 0.0))
+    robot = SimRobot(world, start=Pose2D(-1.0, 0.0, 0.0), seed=0)
+    return IdentificationAgent(robot, tuple(m.name for m in models), planner="circle")
+
+
+def test_view_in_a_widget_on_the_simulator(tmp_path):
+    from lab.sim import SimWorld
+
+    with SimWorld("arena") as world:  # the same run without a view: the reference
+        plain = _sim_agent(world)
+        plain.robot.enable()
+        for _ in range(8):
+            plain.step()
     with SimWorld("arena") as world:
-        world.add_carrier(models[1], Pose2D(0.0, 0.0, 0.0))
-        robot = SimRobot(world, start=Pose2D(-1.0, 0.0, 0.0), seed=0)
-        agent = IdentificationAgent(robot, tuple(m.name for m in models), planner="circle")
+        agent = _sim_agent(world)
         view = LiveView.for_identification(agent, rate_hz=None)
         w = view.widget
         frames = _run_steps(agent, view, 8)
         assert view.n_draws == 8 and agent.on_step is view
+        # watching does not change the run: the same posteriors, bit for bit
+        np.testing.assert_array_equal([s.posterior for s in agent.steps], [s.posterior for s in plain.steps])
         pic = cv2.imdecode(np.frombuffer(w.value, np.uint8), cv2.IMREAD_COLOR)
         assert pic.shape == (540, 960, 3)
         np.testing.assert_array_equal(cv2.cvtColor(pic, cv2.COLOR_BGR2RGB), view.render())
