@@ -59,6 +59,7 @@ def one_run(with_view: bool, sim_time_s: float, rate_hz: float) -> dict:
         "cpu": cpu,
         "steps": len(agent.steps),
         "draws": 0 if view is None else view.n_draws,
+        "full": 0 if view is None else view.n_full_draws,
         "view_s": view_s,
     }
 
@@ -90,9 +91,11 @@ def main():
         f"cpu {med[True]['cpu'] / med[False]['cpu']:.3f}"
     )
     draws = [r["draws"] for r in runs[True]]
+    full = [r["full"] for r in runs[True]]
     per_draw = [1e3 * r["view_s"] / max(r["draws"], 1) for r in runs[True]]
     print(
-        f"view: {statistics.median(draws):.0f} draws per run, {statistics.median(per_draw):.0f} ms per draw "
+        f"view: {statistics.median(draws):.0f} draws per run ({statistics.median(full):.0f} full redraws), "
+        f"{statistics.median(per_draw):.0f} ms per draw "
         f"(median); its share of the run's wall time: median {100 * statistics.median(frac):.1f} %, "
         f"max {100 * float(np.max(frac)):.1f} %"
     )

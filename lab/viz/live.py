@@ -526,9 +526,11 @@ class LiveView:
         pts.append(np.array([[x, y]]))
         allp = np.concatenate(pts)
         # square limits (equal aspect) on a 0.5 m lattice: they move rarely, each move a full redraw
+        # (at least 1.5 m each side of the centre: the robot, the object and the ring fit from the start)
         q = 0.5
-        mid = np.round(0.5 * (allp.min(axis=0) + allp.max(axis=0)) / q) * q
-        half = q * math.ceil((0.5 * float(np.max(allp.max(axis=0) - allp.min(axis=0))) + 0.4) / q)
+        mid = np.round(0.5 * (allp.min(axis=0) + allp.max(axis=0)) / (2 * q)) * (2 * q)
+        half = max(1.5, q * math.ceil((0.5 * float(np.max(allp.max(axis=0) - allp.min(axis=0))) + 0.4) / q))
+        mid = np.clip(mid, allp.max(axis=0) - half + 0.2, allp.min(axis=0) + half - 0.2)  # all inside
         self._set_lims(a["scene"], (mid[0] - half, mid[0] + half), (mid[1] - half, mid[1] + half))
         rec = steps[-1] if steps else None
         gain_txt = ""
