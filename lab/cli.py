@@ -171,6 +171,11 @@ def build_parser() -> argparse.ArgumentParser:
     se.add_argument("--max-time", type=float, default=600.0, help="sim-time budget in seconds (default 600)")
     se.add_argument("--json", type=Path, help="write the result JSON here")
     se.add_argument("--out", type=Path, help="write the figures here")
+    se.add_argument(
+        "--record",
+        type=Path,
+        help="write an animation of the run (.gif, or .mp4 with ffmpeg): one frame per event",
+    )
     se.add_argument("--robot", type=Path, help="real robot: not supported for the search yet")
 
     hw = sub.add_parser(
@@ -349,6 +354,7 @@ def _cmd_identify(args) -> int:
             mover=args.mover,
             json_path=args.json,
             progress=print,
+            record=args.record,
         )
         keys = ("true_model", "identified_model", "success", "actions", "sim_time_s", "wall_time_s")
         summary = {k: res[k] for k in (*keys, "final_posterior", "pose_error", "watchdog_stops")}
@@ -409,6 +415,7 @@ def _cmd_search(args) -> int:
         navigate=navigator_factory,
         obstacles=args.obstacles,
         progress=True,
+        record=args.record,
     )
     data = res.to_json()
     if args.json is not None:

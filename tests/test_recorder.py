@@ -43,3 +43,15 @@ def test_bad_recordings_are_refused(tmp_path):
     with pytest.raises(ValueError, match="RGB uint8"):
         rec.add(np.zeros((10, 10)), 0.0)
     assert rec.close() is None  # nothing to write
+
+
+def test_frames_are_kept_losslessly_and_in_rgb_order(tmp_path):
+    rng = np.random.default_rng(0)
+    imgs = [rng.integers(0, 256, (60, 80, 3), dtype=np.uint8) for _ in range(3)]
+    imgs[0][:20, :, :] = (255, 0, 0)  # red stays red (no channel swap)
+    rec = Recorder(tmp_path / "a.gif")
+    for k, img in enumerate(imgs):
+        rec.add(img, float(k))
+    for kept, img in zip(rec.frames, imgs, strict=True):
+        np.testing.assert_array_equal(kept[:30], img[:30])  # above the time stamp, exactly the input
+    assert len(read_animation(rec.close())) == 3

@@ -42,12 +42,14 @@ def identify_on_robot(
     mover: str = "static",
     json_path: Path | None = None,
     progress=None,
+    record: Path | None = None,
 ) -> dict:
     """Run the unchanged :class:`~lab.identification.agent.IdentificationAgent` on the robot a config
     describes and return the ``lab identify`` JSON (also written to ``json_path``).
 
     ``true_model`` and ``mover`` set the rendered scene of a rehearsal and are ignored otherwise.
-    ``progress`` (callable(str)), if given, gets one line per decision.
+    ``progress`` (callable(str)), if given, gets one line per decision. ``record``, if given, is where
+    the run's animation goes: the live view (:mod:`lab.viz.live`) drawn at every step.
     """
     from lab.hardware.rehearsal import rehearsal
     from lab.hardware.robot import HardwareRobot
@@ -78,12 +80,23 @@ def identify_on_robot(
                     progress(f"decision {seen[0]} at t={frame.t - t0:.1f} s: P = {np.round(a.P, 3).tolist()}")
 
             agent.on_step = on_step
+        recorder = None
+        if record is not None:
+            from lab.viz.live import LiveView
+            from lab.viz.recorder import Recorder
+
+            recorder = Recorder(record)  # one frame per step, chained after the progress lines
+            LiveView.for_identification(agent, rate_hz=None, recorder=recorder, widget=False)
         t0 = robot.now()
         identified = agent.run()
         elapsed = robot.now() - t0
         truth = r.truth() if r is not None else None
         watchdog_stops = robot.watchdog_stops
     wall = time.perf_counter() - t_wall
+    if recorder is not None:
+        written = recorder.close()
+        if progress is not None:
+            progress(f"recording: {written}")
     pose_error = {"translation_m": None, "rotation_deg": None}
     if truth is not None and truth.G_WO is not None and agent.bank.estimates[true_model] is not None:
         pose_error = _pose_error(agent.bank.estimates[true_model].G_CO, se3_inv(truth.G_WC) @ truth.G_WO)

@@ -140,6 +140,9 @@ class IdentificationAgent:
         Seeds RANSAC and the random planner.
     evaluator : optional
         An expected-entropy evaluator to use instead of building one (LUT or MC).
+    observer : callable, optional
+        ``observer(agent, frame)`` after every step (live views, recordings: :mod:`lab.viz.live`);
+        kept as :attr:`on_step`. None (the default) costs nothing.
     """
 
     def __init__(
@@ -152,6 +155,7 @@ class IdentificationAgent:
         scoring: ScoringConfig | None = None,
         action_config: ActionConfig | None = None,
         evaluator=None,
+        observer=None,
     ):
         try:
             self.planner = PlannerChoice(planner) if isinstance(planner, str) else planner
@@ -188,7 +192,8 @@ class IdentificationAgent:
         self._tracking_since: float | None = None
         self._arrival_t: float | None = None
         self.identified: int | None = None
-        self.on_step = None  # optional callable(agent, frame) for live views
+        self.on_step = observer  # optional callable(agent, frame) for live views
+        self.last_features = self.last_observation = None  # the last frame's D_k and its FrameObservation
 
     # --- set-up -----------------------------------------------------------------------------------
     def _make_evaluator(self):
@@ -218,6 +223,7 @@ class IdentificationAgent:
         f = stereo_features(frame.left, frame.right, frame.camera, t=frame.t)
         obs = observe_frame(self.P, f, self.bank, predicted, self.matchers, self.scorers, self.scoring)
         self.P = obs.belief.P
+        self.last_features, self.last_observation = f, obs
         return f, obs
 
     def _object_origin_C(self) -> np.ndarray | None:

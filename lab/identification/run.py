@@ -41,6 +41,7 @@ def run_identify(
     max_time_s: float = 240.0,
     figures: bool = True,
     record: Path | None = None,
+    attach=None,
 ) -> dict:
     """Run one episode in the simulator and return the ``lab identify`` JSON (also written to ``json_path``).
 
@@ -54,6 +55,12 @@ def run_identify(
         static, scripted, random, evasive or teleop.
     planner : str
         lut, mc, random or circle.
+    record : Path, optional
+        Write an animation of the run there: the live view (:mod:`lab.viz.live`) at every step.
+    attach : callable, optional
+        ``attach(agent, carrier)`` once the agent is built, before it runs: a notebook's live view
+        and teleoperation panel, e.g. ``display(LiveView.for_identification(agent).widget)`` and
+        ``display(TeleopPanel(carrier.mover).widget)`` (with ``mover="teleop"``).
     """
     from lab.identification.agent import AgentConfig, IdentificationAgent
     from lab.sim import SimRobot, SimWorld, load_box_models
@@ -83,10 +90,13 @@ def run_identify(
         )
         recorder = None
         if record is not None:
+            from lab.viz.live import LiveView
             from lab.viz.recorder import Recorder
 
-            recorder = Recorder(record)
-            agent.on_step = lambda a, frame: recorder.add(frame.left, frame.t)
+            recorder = Recorder(record)  # the live view drawn at every step: one frame per step
+            LiveView.for_identification(agent, rate_hz=None, recorder=recorder, widget=False)
+        if attach is not None:
+            attach(agent, carrier)
         truth = []  # (G_WC, G_WO) true at each frame's capture: for scoring and figures only
         agent_step = agent.step
 

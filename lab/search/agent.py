@@ -408,6 +408,9 @@ class SearchAgent:
         Seeds the RANSAC starts of the local searches.
     max_time_s : float [s], optional
         Also end the run (between actions) once this much robot time has passed.
+    observer : callable, optional
+        ``observer(agent, event)`` after every :class:`SearchEvent` (live views and recordings,
+        :mod:`lab.viz.live`). None (the default) costs nothing.
     """
 
     def __init__(
@@ -420,8 +423,11 @@ class SearchAgent:
         *,
         rng: np.random.Generator,
         max_time_s: float = math.inf,
+        observer: Callable | None = None,
     ):
         self.robot, self.db, self.navigate, self.pmap = robot, db, navigate, pmap
+        self.observer = observer
+        self.last_local: LocalSearchResult | None = None  # the last local search (for the observer)
         self.config = config or AgentConfig()
         self.rng = rng
         self.max_time_s = max_time_s
@@ -448,6 +454,8 @@ class SearchAgent:
         self._events.append(
             SearchEvent(self.robot.now(), kind, None if cell is None else tuple(cell), detail)
         )
+        if self.observer is not None:
+            self.observer(self, self._events[-1])
 
     def _snapshot(self, label: str, cell=None) -> None:
         self._snapshots.append(
@@ -638,6 +646,7 @@ class SearchAgent:
         p = self.robot.odometry()
         self._stood_at[tuple(cell)] = (p.x, p.y)
         res = local_search(self.robot, self.db, xy, self.rng, lc, self.matcher)
+        self.last_local = res
         self.local_searches += 1
         self._local_since_global += 1
         self._mark_searched(xy)

@@ -23,4 +23,5 @@ def navigator_factory(robot, spec, timeout_s: float = 120.0):
         arrived = r.outcome is _Outcome.ARRIVED
         return NavOutcome(arrived, r.reason or r.outcome.name, r.pose)
 
+    navigate.navigator = nav  # for the live view's costmap (lab.viz.live)
     return navigate

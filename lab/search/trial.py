@@ -154,6 +154,8 @@ class SearchResult:
         Distance between the odometry's and the true robot position at the end of the run.
     events : tuple of SearchEvent
     trace : SearchTrace
+    recording : str or None
+        The animation written (``record``): one frame per event.
     """
 
     object: str
@@ -179,6 +181,7 @@ class SearchResult:
     odometry_error_m: float = 0.0
     events: tuple[SearchEvent, ...] = field(default=(), repr=False)
     trace: SearchTrace | None = field(default=None, repr=False, compare=False)
+    recording: str | None = None
 
     def to_json(self) -> dict:
         """The JSON ``lab search --json`` writes (plain types only)."""
@@ -206,6 +209,7 @@ class SearchResult:
             "camera_frame_error": self.camera_frame_error,
             "odometry_error_m": round(float(self.odometry_error_m), 4),
             "events": [e.as_dict() for e in self.events],
+            "recording": self.recording,
             "map_snapshots": [
                 {
                     "t": round(s.t, 3),
@@ -232,6 +236,8 @@ def run_search(
     supersample: int = 2,
     max_wall_time: float | None = None,
     progress: bool = False,
+    record=None,
+    attach: Callable | None = None,
 ) -> SearchResult:
     """Run one search trial in the simulator and score it.
 
@@ -263,6 +269,12 @@ def run_search(
         Also stop after this much wall-clock time.
     progress : bool
         Say on stderr when a database is being built.
+    record : str or Path, optional
+        Write an animation of the run there (``.gif``, or ``.mp4`` with ffmpeg): the live view
+        (:mod:`lab.viz.live`) drawn at every event, stamped with the sim time.
+    attach : callable, optional
+        ``attach(agent)`` once the agent is built, before it runs: e.g. a notebook's live view,
+        ``attach=lambda agent: display(LiveView.for_search(agent).widget)``.
 
     Returns
     -------
@@ -282,6 +294,11 @@ def run_search(
         )
     if not (isinstance(max_time, (int, float)) and math.isfinite(max_time) and max_time > 0):
         raise ConfigError(f"max_time must be a finite number of seconds > 0, got {max_time!r}")
+    recorder = None
+    if record is not None:  # a bad path is refused before anything is built
+        from lab.viz.recorder import Recorder
+
+        recorder = Recorder(record)
     rng = np.random.default_rng(seed)
     if place is None:
         place = random_placement(scene, object, rng)
@@ -300,6 +317,12 @@ def run_search(
         budget = BudgetedRobot(robot, max_time, max_wall_time)
         nav = navigate(budget, spec)
         agent = SearchAgent(budget, db, nav, ProbabilityMap(spec), cfg, rng=np.random.default_rng([seed, 1]))
+        if recorder is not None:
+            from lab.viz.live import LiveView
+
+            LiveView.for_search(agent, rate_hz=None, recorder=recorder, widget=False)
+        if attach is not None:
+            attach(agent)
         out = agent.run()
         G_true = w.truth.G_W(object)
         G_WC_true = w.truth.G_WC()  # the head has not moved since the last frame of a found track
@@ -342,4 +365,5 @@ def run_search(
         odometry_error_m=odometry_error,
         events=out.events,
         trace=SearchTrace(out, spec, trajectory, scene),
+        recording=None if recorder is None or (p := recorder.close()) is None else str(p),
     )
