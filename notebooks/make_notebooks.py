@@ -505,10 +505,13 @@ would leave, scoring $\tilde{\mathbf{D}}$ against every model $M_j$ with Eq. (9)
 $$E_{\mathbf{D}_{k+1}}[H^+] \approx \sum_i P(M_i \mid \theta)\ \frac{1}{N} \sum_{n=1}^{N} H^+(\tilde{\mathbf{D}}_n),
 \qquad \tilde{\mathbf{D}}_n \sim p(\mathbf{D}_{k+1} \mid \theta, \mathbf{u}, M_i) \qquad (10)$$
 
-($\theta$: everything measured so far). To see the planning on its own, quickly and exactly, we use
-**synthetic** boxes: the real geometry (three faces with one shared page, one unique face), 30
-features per face, no rendering. The box's unique face points to azimuth 60 degrees; the robot's
-pose estimate of it is good (1.4 cm, 1.8 degrees).""",
+($\theta$: everything measured so far). The planner's picture of the object is a set of **hypotheses**
+(`ModelHypotheses`): for every model, the probability $P(M_i)$ and the object's pose in the world frame
+$W$ with its uncertainty, taken from that model's EKF.
+
+To see the planning on its own, quickly and exactly, we use **synthetic** boxes: the real geometry
+(three faces with one shared page, one unique face), 30 features per face, no rendering. The box's
+unique face points to azimuth 60 degrees; every model's pose estimate is good (1.4 cm, 1.8 degrees).""",
     ),
     (
         "code",
@@ -523,7 +526,7 @@ from lab.robot import StereoCamera
 camera = StereoCamera.from_fov(320, 240, 60.0, 0.12, mount_R=(0.0, 0.0, 0.7))   # the robot's camera
 synth = synthetic_box_databases(4, np.random.default_rng(0))                      # S0 .. S3
 G_WO = se3(Rz(math.radians(60)), [0.0, 0.0, 0.49])              # the box in W, unique face towards 60 deg
-Sigma = np.diag([2e-4] * 3 + [1e-3] * 3)                         # pose covariance over [x_r, phi]
+Sigma = np.diag([2e-4] * 3 + [1e-3] * 3)    # pose covariance: position [m^2], small rotation angles [rad^2]
 hyp = ModelHypotheses.one_pose_each(uniform(4), np.stack([G_WO] * 4), np.stack([Sigma] * 4))
 actions = calc_possible_control_actions(hyp.object_centre_W(), camera)   # calcPossibleControlActions
 azimuth = np.degrees([a.azimuth for a in actions])
@@ -545,8 +548,8 @@ assert faces_unique[best] and gain_mc[off_deg > 95].max() < 0.01  # shared faces
         r"""## Lookup tables, Eqs. (13)-(15)
 
 Monte Carlo samples and scores whole feature sets for every goal: too slow to repeat while the robot
-moves. The paper precomputes instead. **Table I**: render true model $M_i$ from each training pose
-$T$ times and count how often each feature $\mathbf{b}^j_l$ of model $M_j$ is matched: $P^j_{\mathbf{b}_l} = \tau / T$.
+moves. The paper precomputes instead, in its **Table I**: render true model $M_i$ from each training
+pose $T$ times; if feature $\mathbf{b}^j_l$ of model $M_j$ is matched in $\tau$ of them, $P^j_{\mathbf{b}_l} = \tau / T$.
 From a goal, the number $W_{ij}$ of features of $M_j$ that will correspond when $M_i$ is the truth is
 a sum of those Bernoulli variables (looked up in the row of the nearest training pose). Then the paper
 takes the residual and its covariance as the same for every feature,
@@ -558,10 +561,11 @@ so the likelihood of the predicted measurement under $M_j$ needs only $W_{ij}$:
 $$p(\tilde{\mathbf{D}} \mid \theta, \mathbf{u}, M_j) = \left[(2\pi)^{3/2} |\Sigma_o|^{1/2}\right]^{-W_{ij}}
 \exp\left(-\frac{W_{ij}}{2}\, \delta_o^T \Sigma_o^{-1} \delta_o\right) \qquad (15)$$
 
-(each feature is 3-D, hence $3/2$; times $c^{\,n - W_{ij}}$ for the features $M_j$ does not explain, as in
-Eq. (9)). The library samples the $W_{ij}$ of one draw at *one* quantile level for all $j$, so that two
-models with equal table rows (a shared face) always get equal counts, and no information appears from
-chance alone. We compute Eqs. (10) and (15) by hand for one goal and compare with the library.""",
+(each feature is 3-D, hence $3/2$), times $c^{\,n - W_{ij}}$ for the $n - W_{ij}$ measured object features
+that $M_j$ does not explain, as in Eq. (9) ($n$ is at least $\max_j W_{ij}$; it cancels in Eq. (7)).
+The library samples the $W_{ij}$ of one draw at *one* quantile level for all $j$, so that two models
+with equal table rows (a shared face) always get equal counts, and no information appears from chance
+alone. We compute Eqs. (10) and (15) by hand for one goal and compare with the library.""",
     ),
     (
         "code",
@@ -572,6 +576,7 @@ from lab.identification.viewpoints import nearest_viewpoint
 
 tables = synthetic_tables(synth)                     # Table I of the synthetic boxes, without rendering
 lut = LookupTableEvaluator(tables, camera)
+# a sharper pose (a tenth of the standard deviations), so that each model looks up exactly one table row
 sharp = ModelHypotheses.one_pose_each(uniform(4), np.stack([G_WO] * 4), np.stack([Sigma / 100] * 4))
 a = actions[6]                                       # the goal at azimuth 60 deg, facing the unique face
 G_CO, Sigma_C = sharp.relative_to(a.G_WC)            # each model's pose seen from that goal's camera
@@ -1056,15 +1061,17 @@ for a in (ax[0], ax[2], ax[3]):
     ),
     (
         "md",
-        r"""**From a cluster to a map cell.** The cluster's disparity $d$ (the median dense-stereo disparity of
-its most object-like pixels) gives its point $p_C$ in the camera frame by the triangulation of notebook
-00, and the world point is
+        r"""**From a cluster to a map cell.** *Dense* stereo gives a disparity for every pixel, not only at
+SIFT features (OpenCV's semi-global block matching). The cluster's disparity $d$, the median over its
+most object-like pixels, gives its point $p_C$ in the camera frame by the triangulation of notebook 00,
+and the world point is
 
 $$p_W = G_{WR}\, G_{RC}\, p_C ,$$
 
-with $G_{WR}$ the robot's pose from odometry and $G_{RC}$ the camera on the pan-tilt head at its current
-angles. A point at a height where an object can stand, inside the room, is a positive detection of its
-cell with the growing $\beta$ above. `process_view` does this for one view; the global search does it for
+with $G_{WR}$ the robot's pose in the world frame $W$ from odometry and $G_{RC}$ the left camera's pose
+on the robot, from the pan-tilt head's current angles ($G_{AB}$ maps points from frame $B$ into frame
+$A$, the papers' convention). A point at a height where an object can stand, inside the room, is a
+positive detection of its cell with the growing $\beta$ above. `process_view` does this for one view; the global search does it for
 12 views (6 pans at 2 tilts) and uses the whole scan's histogram as $I$.""",
     ),
     (
