@@ -1071,8 +1071,8 @@ $$p_W = G_{WR}\, G_{RC}\, p_C ,$$
 with $G_{WR}$ the robot's pose in the world frame $W$ from odometry and $G_{RC}$ the left camera's pose
 on the robot, from the pan-tilt head's current angles ($G_{AB}$ maps points from frame $B$ into frame
 $A$, the papers' convention). A point at a height where an object can stand, inside the room, is a
-positive detection of its cell with the growing $\beta$ above. `process_view` does this for one view; the global search does it for
-12 views (6 pans at 2 tilts) and uses the whole scan's histogram as $I$.""",
+positive detection of its cell with the growing $\beta$ above. `process_view` does this for one view;
+the global search does it for 12 views (6 pans at 2 tilts) and uses the whole scan's histogram as $I$.""",
     ),
     (
         "code",
@@ -1109,7 +1109,7 @@ plt.plot(*true_xy, "r+", ms=14, mew=2); plt.title("M_p after one view (red +: th
 
 To drive to a peak without hitting anything, the robot builds a second grid, the **costmap** $M_c$
 (10 cm cells). Dense stereo gives 3D points $p_W$; a plane fitted to the floor points gives each point's
-height $h$ above the floor. A point with $|h| \le 3$ cm is floor; one from 5 cm up to the robot's height
+height $z$ above the floor. A point with $|z| \le 3$ cm is floor; one from 5 cm up to the robot's height
 (plus a margin) is an obstacle: a table top at 0.75 m is one, because the head would hit it. A cell is
 *obstacle* when obstacle points fell in it (obstacle wins over floor, the paper's conservative rule),
 *free* when only floor points did, and *unknown* otherwise. Obstacles are then **grown** by the robot's
@@ -1118,8 +1118,9 @@ radius, so that A* can plan for a point.
 A* searches the 8-connected grid. A step from cell $u$ into its neighbour $v$ costs
 $c(u, v) = \ell(u, v)\, m(v)$, with $\ell = r$ or $\sqrt 2\, r$ ($r$ the cell size) and a multiplier
 $m(v) \ge 1$: 1 on seen floor, 2 in unknown cells, more close to obstacles, $\infty$ inside grown ones.
-Its heuristic, the octile distance $h(n) = m_{min}\, r\, (\Delta_{max} + (\sqrt 2 - 1)\, \Delta_{min})$
-($\Delta$: the cell offsets from $n$ to the goal), never overestimates the remaining cost, so the path
+Its heuristic, the estimate of the cost still to go from cell $n$, is the octile distance
+$\hat c(n) = m_{min}\, r\, (\Delta_{max} + (\sqrt 2 - 1)\, \Delta_{min})$ ($\Delta$: the cell offsets from $n$
+to the goal, $m_{min}$ the smallest multiplier). It never overestimates the remaining cost, so the path
 A* returns is a cheapest one.
 
 The robot looks around with its head tilted down, and the navigator builds the costmap:""",
@@ -1266,10 +1267,11 @@ else:
         "md",
         r"""**Exercise.**
 
-1. Search for the `book` on the shelf (1.2 m high). Which tilt of the global scan sees it?
-2. Give the local search a larger $\beta$ (`AgentConfig(local_search=LocalSearchConfig(beta=0.5))`,
-   passed as `config=` to `run_search`) and search for the glossy cup again: how does the sequence of
-   snapshots change?""",
+1. Search for the `book` on the shelf, 1.2 m high (`run_search("book", seed=0, place=scene.body("book").pose,
+   navigate=navigator_factory)`). Which tilt of the global scan sees it?
+2. Give the local search a larger $\beta$ (`from lab.search import AgentConfig, LocalSearchConfig`, then
+   `config=AgentConfig(local_search=LocalSearchConfig(beta=0.5))` in `run_search`) and search for the
+   glossy cup again: how does the sequence of snapshots change?""",
     ),
 ]
 
