@@ -203,6 +203,17 @@ def build_parser() -> argparse.ArgumentParser:
     hc.add_argument("--config", required=True, type=Path, help="hardware TOML file, e.g. hardware/robot.toml")
     hc.add_argument("--emulate", action="store_true", help="start the emulators on the config's ports first")
 
+    nb = sub.add_parser(
+        "notebooks",
+        help="open the step-by-step notebooks in JupyterLab",
+        description="Start JupyterLab in the repository's notebooks/ folder (00 simulator and stereo, "
+        "01 pose EKF, 02 entropy planning, 03 grid search, 04 the real robot). Needs the notebooks "
+        "extra: pip install -e '.[notebooks]' (`make notebooks` does both).",
+    )
+    nb.add_argument("--list", action="store_true", help="list the notebooks and exit")
+    nb.add_argument("--fast", action="store_true", help="fast mode (LAB_FAST=1: small budgets, as in CI)")
+    nb.add_argument("--no-browser", action="store_true", help="do not open a browser (print the URL)")
+
     tb = sub.add_parser(
         "tables",
         help="build the lookup tables of the identification planner (cached)",
@@ -464,6 +475,28 @@ def _cmd_tables(args) -> int:
     return 0
 
 
+def _cmd_notebooks(args) -> int:
+    import importlib.util
+    import os
+    import subprocess
+
+    from lab.paths import repo_root
+
+    folder = repo_root() / "notebooks"
+    notebooks = sorted(folder.glob("*.ipynb"))
+    if not notebooks:
+        raise LabError(f"no notebooks in {folder}: `lab notebooks` needs a checkout of the repository")
+    if args.list:
+        for p in notebooks:
+            print(p.name)
+        return 0
+    if importlib.util.find_spec("jupyterlab") is None:
+        raise LabError("JupyterLab is not installed: pip install -e '.[notebooks]' (or run `make notebooks`)")
+    env = dict(os.environ, **({"LAB_FAST": "1"} if args.fast else {}))
+    cmd = [sys.executable, "-m", "jupyterlab", *(["--no-browser"] if args.no_browser else [])]
+    return subprocess.call(cmd, cwd=folder, env=env)
+
+
 def _cmd_demo(args) -> int:
     from lab.demo import run_demo
 
@@ -500,6 +533,7 @@ def main(argv: list[str] | None = None) -> int:
         "grade": _cmd_grade,
         "hardware": _cmd_hardware,
         "identify": _cmd_identify,
+        "notebooks": _cmd_notebooks,
         "render": _cmd_render,
         "search": _cmd_search,
         "tables": _cmd_tables,

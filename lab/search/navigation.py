@@ -11,7 +11,11 @@ __all__ = ["navigator_factory"]
 
 
 def navigator_factory(robot, spec, timeout_s: float = 120.0):
-    """``navigate`` for :func:`lab.search.trial.run_search`: scan once, then ``go_near`` each target."""
+    """``navigate`` for :func:`lab.search.trial.run_search`: scan once, then ``go_near`` each target.
+
+    The returned callable carries its :class:`~lab.navigation.Navigator` as ``navigate.navigator``, so
+    that a caller can show the costmap it built (e.g. :func:`lab.search.figures.fig5_trial`).
+    """
     nav = Navigator(robot)
     state = {"scanned": False}
 
@@ -23,5 +27,5 @@ def navigator_factory(robot, spec, timeout_s: float = 120.0):
         arrived = r.outcome is _Outcome.ARRIVED
         return NavOutcome(arrived, r.reason or r.outcome.name, r.pose)
 
-    navigate.navigator = nav  # for the live view's costmap (lab.viz.live)
+    navigate.navigator = nav
     return navigate
