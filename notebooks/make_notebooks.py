@@ -673,6 +673,7 @@ tables` builds them on first use).""",
 from lab.identification.agent import AgentConfig, IdentificationAgent
 from lab.sim.movers import make_mover
 from lab.viz.identification import fig5
+from lab.viz.live import LiveView
 
 true_model = 2
 world = SimWorld("arena")
@@ -688,10 +689,12 @@ agent = IdentificationAgent(robot, names, planner=planner, seed=0, evaluator=eva
                             config=AgentConfig(max_actions=8, max_time_s=60 if FAST else 240))
 true_poses = []                                      # the box's true pose at every frame: for the plot only
 agent.on_step = lambda agent_, frame: true_poses.append(carrier.G_WO.copy())
+view = LiveView.for_identification(agent)            # the paper's Fig. 6 interface, live: ring, camera, P
+display(view.widget)
 identified = agent.run()
 print(f"identified M{identified} (true: M{true_model}) after {robot.now():.1f} s and {agent.n_actions} actions; "
       f"P = {agent.P.round(3)}")
-assert identified == true_model
+assert identified == true_model and view.n_draws > 0
 """,
     ),
     (
@@ -713,65 +716,54 @@ fig6(d.candidates, d.gains, d.chosen, odom[-1], d.centre_W[:2], path_xy=odom[:, 
         "md",
         r"""## Your turn: drive the object
 
-Now *you* are the operator. The box's carrier takes its commands from the buttons (a `TeleopMover`);
-the robot runs the same agent. Try to keep the unique face hidden, then give up and show it. Each
-"run" button lets 1 s pass (5 agent steps). In fast mode the cell below plays the operator itself:
-it turns the unique face (which starts to the side) towards the robot.""",
+Now *you* are the operator. The box's carrier takes its commands from the buttons of a
+`TeleopPanel` (a `TeleopMover`: each button's command holds until the next one); the robot runs the
+same agent, and a `LiveView` shows what it thinks. Try to keep the unique face hidden, then give up and
+show it. "run 1 s" lets 1 s of simulated time pass (5 agent steps). To drive while the agent runs on its
+own, start the whole episode in a worker thread instead: `run_future = in_background(agent.run)`; the
+buttons then act while it runs (`run_future.result()` waits for its end).
+
+In fast mode the cell after the panel plays the operator: it turns the unique face, which starts to
+the side, towards the robot.""",
     ),
     (
         "code",
         """\
 import ipywidgets as widgets
 from lab.sim.movers import MoverLimits, TeleopMover
+from lab.viz.live import TeleopPanel, TeleopSpeeds, in_background
 
 world.close()
 world = SimWorld("arena")
 carrier = world.add_carrier(models[true_model], Pose2D(0.0, 0.0, 0.0), box_yaw=math.radians(90))
 robot = SimRobot(world, start=Pose2D(-1.2, 0.0, 0.0), seed=1)
 robot.enable()
-teleop = TeleopMover(carrier, MoverLimits(max_box_turn_rate=0.8))
-carrier.mover = teleop
+carrier.mover = TeleopMover(carrier, MoverLimits(max_box_turn_rate=0.8))    # you are the operator
+panel = TeleopPanel(carrier.mover, TeleopSpeeds(box_turn_rate=0.8))
 agent = IdentificationAgent(robot, names, planner=planner, seed=0, evaluator=evaluator,
                             config=AgentConfig(max_actions=8, max_time_s=600))
-view = widgets.Output()
-
-def redraw():
-    with view:
-        view.clear_output(wait=True)
-        fig, ax = plt.subplots(1, 2, figsize=(9, 3), gridspec_kw={"width_ratios": (1.4, 1)})
-        ax[0].imshow(robot.capture_stereo().left); ax[0].axis("off"); ax[0].set_title(f"t = {robot.now():.1f} s")
-        ax[1].bar(names, agent.P); ax[1].set_ylim(0, 1); ax[1].set_title("P(M_i | D)")
-        plt.show()
+view = LiveView.for_identification(agent)
 
 def run(seconds=1.0):
+    \"\"\"Let `seconds` of simulated time pass: the agent perceives, plans and drives; the box does what you said.\"\"\"
     for _ in range(round(seconds / agent.config.dt)):
         if agent.identified is None:
             agent.step()
         else:
             robot.step(agent.config.dt)
-    redraw()
 
-def command(v=0.0, omega=0.0, box_rate=0.0):
-    return lambda _button: teleop.set(v, omega, box_rate)
-
-buttons = [("box left", command(box_rate=0.8)), ("box right", command(box_rate=-0.8)),
-           ("carrier forward", command(v=0.1)), ("carrier turn", command(omega=0.5)), ("stop", command()),
-           ("run 1 s", lambda _b: run(1.0))]
-row = []
-for label, handler in buttons:
-    b = widgets.Button(description=label)
-    b.on_click(handler)
-    row.append(b)
-redraw()
-widgets.VBox([widgets.HBox(row), view])
+run_button = widgets.Button(description="run 1 s", icon="play")
+run_button.on_click(lambda _button: run(1.0))
+run(0.2)                                             # one step, so that the view has a picture
+widgets.VBox([widgets.HBox([panel.widget, run_button]), view.widget])
 """,
     ),
     (
         "code",
         """\
 if FAST:                                  # the operator shows the unique face: a quarter turn towards the robot
-    teleop.set(box_rate=0.8); run(2.0)    # 0.8 rad/s for 2 s
-    teleop.set()
+    panel.press("box left"); run(2.0)     # 0.8 rad/s for 2 s
+    panel.press("stop")
     while agent.P[true_model] < 0.95 and robot.now() < 5.0:
         run(0.4)
     print(f"t = {robot.now():.1f} s: P = {agent.P.round(3)}")
