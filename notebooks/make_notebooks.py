@@ -1295,44 +1295,42 @@ the floor with 2 m of free space around it, and keep a hand near the Create's po
         r"""## Connect
 
 A TOML file describes the robot: serial ports, speed limits, the PTU's directions and zero offsets, the
-camera and its calibration file. The emulated robot is the same file with the emulators' ports.
-
-The emulated camera here replays one stereo pair that the simulator rendered: the robot 1 m in front of
-box model `M1` (the boxes of notebooks 01 and 02). The head and the base move; that picture does not.""",
+camera and its calibration file. Without a robot we use `hardware/rehearsal.toml`, a **rehearsal**: the
+same robot on the emulators, with a camera that renders the simulator's world (the arena, box `M1` on
+its carrier 1.2 m ahead) from the emulators' *true* state: where the Create emulator has driven, where
+the PTU emulator points the head. Everything else, the drivers, the odometry from the wheel encoders,
+the rectification, is the real robot's code. The simulated robot beside it stands in the same scene.""",
     ),
     (
         "code",
         """\
+import contextlib
 from pathlib import Path
 from lab.geometry import Pose2D
-from lab.hardware import HardwareRobot, ReplayStereoSource, load_config, start_emulators
+from lab.hardware import HardwareRobot
+from lab.hardware.rehearsal import rehearsal
 from lab.sim import SimRobot, SimWorld, load_box_models
 
 REPO = Path.cwd().parent                          # the notebooks run in notebooks/
-CONFIG = os.environ.get("LAB_ROBOT_CONFIG")       # e.g. hardware/robot.toml; unset: the emulators
+CONFIG = os.environ.get("LAB_ROBOT_CONFIG")       # e.g. hardware/robot.toml; unset: a rehearsal
 EMULATED = CONFIG is None
+stack = contextlib.ExitStack()                    # closes what we open, in the last cell
 
-# the simulated robot, for the side-by-side cells (and the picture the emulated camera replays)
-world = SimWorld("box_database")
+world = stack.enter_context(SimWorld("arena"))    # the simulated robot's scene: as the rehearsal's
 world.add_carrier(load_box_models()[1], Pose2D(0.0, 0.0, 0.0), box_yaw=math.pi)   # M1, unique face to -x
-sim = SimRobot(world, start=Pose2D(-1.0, 0.05, 0.0), seed=0)
-sim.enable(); sim.command_pan_tilt(0.0, math.radians(-12)); sim.wait_pan_tilt()
-sim_frame = sim.capture_stereo()
-sim.disable()
+sim = SimRobot(world, start=Pose2D(-1.2, 0.0, 0.0), seed=0)
+stack.callback(sim.close)
 
 if EMULATED:
-    emulators = start_emulators()                 # a PTU-D46 and a Create 2 on pseudo-terminals
-    cfg = load_config(REPO / "hardware" / "emulated.toml").with_ports(
-        base=emulators.base_port, ptu=emulators.ptu_port)
-    camera = ReplayStereoSource([(sim_frame.left, sim_frame.right)])
+    r = stack.enter_context(rehearsal(REPO / "hardware" / "rehearsal.toml", true_model=1, box_yaw=math.pi))
+    hw, emulators = r.robot, r.emulators          # a HardwareRobot on the PTU and Create 2 emulators
     print("emulators on", emulators.ports)
 else:
-    emulators, camera = None, None                # the camera the config describes
-    cfg = load_config(Path(CONFIG) if Path(CONFIG).is_absolute() else REPO / CONFIG)
-hw = HardwareRobot(cfg, camera_source=camera)
+    emulators = None
+    hw = stack.enter_context(HardwareRobot(Path(CONFIG) if Path(CONFIG).is_absolute() else REPO / CONFIG))
 robots = {"simulator": sim, "hardware": hw}
 print(f"hardware robot: {hw.state}; PTU limits read from the unit: {hw.pan_tilt_limits}")
-assert hw.camera == sim.camera or not EMULATED    # the emulated robot carries the simulator's camera
+assert hw.camera == sim.camera or not EMULATED    # the rehearsal carries the simulator's camera
 """,
     ),
     (
@@ -1474,7 +1472,8 @@ db = get_database("M1")
 fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
 counts = {}
 for a, (name, robot) in zip(ax, robots.items()):
-    frame = sim_frame if name == "simulator" else robot.capture_stereo()
+    look(robot, 0.0, math.atan2(0.49 - 0.7, 1.1))     # at the box: its centre 0.49 m high, the head 0.7 m
+    frame = robot.capture_stereo(after=robot.now())
     f = stereo_features(frame.left, frame.right, frame.camera)
     m = Matcher(db).match(f)
     counts[name] = (len(f), len(m.pairs(f, db)[0]))
@@ -1482,17 +1481,15 @@ for a, (name, robot) in zip(ax, robots.items()):
     a.plot(f.uv[:, 0], f.uv[:, 1], "y.", ms=3)
     a.set_title(f"{name}: {counts[name][0]} features, {counts[name][1]} matched to M1")
 print(counts)
-if EMULATED:   # the replayed pair went through the hardware's rectification unchanged
-    assert counts["hardware"] == counts["simulator"] and counts["hardware"][1] >= 10
+if EMULATED:   # the rendered pair went through the hardware's rectification and the same pipeline
+    assert all(n_matched >= 10 for _, n_matched in counts.values())
 """,
     ),
     (
         "code",
         """\
 print(hw.read_state().counters)                  # what the drivers counted: frames, commands, retries ...
-hw.close(); sim.close(); world.close()
-if emulators is not None:
-    emulators.close()
+stack.close()                                     # the robots, the emulators and the worlds
 """,
     ),
     (
@@ -1503,8 +1500,10 @@ if emulators is not None:
    watchdog's 0.5 s. Plot the odometry: what do you see, and what would a real robot do?
 2. With the emulators, make the pan-tilt unit stall (`emulators.ptu.stall = True`) and call `look(hw, 0.5, 0.0)`.
    What is raised, and after how long? Where is that time set?
-3. The identification agent of notebook 02 uses only the `Robot` interface. What would it need to run
-   on the emulated robot, and what does it see through a camera that replays one picture?""",
+3. The identification agent of notebook 02 uses only the `Robot` interface, so it runs on `hw` unchanged:
+   `lab identify --robot hardware/rehearsal.toml --true-model 2 --mover static --max-actions 2` runs it in a
+   rehearsal. Compare its control steps with the simulator's: here `step(dt)` waits `dt` *after* the
+   computation. What does that do to the watchdog (`hw.watchdog_stops`)?""",
     ),
 ]
 
