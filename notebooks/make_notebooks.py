@@ -682,7 +682,7 @@ robot = SimRobot(world, start=Pose2D(-1.2, 0.0, 0.0), seed=0)
 robot.enable()
 carrier.mover = make_mover("evasive", carrier, observer_pose=world.truth.robot_pose)
 if FAST:
-    planner, evaluator = "mc", MonteCarloEvaluator(dbs, robot.camera, config=MonteCarloConfig(n_samples=16))
+    planner, evaluator = "mc", MonteCarloEvaluator(dbs, robot.camera, config=MonteCarloConfig(n_samples=8))
 else:
     planner, evaluator = "lut", None                 # the agent loads (or builds) the lookup tables
 agent = IdentificationAgent(robot, names, planner=planner, seed=0, evaluator=evaluator,
