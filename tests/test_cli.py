@@ -88,3 +88,22 @@ def test_demo_writes_its_report(tmp_path):
     assert rep["room"]["collisions"] == 0
     assert 0 < rep["room"]["odometry_error_m"] < 0.1
     assert "![M0 unique](M0_unique.png)" in (tmp_path / "report.md").read_text()
+
+
+def test_notebooks_command_lists_them_and_says_what_is_missing(capsys, monkeypatch):
+    assert main(["notebooks", "--list"]) == 0
+    names = capsys.readouterr().out.split()
+    assert names[:5] == [
+        "00_simulator_and_stereo.ipynb",
+        "01_pose_ekf.ipynb",
+        "02_entropy_planning.ipynb",
+        "03_grid_search.ipynb",
+        "04_real_robot.ipynb",
+    ]
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda n: None if n == "jupyterlab" else real(n))
+    assert main(["notebooks"]) == 2
+    err = capsys.readouterr().err
+    assert "JupyterLab is not installed: pip install -e '.[notebooks]'" in err and len(err.splitlines()) == 1

@@ -26,18 +26,3 @@ def test_notebook_runs_in_fast_mode(path, monkeypatch):
         nb, timeout=120, kernel_name="python3", resources={"metadata": {"path": str(path.parent)}}
     ).execute()
     assert os.environ["LAB_FAST"] == "1"
-
-
-def test_lab_notebooks_lists_them_and_says_what_is_missing(capsys, monkeypatch):
-    import importlib.util
-
-    from lab.cli import main
-
-    assert main(["notebooks", "--list"]) == 0
-    assert capsys.readouterr().out.split() == [p.name for p in NOTEBOOKS]
-    assert [p.stem[:2] for p in NOTEBOOKS] == ["00", "01", "02", "03", "04"]
-    real = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec", lambda n: None if n == "jupyterlab" else real(n))
-    assert main(["notebooks"]) == 2
-    err = capsys.readouterr().err
-    assert "JupyterLab is not installed: pip install -e '.[notebooks]'" in err and len(err.splitlines()) == 1
