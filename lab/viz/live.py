@@ -55,8 +55,9 @@ widget=False)`` draws every step into the recorder (one frame per step, sim time
 recorder after the run to write the file. A second view (a notebook's) chains after it.
 
 Cost: the axes are drawn once and the data blitted over them (a full redraw only when a limit moves, in
-coarse steps), about 50 ms of CPU per picture at 960 x 540 px; ``benchmarks/bench_live.py`` measures
-the share of a run's wall time at the default 2 Hz.
+coarse steps), and the status lines are drawn with OpenCV: about 20-25 ms of CPU per picture at
+960 x 540 px, plus ~5 ms for the widget's PNG; ``benchmarks/bench_live.py`` measures the share of a
+run's wall time at the default 2 Hz.
 
 Teleoperation of the moving box is :class:`TeleopPanel` (``TeleopPanel(mover).widget``): buttons that
 drive the :class:`~lab.sim.movers.TeleopMover`'s carrier robot and turn the box on it.
