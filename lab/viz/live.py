@@ -771,7 +771,11 @@ class LiveView:
         )
 
     def _planned_path(self, target, p) -> np.ndarray:
-        """The last planned path the agent kept (``nav_paths``), else the straight line to the target."""
+        """The path the navigator is driving (its replanned A* waypoints), else the last one the agent
+        kept (``nav_paths``), else the straight line to the target."""
+        driving = getattr(self.navigator, "planned_path", None)
+        if driving is not None and len(driving):
+            return np.vstack([[p.x, p.y], np.asarray(driving, float)])
         paths = list(getattr(self.agent, "_nav_paths", ()))
         if paths and paths[-1][1] is not None:
             return np.asarray(paths[-1][1], float)
