@@ -362,6 +362,10 @@ def test_go_near_faces_the_target_from_within_the_ring():
         assert res.outcome is NavOutcome.ARRIVED and world.truth.collisions == 0
         assert d_min - 0.1 <= d <= d_max + 0.1
         assert facing <= 10.0
+        # the path it drove is exposed for views, and it ends in the band where the robot stopped
+        end = nav.planned_path[-1]
+        assert d_min - 0.1 <= math.hypot(end[0] - target[0], end[1] - target[1]) <= d_max + 0.1
+        assert math.hypot(end[0] - true.x, end[1] - true.y) <= 0.15
 
 
 # -- bad input -----------------------------------------------------------------------------------------------

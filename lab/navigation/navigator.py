@@ -379,6 +379,7 @@ class Navigator:
         elif bounds is not None:
             raise ConfigError("give either spec or bounds, not both")
         self.costmap = Costmap(spec, cfg.costmap)
+        self.planned_path: np.ndarray | None = None  # (n, 2) [m] W: the waypoints being driven (for views)
         self.plane: GroundPlane | None = None
         margin = spec.resolution if cfg.inflation_margin is None else cfg.inflation_margin
         self.radius = robot.base_limits.radius + margin
@@ -722,7 +723,7 @@ class Navigator:
         if not d.path.found:
             goal, heading = requested if requested is not None else (None, None)
             return finish(NavOutcome.NO_PATH, d.path.reason, pose0, goal, heading)
-        s.waypoints = waypoints_of(d.waypoints)
+        s.waypoints = self.planned_path = waypoints_of(d.waypoints)
         s.heading = heading_of(d.waypoints)
 
         try:
@@ -734,6 +735,7 @@ class Navigator:
             if d.replanned and d.path.found:
                 s.replans += 1
                 s.waypoints, s.heading = waypoints_of(d.waypoints), heading_of(d.waypoints)
+                self.planned_path = s.waypoints
             elif d.replanned and not self.path_ahead_clear(s.waypoints, pose0, cfg.confirm_range):
                 # (a blockage farther along is decided on the way, as below)
                 return finish(NavOutcome.NO_PATH, d.path.reason, pose0, s.waypoints[-1], s.heading)
@@ -757,6 +759,7 @@ class Navigator:
                 if d.replanned and d.path.found:
                     s.replans += 1
                     s.waypoints, s.heading = waypoints_of(d.waypoints), heading_of(d.waypoints)
+                    self.planned_path = s.waypoints
                     return StepUpdate(waypoints=s.waypoints, final_heading=s.heading)
                 if d.replanned:
                     failure = d.path.reason

@@ -55,8 +55,9 @@ widget=False)`` draws every step into the recorder (one frame per step, sim time
 recorder after the run to write the file. A second view (a notebook's) chains after it.
 
 Cost: the axes are drawn once and the data blitted over them (a full redraw only when a limit moves, in
-coarse steps), about 50 ms of CPU per picture at 960 x 540 px; ``benchmarks/bench_live.py`` measures
-the share of a run's wall time at the default 2 Hz.
+coarse steps), and the status lines are drawn with OpenCV: about 20-25 ms of CPU per picture at
+960 x 540 px, plus ~5 ms for the widget's PNG; ``benchmarks/bench_live.py`` measures the share of a
+run's wall time at the default 2 Hz.
 
 Teleoperation of the moving box is :class:`TeleopPanel` (``TeleopPanel(mover).widget``): buttons that
 drive the :class:`~lab.sim.movers.TeleopMover`'s carrier robot and turn the box on it.
@@ -127,6 +128,51 @@ def identification_inliers(agent, i: int):
     inl = np.asarray(getattr(upd, "inliers", np.zeros(0, bool)), bool)
     used = f.uv[np.unique(corr.idx_meas[inl])] if len(inl) == len(corr) and inl.any() else empty
     return matched, used
+
+
+class _Label:
+    """A status text that changes at every picture, drawn with OpenCV over the rendered figure (Agg text
+    layout costs ~5 ms a string; this ~0.1 ms). Placed at the fraction ``(fx, fy)`` of its axes (or of
+    the figure when ``ax`` is None): its top-left corner there, or its top-centre (``center``), or
+    its bottom-left (``above``: just above that point)."""
+
+    FONT = cv2.FONT_HERSHEY_SIMPLEX
+    SCALE = 0.38
+    LINE_PX = 13
+
+    def __init__(self, ax, fx: float, fy: float, how: str = "left"):
+        self.ax, self.fx, self.fy, self.how = ax, fx, fy, how
+        self.text = ""
+        self.xy = (0, 0)
+
+    def set_text(self, text: str) -> None:
+        self.text = text
+
+    def place(self, fig) -> None:
+        """Pixel anchor from the axes' position (after a full draw)."""
+        W, H = fig.canvas.get_width_height()
+        if self.ax is None:
+            x, y = self.fx * W, self.fy * H
+        else:
+            bb = self.ax.get_window_extent()
+            x, y = bb.x0 + self.fx * bb.width, bb.y0 + self.fy * bb.height
+        self.xy = (int(round(x)), int(round(H - y)))
+
+    def draw(self, rgb: np.ndarray) -> None:
+        lines = [ln for ln in self.text.split("\n") if ln]
+        if not lines:
+            return
+        w = max(cv2.getTextSize(ln, self.FONT, self.SCALE, 1)[0][0] for ln in lines)
+        h = self.LINE_PX * len(lines)
+        x, y = self.xy
+        if self.how == "center":
+            x -= w // 2
+        elif self.how == "above":
+            y -= h + 3
+        cv2.rectangle(rgb, (x - 2, y), (x + w + 2, y + h + 2), (255, 255, 255), -1)
+        for k, ln in enumerate(lines):
+            cv2.putText(rgb, ln, (x, y + self.LINE_PX * (k + 1) - 2), self.FONT, self.SCALE, (0, 0, 0), 1,
+                        cv2.LINE_AA)  # fmt: skip
 
 
 class LiveView:
@@ -344,11 +390,21 @@ class LiveView:
             self._bg = canvas.copy_from_bbox(fig.bbox)
             self._dirty = False
             self.n_full_draws += 1
+            for lab in self._labels:
+                lab.place(fig)
         else:
             canvas.restore_region(self._bg)
         for art in self._dyn:
             fig.draw_artist(art)
-        return np.ascontiguousarray(np.asarray(canvas.buffer_rgba())[..., :3])
+        rgb = np.ascontiguousarray(np.asarray(canvas.buffer_rgba())[..., :3])
+        for lab in self._labels:
+            lab.draw(rgb)
+        return rgb
+
+    def _label(self, ax, fx: float, fy: float, how: str = "left") -> _Label:
+        lab = _Label(ax, fx, fy, how)
+        self._labels.append(lab)
+        return lab
 
     def _animate(self, art, first: bool = False):
         """Mark an artist as redrawn at every render (drawn first, under the others, when ``first``)."""
@@ -401,6 +457,7 @@ class LiveView:
         self._fig = fig
         self._a = {}
         self._dyn = []
+        self._labels: list[_Label] = []
         self._bg = None
         self._dirty = True
         if self.kind == "identification":
@@ -408,10 +465,10 @@ class LiveView:
         else:
             self._build_search(fig, gs)
         a = self._a
-        a["suptitle"] = fig.suptitle(" ", fontsize=9)
-        # every data artist made in _build_*, and the titles (their text changes): animated
+        a["suptitle"] = self._label(None, 0.5, 0.995, "center")
+        # every data artist made in _build_*: animated
         for k, v in list(a.items()):
-            if k in ("scene", "cam", "prob", "costax", "cross") or v is None:
+            if k in ("scene", "cam", "prob", "costax", "cross") or v is None or isinstance(v, _Label):
                 continue
             for art in v if isinstance(v, list) else [v]:
                 self._animate(art)
@@ -437,10 +494,10 @@ class LiveView:
         a["robot"] = ax.plot([], [], "o", color="tab:green", ms=12, alpha=0.8, zorder=5)[0]
         a["heading"] = ax.plot([], [], color="k", lw=2, zorder=6)[0]
         a["pan"] = ax.plot([], [], color="tab:cyan", lw=1.5, ls="--", zorder=6)[0]
-        a["scene_text"] = ax.text(0.02, 0.98, "", transform=ax.transAxes, va="top", fontsize=7)
+        a["scene_text"] = self._label(ax, 0.01, 0.99)
         cam = fig.add_subplot(gs[0, 1])
         cam.set_axis_off()
-        a["cam_title"] = cam.set_title("left camera", fontsize=8)
+        a["cam_title"] = self._label(cam, 0.0, 1.0, "above")
         a["cam"] = cam
         a["img"] = None
         a["feat"] = cam.scatter(np.zeros(0), np.zeros(0), s=4, color="w", alpha=0.6, lw=0)
@@ -467,7 +524,8 @@ class LiveView:
         ]
         # outside the axes, drawn once with the background (the lines never cross it)
         pr.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=7, borderaxespad=0.0)
-        a["prob_title"] = pr.set_title(" ", fontsize=8)
+        pr.set_title("model probabilities (shaded: scanning)", fontsize=8)
+        a["prob_title"] = self._label(pr, 0.01, 0.99)
         a["bands"] = None
         a["decisions"] = pr.plot([], [], color="c", ls=":", lw=1)[0]
 
@@ -586,7 +644,7 @@ class LiveView:
         ident = getattr(ag, "identified", None)
         best = int(np.argmax(P_now))
         a["prob_title"].set_text(
-            f"model probabilities ({state}; shaded: scanning)   max: {ag.names[best]} {P_now[best]:.2f}"
+            f"head {state}; max: {ag.names[best]} {P_now[best]:.2f}"
             + ("" if ident is None else f"   identified: {ag.names[ident]}"),
         )
         a["suptitle"].set_text(f"identification, planner {ag.planner.value}   t = {self._t():.1f} s")
@@ -656,7 +714,7 @@ class LiveView:
         cam = fig.add_subplot(gs[:, 1])
         cam.set_axis_off()
         a["cam"] = cam
-        a["cam_title"] = cam.set_title(" ", fontsize=8)
+        a["cam_title"] = self._label(cam, 0.0, 1.0, "above")
         a["img"] = None
         a["peaks"] = cam.scatter(np.zeros(0), np.zeros(0), s=160, facecolors="none", edgecolors="red", lw=1.5)
 
@@ -713,7 +771,11 @@ class LiveView:
         )
 
     def _planned_path(self, target, p) -> np.ndarray:
-        """The last planned path the agent kept (``nav_paths``), else the straight line to the target."""
+        """The path the navigator is driving (its replanned A* waypoints), else the last one the agent
+        kept (``nav_paths``), else the straight line to the target."""
+        driving = getattr(self.navigator, "planned_path", None)
+        if driving is not None and len(driving):
+            return np.vstack([[p.x, p.y], np.asarray(driving, float)])
         paths = list(getattr(self.agent, "_nav_paths", ()))
         if paths and paths[-1][1] is not None:
             return np.asarray(paths[-1][1], float)
