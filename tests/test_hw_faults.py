@@ -264,6 +264,7 @@ def test_cliff_trip_in_safe_mode(rig, record_property):
     for _ in range(3):
         robot.drive(0.2, 0.0)
         robot.step(0.1)
+    create.max_lateness_s = 0.0
     t_cliff = create.now()
     create.cliff(2)  # front-right, while driving forward
     t0 = time.monotonic()
@@ -271,7 +272,9 @@ def test_cliff_trip_in_safe_mode(rig, record_property):
         for _ in range(100):
             robot.step(0.005)
     record_property("cliff_to_safety_stop_s", round(time.monotonic() - t0, 4))
-    assert create.trips and create.trips[0][0] - t_cliff < 0.02 and create.wheel_speeds() == (0, 0)
+    # the robot trips at its next tick (5 ms; later by what a loaded machine measurably delayed its thread)
+    assert create.trips and create.trips[0][0] - t_cliff < 0.02 + 2 * create.max_lateness_s
+    assert create.wheel_speeds() == (0, 0)
     assert robot.state == "faulted" and not robot.enabled
     assert any(e.kind == "safety_stop" for e in rig.events)
     time.sleep(0.3)
