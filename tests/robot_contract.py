@@ -217,7 +217,7 @@ class RobotContract:
         assert isinstance(s, PanTiltState) and not s.moving
         assert s.pan == pytest.approx(0.3, abs=0.002) and s.tilt == pytest.approx(-0.1, abs=0.002)
         lim = robot.pan_tilt_limits
-        speed = 0.5 * (lim.min_speed + lim.max_speed) / 2
+        speed = 0.25 * (lim.min_speed + lim.max_speed) / 2  # slow enough for several samples on the way
         robot.command_pan_tilt(0.0, 0.0, speed=speed)
         samples = []  # (t, pan) while it moves: the slope is the speed (a late reply shifts, not tilts, it)
         t_end = robot.now() + 5.0
