@@ -67,7 +67,18 @@ def rig(tmp_path):
 
 
 # --- watchdog ------------------------------------------------------------------------------------------
-def test_watchdog_stops_the_base_within_the_timeout_on_the_emulator_clock(rig, record_property):
+@pytest.fixture
+def rig_slow_stale(tmp_path):
+    """A rig whose stale-stream stop (0.1 s, tested on its own) cannot fire first: a busy machine delays
+    the emulated stream, and a stale stop before the watchdog's would be mistaken for an early watchdog."""
+    r = Rig(tmp_path, base={"stale_timeout_s": 1.0})
+    r.connect()
+    yield r
+    r.close()
+
+
+def test_watchdog_stops_the_base_within_the_timeout_on_the_emulator_clock(rig_slow_stale, record_property):
+    rig = rig_slow_stale
     robot, create = rig.robot, rig.emu.create
     robot.enable()
     # commands every 0.1 s keep it going: no stop in between
