@@ -72,10 +72,14 @@ def test_odometry_across_encoder_wrap_matches_the_true_pose(tmp_path):
         b.connect()
         b.enable()
         b.drive_direct(right_mm_s=-60, left_mm_s=200)
-        # driven until both counters wrapped (waited for, not timed: a loaded machine runs the emulator late)
-        assert wait_until(
-            lambda: 100 < e.encoder_counts()[0] < 65400 and 30 < e.encoder_counts()[1] < 65000, 10.0
-        )
+        # driven until both counters wrapped: waited for, not timed (a loaded machine runs the emulator
+        # late; a starved host may even see the stream go stale, and the driver then stops: drive on)
+        t_end = time.monotonic() + 10.0
+        while not (e.encoder_counts()[0] < 65400 and e.encoder_counts()[1] > 30 and abs(e.theta) > 0.4):
+            assert time.monotonic() < t_end, "the encoders did not wrap (or it did not turn) within 10 s"
+            if e.wheel_speeds() == (0, 0) and not b.stale:
+                b.drive_direct(right_mm_s=-60, left_mm_s=200)
+            time.sleep(0.01)
         b.stop()
         assert wait_until(lambda: e.wheel_speeds() == (0, 0), 2.0)
         _frames_after_the_stop(b)
@@ -146,11 +150,12 @@ def test_cliff_trip_in_safe_mode_is_reported_and_not_rearmed(tmp_path, quirk):
         b.enable()
         b.drive_direct(200, 200)
         assert wait_until(lambda: e.wheel_speeds() == (200, 200), 0.2)
+        e.max_lateness_s = 0.0
         t_cliff = e.now()
         e.cliff(1)  # front-left cliff while moving forward: the robot stops itself, Passive
         assert wait_until(lambda: b.safety_trip is not None, 0.3)
         assert e.wheel_speeds() == (0, 0) and e.trips and e.trips[0][1] == "cliff"
-        assert e.trips[0][0] - t_cliff < 0.02
+        assert e.trips[0][0] - t_cliff < 0.02 + 2 * e.max_lateness_s  # its next tick, however late it ran
         assert "cliff front-left" in b.safety_trip and not b.enabled
         assert wait_until(lambda: ("safety_stop", b.safety_trip) in b.events, 0.2)
         with pytest.raises(SafetyStop, match="enable"):
@@ -213,6 +218,8 @@ def test_unplug_while_driving(base, emu):
     t_replug = emu.now()
     base.reconnect()
     # stop first, never replay the last velocity; then Start (Passive) and the stream
+    # the emulator may still be working through the bytes (it streams on from before the unplug)
+    assert wait_until(lambda: len(emu.opcode_names(since=t_replug)) >= 3, 2.0)
     assert emu.opcode_names(since=t_replug)[:3] == ["DRIVE_DIRECT", "START", "STREAM"]
     first = [d for d in emu.drives() if d.t >= t_replug][0]
     assert (first.right, first.left, first.accepted) == (0, 0, True)

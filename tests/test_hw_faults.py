@@ -67,25 +67,51 @@ def rig(tmp_path):
 
 
 # --- watchdog ------------------------------------------------------------------------------------------
-def test_watchdog_stops_the_base_within_the_timeout_on_the_emulator_clock(rig, record_property):
+@pytest.fixture
+def rig_slow_stale(tmp_path):
+    """A rig whose stale-stream stop (0.1 s, tested on its own) cannot fire first: a busy machine delays
+    the emulated stream, and a stale stop before the watchdog's would be mistaken for an early watchdog."""
+    r = Rig(tmp_path, base={"stale_timeout_s": 1.0})
+    r.connect()
+    yield r
+    r.close()
+
+
+def test_watchdog_stops_the_base_within_the_timeout_on_the_emulator_clock(rig_slow_stale, record_property):
+    rig = rig_slow_stale
     robot, create = rig.robot, rig.emu.create
     robot.enable()
-    # commands every 0.3 s keep it going: no stop in between
+    # commands every 0.1 s keep it going: no stop in between
     t_first = create.now()
-    for _ in range(4):
+    for _ in range(8):
         robot.drive(0.2, 0.0)
-        time.sleep(0.3)
+        time.sleep(0.1)
     assert create.first_zero_drive_after(t_first) is None
-    robot.drive(0.2, 0.0)
-    t_cmd = create.now()  # the last command, on the emulator's clock
-    assert wait_until(lambda: create.first_zero_drive_after(t_cmd) is not None, 1.5)
-    zero = create.first_zero_drive_after(t_cmd)
-    last = [d for d in create.drives() if d.t < zero.t and (d.right or d.left)][-1]
-    latency = zero.t - t_cmd
-    record_property("watchdog_stop_latency_s", round(latency, 4))
-    assert robot.cmd_timeout_s - 0.01 <= latency <= robot.cmd_timeout_s + 0.05
+    # The bound is measured on the emulator's clock, which stamps a command when the emulator's thread gets
+    # to it. On a loaded machine that thread may run late, so a missed bound is measured again (at most 3
+    # times), but only when the emulator itself was late by more than the margin: a late stop from an
+    # emulator that ran on time fails at once.
+    margin = 0.05
+    for attempt in range(1, 4):
+        create.max_lateness_s = 0.0
+        robot.drive(0.2, 0.0)
+        t_cmd = create.now()  # the last command, on the emulator's clock
+        assert wait_until(lambda t=t_cmd: create.first_zero_drive_after(t) is not None, 1.5)
+        zero = create.first_zero_drive_after(t_cmd)
+        last = [d for d in create.drives() if d.t < zero.t and (d.right or d.left)][-1]
+        latency = zero.t - t_cmd
+        record_property(f"watchdog_stop_latency_s_{attempt}", round(latency, 4))
+        assert robot.cmd_timeout_s - 0.01 <= latency, "stopped before the timeout"
+        if latency <= robot.cmd_timeout_s + margin:
+            break
+        lateness = create.max_lateness_s
+        assert lateness > margin, f"stop {latency:.3f} s after the last command, emulator on time"
+    else:
+        pytest.fail(
+            f"the watchdog stop came late 3 times (last {latency:.3f} s, emulator {lateness:.3f} s late)"
+        )
     assert last.t < zero.t and zero.accepted and create.wheel_speeds() == (0, 0)
-    assert robot.enabled and robot.watchdog_stops == 1
+    assert robot.enabled and robot.watchdog_stops == attempt
     assert any(e.kind == "watchdog" for e in rig.events)
 
 
@@ -106,7 +132,9 @@ def test_unplug_the_base_during_a_run(rig, record_property):
     detect = time.monotonic() - t0
     record_property("base_unplug_detection_s", round(detect, 4))
     assert detect < 0.1 and robot.state == "disconnected"
-    assert "H" in [c for t, c in ptu.commands if t >= t_ptu]  # what can still be reached is stopped
+    assert wait_until(
+        lambda: "H" in [c for t, c in ptu.commands if t >= t_ptu], 2.0
+    )  # what can still be reached is stopped
     assert wait_until(lambda: not ptu._busy and ptu.position_steps()["P"] == ptu.target["P"], 0.2)
     for call in (lambda: robot.drive(0.1, 0.0), lambda: robot.command_pan_tilt(0.0, 0.0), robot.enable):
         with pytest.raises(ConnectionLost):
@@ -117,6 +145,8 @@ def test_unplug_the_base_during_a_run(rig, record_property):
     t_replug = create.now()
     robot.reconnect()
     assert robot.state == "connected" and not robot.enabled
+    # the emulator may still be working through the bytes (it streams on from before the unplug)
+    assert wait_until(lambda: len(create.opcode_names(since=t_replug)) >= 3, 2.0)
     assert create.opcode_names(since=t_replug)[:3] == ["DRIVE_DIRECT", "START", "STREAM"]
     first = [d for d in create.drives() if d.t >= t_replug][0]
     assert (first.right, first.left, first.accepted) == (0, 0, True)  # stopped, the old velocity not replayed
@@ -126,7 +156,7 @@ def test_unplug_the_base_during_a_run(rig, record_property):
         robot.drive(0.1, 0.0)
     robot.enable()
     robot.drive(0.1, 0.0)
-    assert wait_until(lambda: create.wheel_speeds() != (0, 0), 0.3)
+    assert wait_until(lambda: create.wheel_speeds() != (0, 0), 2.0)
 
 
 def test_unplug_the_ptu_during_a_run(rig):
@@ -190,21 +220,26 @@ def test_silent_ptu_times_out_within_a_bounded_time(rig, record_property):
     dt = time.monotonic() - t0
     record_property("silent_ptu_error_after_s", round(dt, 3))
     assert dt < 2 * rig.cfg.ptu.timeout_s + 0.15  # one try and one retry
-    robot.drive(0.1, 0.0)  # the base is unaffected
-    assert wait_until(lambda: rig.emu.create.wheel_speeds() == (100, 100), 0.3)
+    # the base is unaffected (commanded as a control loop does: the ramp and a busy host may take a while)
+    assert wait_until(
+        lambda: robot.drive(0.1, 0.0) or rig.emu.create.wheel_speeds() == (100, 100), 2.0, step=0.05
+    )
 
 
 def test_silent_stream_stops_the_base(rig, record_property):
     robot, create = rig.robot, rig.emu.create
     robot.enable()
     robot.drive(0.2, 0.0)
-    assert wait_until(lambda: create.wheel_speeds() != (0, 0), 0.3)
+    assert wait_until(lambda: create.wheel_speeds() != (0, 0), 2.0)
+    create.max_lateness_s = 0.0
     create.mute_stream = True  # the robot still listens, but sends nothing
     t_mute = create.now()
-    assert wait_until(lambda: create.first_zero_drive_after(t_mute) is not None, 0.5)
+    assert wait_until(lambda: create.first_zero_drive_after(t_mute) is not None, 2.0)
     latency = create.first_zero_drive_after(t_mute).t - t_mute
     record_property("stale_stream_stop_after_s", round(latency, 4))
-    assert latency <= rig.cfg.base.stale_timeout_s + 0.05
+    # stale timeout + 50 ms; a loaded machine adds what it measurably delayed the emulator's thread
+    lateness = create.max_lateness_s
+    assert latency <= rig.cfg.base.stale_timeout_s + 0.05 + 2 * lateness, f"emulator {lateness:.3f} s late"
     with pytest.raises(DeviceTimeout, match="no sensor stream"):
         robot.drive(0.1, 0.0)
     assert "stale_stream" in robot.read_state().faults
@@ -216,13 +251,17 @@ def test_silent_stream_stops_the_base(rig, record_property):
 def test_silent_base_at_connect(tmp_path, record_property):
     rig = Rig(tmp_path, base={"first_frame_timeout_s": 0.1, "connect_attempts": 2})
     rig.emu.create.silent = True
+    rig.emu.ptu.max_lateness_s = rig.emu.create.max_lateness_s = 0.0
     t0 = time.monotonic()
     try:
         with pytest.raises(DeviceTimeout, match="Create 2 on .*no sensor stream within 0.2 s"):
             rig.connect()
         dt = time.monotonic() - t0
         record_property("silent_base_connect_error_after_s", round(dt, 3))
-        assert dt < 0.2 + 0.2
+        # two 0.1 s attempts + the PTU's connect; a loaded machine adds what it measurably delayed this
+        # process (the emulator threads' lateness), a few times over (each wait can be hit)
+        lateness = max(rig.emu.ptu.max_lateness_s, rig.emu.create.max_lateness_s)
+        assert dt < 0.2 + 0.2 + 3 * lateness, f"error after {dt:.3f} s, emulators {lateness:.3f} s late"
         with serial.Serial(rig.emu.ptu_port, exclusive=True):  # the PTU port was released again
             pass
     finally:
@@ -236,6 +275,7 @@ def test_cliff_trip_in_safe_mode(rig, record_property):
     for _ in range(3):
         robot.drive(0.2, 0.0)
         robot.step(0.1)
+    create.max_lateness_s = 0.0
     t_cliff = create.now()
     create.cliff(2)  # front-right, while driving forward
     t0 = time.monotonic()
@@ -243,7 +283,9 @@ def test_cliff_trip_in_safe_mode(rig, record_property):
         for _ in range(100):
             robot.step(0.005)
     record_property("cliff_to_safety_stop_s", round(time.monotonic() - t0, 4))
-    assert create.trips and create.trips[0][0] - t_cliff < 0.02 and create.wheel_speeds() == (0, 0)
+    # the robot trips at its next tick (5 ms; later by what a loaded machine measurably delayed its thread)
+    assert create.trips and create.trips[0][0] - t_cliff < 0.02 + 2 * create.max_lateness_s
+    assert create.wheel_speeds() == (0, 0)
     assert robot.state == "faulted" and not robot.enabled
     assert any(e.kind == "safety_stop" for e in rig.events)
     time.sleep(0.3)
@@ -311,19 +353,27 @@ def test_sigint_stops_the_base(rig, record_property):
         pytest.skip("the SIGINT hook is not installed (not the main thread)")
     robot.enable()
     robot.drive(0.2, 0.0)
-    assert wait_until(lambda: create.wheel_speeds() != (0, 0), 0.3)
+    assert wait_until(lambda: create.wheel_speeds() != (0, 0), 2.0)
+    robot.drive(0.2, 0.0)  # fresh: the watchdog is 0.5 s away
+    w0 = robot.watchdog_stops
     t = create.now()
-    with pytest.raises(KeyboardInterrupt):
-        # to the main thread itself: os.kill may hand a process signal to another thread, whose handler
-        # then runs whenever that thread is next scheduled (on a loaded machine, after any fixed sleep)
+    # A shell starts background jobs with SIGINT ignored; the hook then only stops (it keeps the ignore:
+    # no KeyboardInterrupt). Otherwise the previous handler's KeyboardInterrupt comes through.
+    ignored = robot_module._HOOKS["sigint_prev"] == signal.SIG_IGN
+    interrupted = False
+    try:
+        # to the main thread itself: its handler runs before pthread_kill returns
         signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
-        for _ in range(500):
+        for _ in range(50 if ignored else 500):
             time.sleep(0.01)  # interrupted at once (bounded: 5 s)
+    except KeyboardInterrupt:
+        interrupted = True
+    assert interrupted != ignored
     assert wait_until(lambda: create.first_zero_drive_after(t) is not None, 2.0)
     latency = create.first_zero_drive_after(t).t - t
     record_property("sigint_stop_after_s", round(latency, 4))
     # the hook stopped it, not the watchdog: no watchdog stop counted, and before the watchdog could fire
-    assert robot.watchdog_stops == 0 and not any(e.kind == "watchdog" for e in rig.events)
+    assert robot.watchdog_stops == w0
     assert latency < robot.cmd_timeout_s
 
 
@@ -331,7 +381,7 @@ def test_exit_and_exception_paths_stop_the_base(rig):
     robot, create = rig.robot, rig.emu.create
     robot.enable()
     robot.drive(0.2, 0.0)
-    assert wait_until(lambda: create.wheel_speeds() != (0, 0), 0.3)
+    assert wait_until(lambda: create.wheel_speeds() != (0, 0), 2.0)
     t = create.now()
     robot_module._close_all_at_exit()  # what atexit runs
     assert create.opcode_names(since=t)[-3:] == ["DRIVE_DIRECT", "START", "STOP"]

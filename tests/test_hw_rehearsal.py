@@ -43,6 +43,18 @@ def test_rehearsal_toml_selects_the_rendered_camera():
         make_camera_source(cfg)  # it needs the emulators' truth: only a rehearsal can build it
 
 
+def test_check_explains_the_rendered_camera(tmp_path):
+    from lab.hardware.cli import check
+
+    text = REHEARSAL_TOML.read_text().replace("/tmp/lab-emulators", str(tmp_path / "links"))
+    text = text.replace('"calibration/', f'"{REPO}/hardware/calibration/')
+    p = tmp_path / "r.toml"
+    p.write_text(text)
+    lines = []
+    assert check(p, out=lines.append, emulate=True) == 0, lines
+    assert any(ln.startswith("PASS  camera: rendered by the simulator (world 'arena')") for ln in lines)
+
+
 def test_unknown_world_is_one_clear_line(tmp_path):
     text = REHEARSAL_TOML.read_text().replace('world = "arena"', 'world = "moon"')
     text = text.replace('"calibration/', f'"{REPO}/hardware/calibration/')

@@ -120,7 +120,7 @@ def check(
                 )
 
         _check_ptu(cfg, line)
-        _check_base(cfg, line)
+        _check_base(cfg, line, in_process=emu is not None)
         _check_camera(cfg, calib, line)
     finally:
         if emu is not None:
@@ -169,7 +169,13 @@ def _check_ptu(cfg, line) -> None:
         ptu.close()
 
 
-def _check_base(cfg, line) -> None:
+def _check_base(cfg, line, in_process: bool = False) -> None:
+    """The Create's connect, stream, battery, sensors and odometry at rest.
+
+    ``in_process``: the emulators run in this process (``--emulate``), so their stream shares the CPU with
+    the check: on a loaded machine it arrives late, which says nothing about a cable; only a stream at
+    under a third of its rate fails then.
+    """
     b = cfg.base
     base = Create2(
         b.port,
@@ -183,12 +189,13 @@ def _check_base(cfg, line) -> None:
         line(False, "Create 2", str(e), "switch it on (Clean button), check the cable and [base] baudrate")
         return
     try:
+        # over a whole second: a short window reads a momentary stall of a busy host as a bad cable
         n0, t0 = base.frames, time.monotonic()
-        time.sleep(0.3)
+        time.sleep(1.0)
         s = base.sensors()
         rate = (base.frames - n0) / (time.monotonic() - t0)
         line(
-            rate > 40,
+            rate > (22 if in_process else 40),
             "Create 2 stream",
             f"{rate:.0f} frames/s (expect ~67), OI mode {s.oi_mode}, {base.corrupt_frames} corrupt frames",
             "check the cable (USB hub, loose connector)",
@@ -204,7 +211,7 @@ def _check_base(cfg, line) -> None:
         line(
             still == 0 and all(map(math.isfinite, (pose.x, pose.y, pose.theta))),
             "odometry at rest",
-            f"{still} ticks moved in 0.3 s, pose ({pose.x:.3f}, {pose.y:.3f}, {pose.theta:.3f})",
+            f"{still} ticks moved in 1 s, pose ({pose.x:.3f}, {pose.y:.3f}, {pose.theta:.3f})",
             "the wheels turned while disabled: is it docked or being pushed?",
         )
     finally:
@@ -214,6 +221,14 @@ def _check_base(cfg, line) -> None:
 def _check_camera(cfg, calib, line) -> None:
     from lab.hardware.robot import make_camera_source
 
+    if cfg.camera.source == "sim":  # rendered from the emulators' state: only a rehearsal can make it
+        line(
+            True,
+            "camera",
+            f"rendered by the simulator (world {cfg.sim.world!r}) in a rehearsal: "
+            f"lab identify --robot {cfg.path or 'CONFIG'} (or lab.hardware.rehearsal.rehearsal())",
+        )
+        return
     try:
         src = make_camera_source(cfg)
     except LabError as e:

@@ -82,6 +82,10 @@ class PtyDevice:
         self.delay_s = 0.0
         self.rx_log: list[tuple[float, bytes]] = []
         self.dropped_bytes = 0
+        #: how much later than it asked for the device thread got the CPU back, at most [s] (since reset
+        #: to 0 by a test): the emulator's clock stamps what it receives when it runs, so on a loaded
+        #: machine its timings include this; a test can tell a late host from a late emulator with it
+        self.max_lateness_s = 0.0
 
     # --- clock and port -------------------------------------------------------------------------
     def now(self) -> float:
@@ -213,9 +217,12 @@ class PtyDevice:
                 timeout = self.tick_s
                 if self._out:
                     timeout = min(timeout, max(0.0, self._out[0][0] - self.now()))
+            t_ask = time.monotonic()
             r, _, _ = select.select([m, sr], [], [], timeout)
             if sr in r:
                 return
+            if not r:  # woken by the timeout: by how much late
+                self.max_lateness_s = max(self.max_lateness_s, time.monotonic() - t_ask - timeout)
             if m in r:
                 try:
                     data = os.read(m, 4096)

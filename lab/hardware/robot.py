@@ -142,7 +142,7 @@ def _pose_at(t: float, a: tuple[float, Pose2D], b: tuple[float, Pose2D]) -> Pose
 
 
 _LIVE: weakref.WeakSet[HardwareRobot] = weakref.WeakSet()
-_HOOKS = {"atexit": False, "sigint": False}
+_HOOKS: dict = {"atexit": False, "sigint": False, "sigint_prev": None}
 
 
 def _close_all_at_exit() -> None:
@@ -172,6 +172,7 @@ def _install_hooks(sigint: bool) -> None:
         try:
             signal.signal(signal.SIGINT, _on_sigint)
             _HOOKS["sigint"] = True
+            _HOOKS["sigint_prev"] = prev  # SIG_IGN in a background job: then Ctrl-C only stops, never raises
         except ValueError:  # not the main thread of the main interpreter
             pass
 
