@@ -89,6 +89,7 @@ def run_identify(
         )
     rng = np.random.default_rng(seed)
     t_wall = time.perf_counter()
+    t_cpu = time.process_time()  # this process's CPU time: the cost of the episode whatever the load
     with SimWorld("arena") as world:
         # the unique face (+X) points away from the robot: it sees shared faces first
         carrier = world.add_carrier(
@@ -130,6 +131,7 @@ def run_identify(
         collisions = world.truth.collisions
         true_poses = [G_WO for _, G_WO in truth]
     wall = time.perf_counter() - t_wall
+    cpu = time.process_time() - t_cpu
     steps = agent.steps
     result = {
         "true_model": true_model,
@@ -164,6 +166,8 @@ def run_identify(
             for d in agent.decisions
         ],
         "real_time_factor": sim_time / wall if wall > 0 else None,
+        "cpu_time_s": cpu,
+        "real_time_factor_cpu": sim_time / cpu if cpu > 0 else None,  # on one free core
         "filter_reseats": agent.n_reseats,
         "ring_blocked": agent.n_blocked,
         "track_lost": agent.n_lost,
