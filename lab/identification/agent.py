@@ -16,6 +16,18 @@ The robot drives on arcs of the ring around the probability-weighted object esti
 goal never crosses the object. It stops when one model's probability stays above ``stop_probability``
 for ``dwell_s`` seconds, or when the action or time budget is spent.
 
+**The box's look-alike turns.** Three faces carry the same page, so RANSAC can seat a model's filter
+on any quarter-turn of the box (measured: 3 of 4 filters start 90 degrees off). Each frame is scored
+at the filters' poses *and* their quarter-turns (:func:`calc_current_entropy` with ``symmetries``);
+every ``keyframe_s`` the frame is scored at each filter's turns (:class:`TurnEvidence`), a filter
+whose own turn the keyframes support clearly less than another is re-seated on it, and the planner
+weighs each model's four turns by that evidence (:meth:`ModelHypotheses.from_estimates`).
+
+**Fallbacks.** No filter took in a frame for ``lost_after_s``: the track is lost, the head scans and
+the base halts; once a filter takes one in again, the interrupted goal is resumed (or replanned if the
+object moved). No ring goal reachable on the floor plan (:class:`RingBlocked`): hold position, keep
+observing, plan again after ``retry_s``.
+
 The agent uses only the :class:`lab.robot.Robot` interface: it runs unchanged on :class:`lab.sim.SimRobot`
 and on :class:`lab.hardware.HardwareRobot`.
 """
