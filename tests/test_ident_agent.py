@@ -134,3 +134,22 @@ def test_a_lost_track_scans_halts_and_resumes():
     scanning = [r for r in gone + back if r.head_mode == "scanning"]
     assert scanning and all(r.base_mode == "halted" for r in scanning)  # HALT while scanning
     assert back[-1].head_mode == "tracking"  # the track is re-established
+
+
+def test_the_optional_visibility_rule_keeps_the_features_seen_from_that_direction():
+    dbs = S.databases()
+    assert ModelScorer(dbs[0]).visible(S.estimate(S.box_pose(0.0), S.camera_at(180.0))) is None  # off
+    scorer = ModelScorer(dbs[0], ScoringConfig(visibility_deg=15.0))
+    G_WO, G_WC = S.box_pose(0.0), S.camera_at(180.0)  # the -X face
+    vis = scorer.visible(S.estimate(G_WO, G_WC))
+    az = np.degrees(dbs[0].viewpoints[:, 0])
+    near = np.abs((az - 180.0 + 180.0) % 360.0 - 180.0) <= 15.0
+    np.testing.assert_array_equal(vis, dbs[0].seen_from[:, near].any(axis=1))
+    assert (
+        vis.any()
+        and not vis[dbs[0].seen_from[:, np.abs((az + 180.0) % 360.0 - 180.0) <= 15.0].any(axis=1)].any()
+    )
+    f = S.observe(dbs[0], G_WO, G_WC, np.random.default_rng(3), clutter=0)
+    assert scorer.explain(f, S.estimate(G_WO, G_WC)).n_explained == len(f)  # what is seen stays explained
+    with pytest.raises(ConfigError, match="visibility_deg"):
+        ScoringConfig(visibility_deg=0.0)
