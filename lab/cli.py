@@ -54,13 +54,32 @@ def build_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser(
         "demo",
-        help="run the main demo in the simulator and write its report",
-        description="Run the main demo headless in the simulator and write a report "
-        "(Markdown, JSON and pictures) into --out.",
+        help="run the identification demo in the simulator and write its figures and report",
+        description="Run one identification episode headless in the simulator (the identification "
+        "paper): a second robot turns the box to hide its unique face (evasive mover) while the robot "
+        "tracks it with the pan-tilt head and drives to the next-best view from the lookup tables. Writes "
+        "the paper's Fig. 5-7, identify.json and report.md into --out. The first run builds the lookup "
+        "tables (several minutes, once).",
     )
     d.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default: out/demo)")
     d.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
-    d.add_argument("--supersample", type=int, default=1, choices=(1, 2), help="render at 2x and downsample")
+    d.add_argument("--true-model", type=int, default=1, help="the box on the carrier, 0..3 (default 1)")
+    d.add_argument(
+        "--mover",
+        default="evasive",
+        choices=("static", "scripted", "random", "evasive"),
+        help="how the box moves (default: evasive, the paper's operator)",
+    )
+    d.add_argument(
+        "--planner",
+        default="lut",
+        choices=("lut", "mc", "random", "circle"),
+        help="how the next view is chosen (default: lut)",
+    )
+    d.add_argument("--max-actions", type=int, default=8, help="planning actions budget (default 8)")
+    d.add_argument("--max-time", type=float, default=150.0, help="simulated time budget [s] (default 150)")
+    d.add_argument("--record", type=Path, help="write an animation of the run (.gif, or .mp4 with ffmpeg)")
+    d.add_argument("--robot", type=Path, help="run on a real (or emulated) robot: its hardware TOML config")
 
     r = sub.add_parser(
         "render",
@@ -500,8 +519,22 @@ def _cmd_notebooks(args) -> int:
 def _cmd_demo(args) -> int:
     from lab.demo import run_demo
 
-    report = run_demo(args.out, seed=args.seed, supersample=args.supersample)
-    print(f"demo report: {report}")
+    if args.max_actions < 0:
+        raise LabError(f"--max-actions must be >= 0, got {args.max_actions}")
+    if not args.max_time > 0:
+        raise LabError(f"--max-time must be > 0 s, got {args.max_time}")
+    report = run_demo(
+        args.out,
+        seed=args.seed,
+        true_model=args.true_model,
+        planner=args.planner,
+        mover=args.mover,
+        max_actions=args.max_actions,
+        max_time_s=args.max_time,
+        record=args.record,
+        robot=args.robot,
+    )
+    print(f"demo: figures, identify.json and the report are in {report.parent}/ (open {report})")
     return 0
 
 

@@ -1,117 +1,171 @@
-"""``lab demo``: the main job a new user runs first.
+"""``lab demo``: the main job a new user runs first, the identification paper end to end.
 
-Until the identification loop lands, the demo tours the simulator: it renders each box model of the
-identification database from its unique and from a shared side, drives the robot into the lab room
-while panning the head, and writes a report (Markdown + JSON + pictures) that says what it saw,
-including the stereo depth error against the renderer's depth buffer.
+One identification episode in the simulator: the robot faces a box (model ``M1`` by default) that a
+second robot keeps turning so that its unique face points away (the evasive mover, the paper's human
+operator); the robot perceives every frame, tracks the box with the pan-tilt head, and drives to the
+next-best view chosen from the lookup tables until one model's probability stays >= 0.95. The demo
+writes the paper's Fig. 5-7, the ``lab identify`` JSON and a short ``report.md`` into ``out``, and
+optionally an animation (``record``). With ``robot`` (a hardware TOML config) it runs the same loop on
+the real (or emulated) robot instead and writes the JSON and report.
+
+The first run builds the feature databases and the lookup tables into the cache (several minutes,
+once); :func:`run_demo` says so through ``say`` before it starts.
 """
 
 from __future__ import annotations
 
-import json
-import math
 import time
+from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
-
-from lab.geometry import Pose2D
+from lab.errors import ConfigError
 from lab.io import write_json_atomic, write_text_atomic
-from lab.robot import StereoCamera
-from lab.sim import RenderSettings, SimRobot, SimWorld, load_box_models
-from lab.viz import disparity_map, disparity_picture, save_rgb
 
-__all__ = ["run_demo"]
+__all__ = ["run_demo", "tables_missing"]
+
+FIGURES = (
+    ("fig5_pose_and_probabilities.png", "Fig. 5: pose estimates against ground truth, model probabilities"),
+    ("fig6_information_gain_ring.png", "Fig. 6: the ring of candidate goals coloured by information gain"),
+    ("fig7_probabilities.png", "Fig. 7: model probabilities against time"),
+)
 
 
-def run_demo(out: Path, seed: int = 0, supersample: int = 1) -> Path:
-    """Run the simulator tour and return the path of its Markdown report."""
+def tables_missing(folder: Path | None = None) -> list[str]:
+    """The box models whose lookup tables (or feature databases) are not in the cache yet."""
+    from lab.identification.tables import box_model_names, tables_path
+    from lab.vision.database import database_path
+
+    return [
+        n
+        for n in box_model_names()
+        if not tables_path(n, folder).is_file() or not database_path(n, folder).is_file()
+    ]
+
+
+def _report(res: dict, names: list[str], figures: list[tuple[str, str]], robot: Path | None) -> str:
+    k, found = res.get("true_model"), res.get("identified_model")
+    post = ", ".join(f"P({n}) = {p:.3f}" for n, p in zip(names, res["final_posterior"], strict=False))
+    where = f"on the robot of `{robot}`" if robot else "in the simulator (arena, evasive mover)"
+    lines = [
+        "# lab demo: model identification with next-best-view planning",
+        "",
+        f"One episode of the identification paper {where}, planner `{res['planner']}`, seed {res['seed']}.",
+        "",
+    ]
+    if k is not None:
+        verdict = "identified correctly" if res["success"] else "NOT identified"
+        lines.append(
+            f"The box on the carrier was **{names[k]}**; it was {verdict}"
+            + (f" (the robot settled on {names[found]})" if found is not None and found != k else "")
+            + "."
+        )
+    else:
+        lines.append(
+            "Identified model: " + ("none (budget spent)" if found is None else f"**{names[found]}**") + "."
+        )
+    lines += [
+        "",
+        f"* planning actions: {res['actions']}",
+        f"* simulated time: {res['sim_time_s']:.1f} s, wall time: {res['wall_time_s']:.1f} s "
+        f"(real-time factor {res['sim_time_s'] / max(res['wall_time_s'], 1e-9):.2f})",
+        f"* final probabilities: {post}",
+    ]
+    pe = res.get("pose_error") or {}
+    if pe.get("translation_m") is not None:
+        lines.append(
+            f"* the true model's final pose error: {100 * pe['translation_m']:.1f} cm, "
+            f"{pe['rotation_deg']:.1f} deg"
+        )
+    lines += ["", "The numbers are in `identify.json` (the `lab identify` contract).", ""]
+    for name, caption in figures:
+        lines += [f"## {caption}", "", f"![{caption}]({name})", ""]
+    if res.get("recording"):
+        lines += [f"Animation: `{res['recording']}`", ""]
+    return "\n".join(lines)
+
+
+def run_demo(
+    out: Path,
+    seed: int = 0,
+    true_model: int = 1,
+    planner: str = "lut",
+    mover: str = "evasive",
+    max_actions: int = 8,
+    max_time_s: float = 150.0,
+    record: Path | None = None,
+    robot: Path | None = None,
+    say: Callable[[str], None] = print,
+) -> Path:
+    """Run the identification demo and return the path of its Markdown report.
+
+    Parameters
+    ----------
+    out : Path
+        Output folder: ``report.md``, ``identify.json`` and the figures.
+    seed, true_model, planner, mover, max_actions, max_time_s
+        As ``lab identify`` (defaults: seed 0, the box M1, lookup tables, the evasive mover, 8 actions,
+        150 s of simulated time).
+    record : Path, optional
+        Write an animation of the live view (.gif, or .mp4 with ffmpeg).
+    robot : Path, optional
+        A hardware TOML config: run on that robot (no ground truth: no pose error, no Fig. 5 truth); a
+        rehearsal config (``hardware/rehearsal.toml``) runs on the emulators with rendered frames and
+        uses ``true_model`` and ``mover`` for the rendered scene.
+    say : callable
+        Where progress lines go (the terminal).
+    """
+    from lab.identification.tables import box_model_names
+
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    names = list(box_model_names())
+    if robot is None and not (isinstance(true_model, int) and 0 <= true_model < len(names)):
+        raise ConfigError(
+            f"unknown true model {true_model!r}; models: 0..{len(names) - 1} ({', '.join(names)})"
+        )
+    missing = tables_missing()
+    if planner == "lut" and missing:
+        say(
+            f"lab demo: first run: building the feature databases and lookup tables of {', '.join(missing)} "
+            "(several minutes, once; `lab tables` builds them ahead)"
+        )
     t0 = time.perf_counter()
-    cam = StereoCamera.from_fov(320, 240, 60.0, 0.12, mount_R=(0.0, 0.0, 0.7))
-    settings = RenderSettings(supersample=supersample)
-    lines = ["# lab demo: a tour of the simulator", ""]
-    summary: dict = {"seed": seed, "supersample": supersample, "models": [], "room": {}}
+    if robot is not None:
+        from lab.hardware.run import identify_on_robot
 
-    lines += [
-        "## The box database (identification paper, Fig. 4)",
-        "",
-        "Each model seen from 1.2 m: its unique face, then a shared face.",
-        "",
-    ]
-    for model in load_box_models():
-        row = {"model": model.name}
-        for side, yaw in (("unique", math.pi), ("shared", 0.0)):
-            with SimWorld("box_database", settings) as world:
-                world.add_carrier(model, Pose2D(0.0, 0.0, 0.0), box_yaw=yaw)
-                robot = SimRobot(world, cam, start=Pose2D(-1.2, 0.0, 0.0), seed=seed)
-                robot.enable()
-                robot.command_pan_tilt(0.0, math.radians(-8))
-                robot.wait_pan_tilt()
-                frame = robot.capture_stereo()
-                name = f"{model.name}_{side}.png"
-                save_rgb(out / name, frame.left)
-                # stereo depth against the renderer's depth buffer, on the box's pixels
-                G_WC = world.truth.G_WC()
-                seg = world.truth.segmentation(G_WC, cam)
-                depth = world.truth.depth(G_WC, cam)
-                box = seg == world.body_id("target")
-                d = disparity_map(frame.left, frame.right)
-                ok = box & np.isfinite(d)
-                z_stereo = cam.fx * cam.baseline / d[ok]
-                err = np.abs(z_stereo - depth[ok])
-                row[side] = {
-                    "image": name,
-                    "box_pixels": int(box.sum()),
-                    "dense_depth_error_median_m": float(np.median(err)) if err.size else None,
-                }
-                lines.append(f"![{model.name} {side}]({name})")
-        summary["models"].append(row)
-        lines.append("")
+        say(f"lab demo: identifying the box with the robot of {robot} ({planner} planner) ...")
+        res = identify_on_robot(
+            robot,
+            planner=planner,
+            seed=seed,
+            max_actions=max_actions,
+            max_time_s=max_time_s,
+            true_model=true_model,
+            mover=mover,
+            progress=say,
+            record=record,
+        )
+    else:
+        from lab.identification.run import run_identify
 
-    lines += [
-        "## The lab room (search paper)",
-        "",
-        "The robot drives 1.5 m into the room while the head pans left and right.",
-        "",
-    ]
-    with SimWorld("lab_room", settings) as world:
-        robot = SimRobot(world, cam, seed=seed)
-        robot.enable()
-        frames = []
-        for k, pan_deg in enumerate((0, 40, -40)):
-            robot.command_pan_tilt(math.radians(pan_deg), math.radians(-5))
-            for _ in range(10):
-                robot.drive(0.5, 0.0)
-                robot.step(0.1)
-            robot.drive(0.0, 0.0)
-            robot.wait_pan_tilt()
-            f = robot.capture_stereo()
-            frames.append(f)
-            save_rgb(out / f"room_{k}.png", f.left)
-            save_rgb(out / f"room_{k}_disparity.png", disparity_picture(f.left, f.right))
-            lines.append(f"![room view {k}](room_{k}.png) ![disparity {k}](room_{k}_disparity.png)")
-        true = world.truth.robot_pose()
-        odo = robot.odometry()
-        summary["room"] = {
-            "bodies": world.names,
-            "true_pose": [true.x, true.y, true.theta],
-            "odometry_pose": [odo.x, odo.y, odo.theta],
-            "odometry_error_m": math.hypot(true.x - odo.x, true.y - odo.y),
-            "collisions": world.truth.collisions,
-            "sim_time_s": world.t,
-        }
-        lines += [
-            "",
-            f"True pose after the drive: x={true.x:.3f} m, y={true.y:.3f} m; odometry says "
-            f"x={odo.x:.3f} m, y={odo.y:.3f} m (error {summary['room']['odometry_error_m'] * 100:.1f} cm); "
-            f"collisions: {world.truth.collisions}.",
-            "",
-        ]
-    summary["wall_time_s"] = time.perf_counter() - t0
-    lines += ["## Numbers", "", "```json", json.dumps(summary, indent=2), "```", ""]
-    write_json_atomic(out / "report.json", summary)
+        say(
+            f"lab demo: identifying the box on the carrier ({names[true_model]}, {mover} mover, "
+            f"{planner} planner, up to {max_actions} actions, {max_time_s:g} s simulated) ..."
+        )
+        res = run_identify(
+            true_model,
+            seed,
+            mover,
+            planner,
+            max_actions,
+            out=out,
+            json_path=out / "identify.json",
+            max_time_s=max_time_s,
+            record=record,
+        )
+    figures = [(f, c) for f, c in FIGURES if (out / f).is_file()]
+    res["demo_wall_time_s"] = time.perf_counter() - t0
+    write_json_atomic(out / "identify.json", res)
     report = out / "report.md"
-    write_text_atomic(report, "\n".join(lines))
+    write_text_atomic(report, _report(res, names, figures, robot))
     return report

@@ -74,20 +74,29 @@ def test_bad_input_is_one_clear_line_and_a_nonzero_exit(tmp_path, args, message)
     assert len(r.stderr.strip().splitlines()) == 1
 
 
-def test_demo_writes_its_report(tmp_path):
-    r = _run("demo", "--out", str(tmp_path))
-    assert r.returncode == 0, r.stderr
-    assert (tmp_path / "report.md").is_file()
-    rep = json.loads((tmp_path / "report.json").read_text())
-    assert [m["model"] for m in rep["models"]] == ["M0", "M1", "M2", "M3"]
-    for m in rep["models"]:
-        for side in ("unique", "shared"):
-            assert m[side]["box_pixels"] > 1000
-            assert m[side]["dense_depth_error_median_m"] < 0.02
-            assert (tmp_path / m[side]["image"]).is_file()
-    assert rep["room"]["collisions"] == 0
-    assert 0 < rep["room"]["odometry_error_m"] < 0.1
-    assert "![M0 unique](M0_unique.png)" in (tmp_path / "report.md").read_text()
+def test_demo_runs_an_identification_episode_and_writes_its_figures_and_report(tmp_path):
+    """A short demo (a still box facing the robot, the circling baseline, one action): the one-command
+    experience writes the paper's figures, the identify JSON and a report that points at them."""
+    r = subprocess.run(
+        [sys.executable, "-m", "lab", "demo", "--out", str(tmp_path), "--true-model", "2"]
+        + ["--mover", "static", "--planner", "circle", "--max-actions", "1", "--max-time", "5"],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert str(tmp_path) in r.stdout  # it says where
+    res = json.loads((tmp_path / "identify.json").read_text())
+    assert res["true_model"] == 2 and res["planner"] == "circle" and res["sim_time_s"] <= 5.5
+    assert abs(sum(res["final_posterior"]) - 1.0) < 1e-9
+    assert all(h["ptu_state"] in ("tracking", "scanning") for h in res["history"])
+    report = (tmp_path / "report.md").read_text()
+    assert "The box on the carrier was **M2**" in report
+    for fig in ("fig5_pose_and_probabilities.png", "fig7_probabilities.png"):
+        assert (tmp_path / fig).is_file() and f"({fig})" in report
+    r = _run("demo", "--out", str(tmp_path), "--true-model", "9")
+    assert r.returncode == 2 and "unknown true model 9; models: 0..3" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
 
 
 def test_notebooks_command_lists_them_and_says_what_is_missing(capsys, monkeypatch):

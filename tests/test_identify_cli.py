@@ -74,3 +74,27 @@ def test_identify_bad_input_is_one_line():
         timeout=300,
     )
     assert r.returncode == 2 and "unknown true model 7; models: 0..3" in r.stderr
+
+
+def test_unknown_mover_and_planner_names_are_refused_clearly():
+    """Through the command line (argparse choices) and the Python API (ConfigError naming the choices)."""
+    import pytest
+
+    from lab.errors import ConfigError
+    from lab.identification.agent import IdentificationAgent
+    from lab.sim.movers import make_mover
+
+    r = subprocess.run(
+        [sys.executable, "-m", "lab", "identify", "--mover", "teleport"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 2 and "invalid choice: 'teleport'" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    with pytest.raises(
+        ConfigError, match="unknown mover 'teleport'; movers: static, scripted, random, evasive"
+    ):
+        make_mover("teleport", carrier=None)
+    with pytest.raises(ConfigError, match="unknown planner 'oracle'; planners: lut, mc, random, circle"):
+        IdentificationAgent(robot=None, planner="oracle")

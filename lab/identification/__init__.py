@@ -28,7 +28,14 @@ from lab.identification.actions import (
     calc_possible_control_actions,
     reachable_on,
 )
-from lab.identification.hypotheses import ModelHypotheses, NoObjectEstimate, symmetry_log_weights, z_turns
+from lab.identification.hypotheses import (
+    ModelHypotheses,
+    NoObjectEstimate,
+    TurnEvidence,
+    symmetry_log_weights,
+    turn_between,
+    z_turns,
+)
 from lab.identification.lut import Eq15Constants, LookupTableEvaluator, eq15_log_likelihood
 from lab.identification.montecarlo import MonteCarloConfig, MonteCarloEvaluator, cross_correspondences
 from lab.identification.planner import (
@@ -120,6 +127,8 @@ __all__ = [
     "save_model_tables",
     "state_for_scoring",
     "symmetry_log_weights",
+    "TurnEvidence",
+    "turn_between",
     "tables_path",
     "uniform",
     "update_model_probabilities",

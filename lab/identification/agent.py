@@ -16,6 +16,18 @@ The robot drives on arcs of the ring around the probability-weighted object esti
 goal never crosses the object. It stops when one model's probability stays above ``stop_probability``
 for ``dwell_s`` seconds, or when the action or time budget is spent.
 
+**The box's look-alike turns.** Three faces carry the same page, so RANSAC can seat a model's filter
+on any quarter-turn of the box (measured: 3 of 4 filters start 90 degrees off). Each frame is scored
+at the filters' poses *and* their quarter-turns (:func:`calc_current_entropy` with ``symmetries``);
+every ``keyframe_s`` the frame is scored at each filter's turns (:class:`TurnEvidence`), a filter
+whose own turn the keyframes support clearly less than another is re-seated on it, and the planner
+weighs each model's four turns by that evidence (:meth:`ModelHypotheses.from_estimates`).
+
+**Fallbacks.** No filter took in a frame for ``lost_after_s``: the track is lost, the head scans and
+the base halts; once a filter takes one in again, the interrupted goal is resumed (or replanned if the
+object moved). No ring goal reachable on the floor plan (:class:`RingBlocked`): hold position, keep
+observing, plan again after ``retry_s``.
+
 The agent uses only the :class:`lab.robot.Robot` interface: it runs unchanged on :class:`lab.sim.SimRobot`
 and on :class:`lab.hardware.HardwareRobot`.
 """
@@ -30,11 +42,18 @@ from enum import Enum
 import numpy as np
 
 from lab.errors import ConfigError
-from lab.estimation import EKFBank, EKFConfig, OrientationChart
-from lab.geometry import Pose2D, relative_pose2d, wrap_angle
+from lab.estimation import EKFBank, EKFConfig, OrientationChart, UpdateOutcome
+from lab.geometry import G_to_pose6, Pose2D, relative_pose2d, wrap_angle
 from lab.identification.actions import ActionConfig, RingBlocked
 from lab.identification.head import HeadController, HeadMode
-from lab.identification.hypotheses import ModelHypotheses, NoObjectEstimate
+from lab.identification.hypotheses import (
+    ModelHypotheses,
+    NoObjectEstimate,
+    TurnEvidence,
+    symmetry_log_weights,
+    turn_between,
+    z_turns,
+)
 from lab.identification.planner import plan_next_best_view
 from lab.identification.probabilities import ModelScorer, ScoringConfig, uniform
 from lab.identification.step import observe_frame
@@ -78,6 +97,25 @@ class AgentConfig:
         Frames of tracking before the first decision (the posterior takes in the first view).
     final_observe_s : float [s]
         Observation at the last goal once the action budget is spent.
+    symmetry_turns : int
+        The box's look-alike turns about its z axis (4: three shared faces and the unique one look
+        alike from the side, so a filter can lock on the wrong quarter-turn; 1 turns the symmetry off).
+    keyframe_s : float [s]
+        A tracked frame is kept as a keyframe for the turn evidence at most this often ...
+    keyframes : int
+        ... and this many are kept (:class:`~lab.identification.hypotheses.TurnEvidence`).
+    reseat_margin : float [nats, after the evidence weight]
+        A filter is moved to another turn when the keyframes favour that turn over its own by this
+        much (1.0: about eight features that its own pose puts on the wrong face).
+    lost_after_s : float [s]
+        The track is lost when no model's filter has taken in a frame for this long: the head scans
+        and the base halts until a filter takes one in again (the paper's HALT).
+    replan_shift_m : float [m]
+        After a lost track, the interrupted goal is resumed unless the object's estimate moved more
+        than this from where the goal was planned around; then the next-best view is recomputed.
+    retry_s : float [s]
+        When no goal of the ring is reachable (:class:`RingBlocked`), the robot holds position and keeps
+        observing, and plans again after this long.
     """
 
     dt: float = 0.2
@@ -90,6 +128,13 @@ class AgentConfig:
     arrive_theta_deg: float = 15.0
     settle_s: float = 1.0
     final_observe_s: float = 4.0
+    symmetry_turns: int = 4
+    keyframe_s: float = 1.0
+    keyframes: int = 8
+    reseat_margin: float = 1.0
+    lost_after_s: float = 3.0
+    replan_shift_m: float = 0.3
+    retry_s: float = 2.0
 
     def __post_init__(self):
         if not 0.02 <= self.dt <= 1.0:
@@ -98,6 +143,11 @@ class AgentConfig:
             raise ConfigError(f"stop_probability must be within (0.5, 1), got {self.stop_probability}")
         if self.max_actions < 0:
             raise ConfigError(f"max_actions must be >= 0, got {self.max_actions}")
+        if self.symmetry_turns < 1 or self.keyframes < 1 or not self.reseat_margin > 0:
+            raise ConfigError(
+                f"symmetry_turns and keyframes must be >= 1 and reseat_margin > 0, got "
+                f"{self.symmetry_turns}, {self.keyframes}, {self.reseat_margin}"
+            )
 
 
 @dataclass(frozen=True)
@@ -143,6 +193,10 @@ class IdentificationAgent:
     observer : callable, optional
         ``observer(agent, frame)`` after every step (live views, recordings: :mod:`lab.viz.live`);
         kept as :attr:`on_step`. None (the default) costs nothing.
+    floor_plan : lab.navigation.CostGrid, optional
+        A known map (obstacles grown by the robot's radius): only ring goals that A* reaches on it
+        from the robot's odometry pose are candidates (:func:`~lab.identification.actions.reachable_on`).
+        Without it every goal of the ring is a candidate.
     """
 
     def __init__(
@@ -156,6 +210,7 @@ class IdentificationAgent:
         action_config: ActionConfig | None = None,
         evaluator=None,
         observer=None,
+        floor_plan=None,
     ):
         try:
             self.planner = PlannerChoice(planner) if isinstance(planner, str) else planner
@@ -194,6 +249,16 @@ class IdentificationAgent:
         self.identified: int | None = None
         self.on_step = observer  # optional callable(agent, frame) for live views
         self.last_features = self.last_observation = None  # the last frame's D_k and its FrameObservation
+        self.floor_plan = floor_plan
+        self.n_blocked = 0  # decisions that found every ring goal blocked (held position, retried)
+        self.n_lost = 0  # times the track was lost (scan, halt, then resume or replan)
+        self._retry_at: float | None = None
+        self._last_seen_t: float | None = None  # last frame a filter took in
+        self._lost = False
+        self.turns = z_turns(self.config.symmetry_turns)
+        self.turn_evidence = TurnEvidence(len(self.dbs), len(self.turns), self.config.keyframes)
+        self._last_keyframe_t: float | None = None
+        self.n_reseats = 0  # filters moved to a better-supported turn
 
     # --- set-up -----------------------------------------------------------------------------------
     def _make_evaluator(self):
@@ -221,10 +286,55 @@ class IdentificationAgent:
         self._prev = frame
         predicted = self.bank.estimates
         f = stereo_features(frame.left, frame.right, frame.camera, t=frame.t)
-        obs = observe_frame(self.P, f, self.bank, predicted, self.matchers, self.scorers, self.scoring)
+        obs = observe_frame(
+            self.P, f, self.bank, predicted, self.matchers, self.scorers, self.scoring, self.turns
+        )
         self.P = obs.belief.P
         self.last_features, self.last_observation = f, obs
+        if any(u.outcome is not UpdateOutcome.SKIPPED for u in obs.updates):
+            self._last_seen_t = frame.t
+        self._follow_reinitialised_filters(predicted, obs.updates)
+        self._keyframe(frame, f)
         return f, obs
+
+    # --- the box's look-alike turns ----------------------------------------------------------------
+    def _follow_reinitialised_filters(self, predicted, updates) -> None:
+        """A filter that RANSAC re-initialised on another copy of the shared page turned by a quarter:
+        re-index its turn evidence (or forget it when the new pose is unrelated to the old)."""
+        for i, (before, u) in enumerate(zip(predicted, updates, strict=True)):
+            if u.outcome not in (UpdateOutcome.INITIALIZED, UpdateOutcome.REINITIALIZED):
+                continue
+            after = self.bank[i].estimate
+            k = None if before is None or after is None else turn_between(before.G_CO, after.G_CO, self.turns)
+            if k is None:
+                self.turn_evidence.forget(i)
+            elif k:
+                self.turn_evidence.reseated(i, k)
+
+    def _keyframe(self, frame, features) -> None:
+        """Every ``keyframe_s``, score the frame at each filter's look-alike turns and re-seat a filter
+        whose own turn the keyframes support clearly less than another (the shared faces let RANSAC
+        lock on any of them; only the unique face, or its absence where a turn puts it, tells)."""
+        cfg = self.config
+        if len(self.turns) < 2 or len(features) == 0:
+            return
+        if self._last_keyframe_t is not None and frame.t - self._last_keyframe_t < cfg.keyframe_s - 1e-9:
+            return
+        est = self.bank.estimates
+        if all(e is None for e in est):
+            return
+        self._last_keyframe_t = frame.t
+        G_WC = frame.odom.G() @ frame.G_RC
+        lw = symmetry_log_weights([(features, G_WC)], self.scorers, est, G_WC, self.turns, self.scoring)
+        self.turn_evidence.add(lw)
+        total = self.turn_evidence.total()
+        for i, e in enumerate(est):
+            k = int(np.argmax(total[i]))
+            if e is None or k == 0 or total[i, k] - total[i, 0] < cfg.reseat_margin:
+                continue
+            self.bank[i].initialize(G_to_pose6(e.G_CO @ self.turns[k]), None, Sigma_rv=e.Sigma_rv)
+            self.turn_evidence.reseated(i, k)
+            self.n_reseats += 1
 
     def _object_origin_C(self) -> np.ndarray | None:
         """The probability-weighted origin of the tracked models, in the current camera frame."""
@@ -237,8 +347,11 @@ class IdentificationAgent:
         return np.sum([wk * est[i].mu[:3] for wk, i in zip(w, known, strict=True)], axis=0)
 
     def _hypotheses(self, frame) -> ModelHypotheses:
+        """Each model's pose and its look-alike turns, weighted by the keyframes' turn evidence."""
         G_WC = frame.odom.G() @ frame.G_RC
-        return ModelHypotheses.from_estimates(self.P, self.bank.estimates, G_WC)
+        return ModelHypotheses.from_estimates(
+            self.P, self.bank.estimates, G_WC, self.turns, self.turn_evidence.total()
+        )
 
     def _arc_path(self, centre_xy, goal: Pose2D, pose: Pose2D) -> np.ndarray:
         """Waypoints along the ring from the robot's angle to the goal's, the short way round."""
@@ -262,14 +375,23 @@ class IdentificationAgent:
             return False
         centre = hyp.object_centre_W()
         t0 = time.perf_counter()
+        reachable = None
+        if self.floor_plan is not None:
+            from lab.identification.actions import reachable_on
+
+            reachable = reachable_on(self.floor_plan, frame.odom)
         try:
             if self.planner in (PlannerChoice.LUT, PlannerChoice.MC):
-                plan = plan_next_best_view(hyp, self.robot.camera, self.evaluator, self.action_config)
+                plan = plan_next_best_view(
+                    hyp, self.robot.camera, self.evaluator, self.action_config, reachable
+                )
                 actions, gains, best = plan.actions, np.asarray(plan.gain), plan.best
             else:
                 from lab.identification.actions import calc_possible_control_actions
 
-                actions = calc_possible_control_actions(centre, self.robot.camera, self.action_config)
+                actions = calc_possible_control_actions(
+                    centre, self.robot.camera, self.action_config, reachable
+                )
                 gains = np.full(len(actions), np.nan)
                 if self.planner is PlannerChoice.RANDOM:
                     best = int(self.rng.integers(len(actions)))
@@ -277,7 +399,9 @@ class IdentificationAgent:
                     here = math.atan2(frame.odom.y - centre[1], frame.odom.x - centre[0])
                     want = here + math.radians(self.config.circle_step_deg)
                     best = int(np.argmin([abs(wrap_angle(a.azimuth - want)) for a in actions]))
-        except RingBlocked:
+        except RingBlocked:  # hold position, keep observing, and plan again after retry_s
+            self.n_blocked += 1
+            self._retry_at = frame.t + self.config.retry_s
             return False
         goal = actions[best].pose
         self._goal = goal
@@ -296,7 +420,8 @@ class IdentificationAgent:
         robot = self.robot
         frame = robot.capture_stereo()
         f, _ = self._perceive(frame)
-        cmd = self.head.command(robot.pan_tilt(), self._object_origin_C(), cfg.dt)
+        self._check_track(frame)
+        cmd = self.head.command(robot.pan_tilt(), None if self._lost else self._object_origin_C(), cfg.dt)
         robot.command_pan_tilt(cmd.pan, cmd.tilt)
         tracking = cmd.mode is HeadMode.TRACKING
         if tracking:
@@ -308,7 +433,14 @@ class IdentificationAgent:
             self._arrival_t = frame.t
         action = None
         settled = tracking and frame.t - self._tracking_since >= cfg.settle_s
-        if settled and arrived and len(self.decisions) < cfg.max_actions and self.identified is None:
+        retry_ok = self._retry_at is None or frame.t >= self._retry_at
+        if (
+            settled
+            and arrived
+            and retry_ok
+            and len(self.decisions) < cfg.max_actions
+            and self.identified is None
+        ):
             if self._decide(frame):  # the gain is computed when the goal is reached (the paper's Fig. 3)
                 action = len(self.decisions) - 1
                 self._arrival_t = None
@@ -340,6 +472,28 @@ class IdentificationAgent:
             self._above_since = None
         robot.step(cfg.dt)
         return rec
+
+    def _check_track(self, frame) -> None:
+        """Lose the track when no filter has taken in a frame for ``lost_after_s``; on re-acquiring it,
+        resume the interrupted goal, or replan if the object's estimate moved (the paper's Sec. IV)."""
+        cfg = self.config
+        seen = self._last_seen_t
+        if not self._lost:
+            if seen is not None and frame.t - seen > cfg.lost_after_s:
+                self._lost = True
+                self.n_lost += 1
+            return
+        if seen is None or frame.t - seen > 1e-9:  # still nothing taken in this frame
+            return
+        self._lost = False
+        if self._goal is not None and self.decisions:
+            try:
+                centre = self._hypotheses(frame).object_centre_W()
+            except NoObjectEstimate:
+                return
+            if np.linalg.norm(centre[:2] - self.decisions[-1].centre_W[:2]) > cfg.replan_shift_m:
+                self._goal = None  # arrived by definition: the next settled step plans again
+                self._arrival_t = None
 
     def _arrived(self, pose: Pose2D) -> bool:
         """At the current goal (or there is none), within the arrival tolerances."""

@@ -31,7 +31,14 @@ from lab.geometry import G_to_pose6, Rz, se3, se3_inv
 from lab.identification.probabilities import ModelScorer, ScoringConfig, pose_estimate_rv
 from lab.vision import Features3D
 
-__all__ = ["ModelHypotheses", "NoObjectEstimate", "symmetry_log_weights", "z_turns"]
+__all__ = [
+    "ModelHypotheses",
+    "NoObjectEstimate",
+    "TurnEvidence",
+    "symmetry_log_weights",
+    "turn_between",
+    "z_turns",
+]
 
 
 class NoObjectEstimate(LabError, RuntimeError):
@@ -259,3 +266,71 @@ def symmetry_log_weights(
                 out[i, k] += config.evidence_weight * scorer.score(features, alias).log_likelihood
         out[i] -= out[i].max()
     return out
+
+
+def turn_between(G_a: np.ndarray, G_b: np.ndarray, symmetries: Sequence[np.ndarray], tol_deg: float = 20.0):
+    """The index ``k`` of the symmetry with ``G_b ~ G_a S_k`` (rotations within ``tol_deg``), or None.
+
+    Two poses of the same object (in the same frame) that differ by one of the look-alike turns: how a
+    filter re-initialised on another copy of the shared page relates to its old pose.
+    """
+    R = np.asarray(G_a, dtype=float)[:3, :3].T @ np.asarray(G_b, dtype=float)[:3, :3]  # S = G_a^-1 G_b
+    best, best_deg = None, float(tol_deg)
+    for k, S in enumerate(symmetries):
+        D = np.asarray(S, dtype=float)[:3, :3].T @ R
+        deg = float(np.degrees(np.arccos(np.clip((np.trace(D) - 1.0) / 2.0, -1.0, 1.0))))
+        if deg <= best_deg:
+            best, best_deg = k, deg
+    return best
+
+
+class TurnEvidence:
+    """Which look-alike turn of each model's filter pose the recent keyframes support.
+
+    Each keyframe adds an (L, K) array: :func:`symmetry_log_weights` of that frame alone, at the
+    filters' poses *of that frame* (so a box that turned since does not matter: the turn is relative to
+    the filter, which follows the box). The evidence is the sum over the last ``window`` keyframes.
+    Turn 0 is the filter's own pose; when a filter is re-seated on turn ``k`` (or re-initialised on
+    it), its rows are re-indexed (:meth:`reseated`); a re-initialisation unrelated to the old pose
+    forgets them (:meth:`forget`).
+
+    Parameters
+    ----------
+    n_models, n_turns : int
+    window : int
+        Keyframes kept.
+    """
+
+    def __init__(self, n_models: int, n_turns: int, window: int = 8):
+        if window < 1:
+            raise ConfigError(f"window must be >= 1 keyframe, got {window}")
+        self.L, self.K, self.window = int(n_models), int(n_turns), int(window)
+        self._frames: list[np.ndarray] = []
+
+    def __len__(self) -> int:
+        return len(self._frames)
+
+    def add(self, log_weights) -> None:
+        """Add one keyframe's ``symmetry_log_weights`` (L, K)."""
+        lw = np.array(log_weights, dtype=float)
+        if lw.shape != (self.L, self.K) or not np.all(np.isfinite(lw)):
+            raise ConfigError(f"a keyframe's turn log-weights must be finite, shape ({self.L}, {self.K})")
+        self._frames.append(lw)
+        del self._frames[: -self.window]
+
+    def total(self) -> np.ndarray:
+        """Summed log-weights (L, K), each row's best at 0 (all 0 before any keyframe)."""
+        if not self._frames:
+            return np.zeros((self.L, self.K))
+        tot = np.sum(self._frames, axis=0)
+        return tot - tot.max(axis=1, keepdims=True)
+
+    def reseated(self, i: int, k: int) -> None:
+        """Model ``i``'s filter now sits on what was its turn ``k``: new turn ``j`` is old ``k + j``."""
+        for lw in self._frames:
+            lw[i] = np.roll(lw[i], -int(k))
+
+    def forget(self, i: int) -> None:
+        """Model ``i``'s filter was re-initialised on a pose unrelated to the old one."""
+        for lw in self._frames:
+            lw[i] = 0.0

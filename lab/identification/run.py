@@ -18,7 +18,7 @@ from lab.errors import ConfigError
 from lab.geometry import Pose2D, se3_inv
 from lab.io import write_json_atomic
 
-__all__ = ["run_identify"]
+__all__ = ["floor_plan", "run_identify"]
 
 
 def _pose_error(G_est: np.ndarray, G_true: np.ndarray) -> dict:
@@ -28,6 +28,28 @@ def _pose_error(G_est: np.ndarray, G_true: np.ndarray) -> dict:
         "translation_m": t,
         "rotation_deg": math.degrees(math.acos(np.clip((np.trace(R) - 1) / 2, -1, 1))),
     }
+
+
+def floor_plan(room_size_m: tuple[float, float], robot_radius_m: float, resolution_m: float = 0.1):
+    """The known floor plan of a rectangular room centred on the origin, as A*'s cost grid: the walls
+    grown by the robot's radius (a map the operator gives the robot, not the simulator's state).
+
+    Parameters
+    ----------
+    room_size_m : (float, float) [m]
+        The room's x and y extent.
+    robot_radius_m : float [m]
+        The robot's footprint radius.
+    """
+    from lab.navigation import Costmap, GridSpec
+
+    sx, sy = (float(v) for v in room_size_m)
+    if not (sx > 0 and sy > 0):
+        raise ConfigError(f"room size must be positive, got {room_size_m}")
+    spec = GridSpec.from_bounds(-sx / 2, -sy / 2, sx / 2, sy / 2, resolution_m)
+    wall = np.zeros(spec.shape, dtype=bool)
+    wall[0, :] = wall[-1, :] = wall[:, 0] = wall[:, -1] = True
+    return Costmap.from_occupancy(spec, wall).inflated(robot_radius_m + resolution_m)
 
 
 def run_identify(
@@ -74,6 +96,7 @@ def run_identify(
         )
     rng = np.random.default_rng(seed)
     t_wall = time.perf_counter()
+    t_cpu = time.process_time()  # this process's CPU time: the cost of the episode whatever the load
     with SimWorld("arena") as world:
         # the unique face (+X) points away from the robot: it sees shared faces first
         carrier = world.add_carrier(
@@ -87,6 +110,9 @@ def run_identify(
             planner=planner,
             seed=seed,
             config=AgentConfig(max_actions=max_actions, max_time_s=max_time_s),
+            floor_plan=None
+            if world.scene.room is None
+            else floor_plan(world.scene.room.size, robot.base_limits.radius),
         )
         recorder = None
         if record is not None:
@@ -115,6 +141,7 @@ def run_identify(
         collisions = world.truth.collisions
         true_poses = [G_WO for _, G_WO in truth]
     wall = time.perf_counter() - t_wall
+    cpu = time.process_time() - t_cpu
     steps = agent.steps
     result = {
         "true_model": true_model,
@@ -149,6 +176,11 @@ def run_identify(
             for d in agent.decisions
         ],
         "real_time_factor": sim_time / wall if wall > 0 else None,
+        "cpu_time_s": cpu,
+        "real_time_factor_cpu": sim_time / cpu if cpu > 0 else None,  # on one free core
+        "filter_reseats": agent.n_reseats,
+        "ring_blocked": agent.n_blocked,
+        "track_lost": agent.n_lost,
     }
     if recorder is not None:
         p = recorder.close()

@@ -49,6 +49,7 @@ def observe_frame(
     matchers: Sequence[Matcher],
     scorers: Sequence[ModelScorer],
     config: ScoringConfig | None = None,
+    symmetries: Sequence | None = None,
 ) -> FrameObservation:
     """Update every model's filter with the frame and the model probabilities with Eq. (7).
 
@@ -65,6 +66,8 @@ def observe_frame(
     matchers, scorers : sequences, one per model
         ``Matcher(db_i)`` (the EKF's correspondences) and ``ModelScorer(db_i)`` (the probabilities').
     config : ScoringConfig, optional
+    symmetries : sequence of ndarray (4, 4), optional
+        The object's look-alike turns, passed to :func:`calc_current_entropy`.
     """
     L = len(bank)
     if not (len(predicted) == len(matchers) == len(scorers) == L):
@@ -76,5 +79,5 @@ def observe_frame(
         bank.update(i, *matchers[i].match(features).pairs(features, scorers[i].db)) for i in range(L)
     )
     states = [state_for_scoring(p, u) for p, u in zip(predicted, updates, strict=True)]
-    belief = calc_current_entropy(P, features, scorers, states, config)
+    belief = calc_current_entropy(P, features, scorers, states, config, symmetries)
     return FrameObservation(belief, updates)

@@ -137,7 +137,7 @@ def fig6(
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.legend(fontsize=8, loc="upper left")
-    ax.set_title("Candidate views coloured by information gain (identification paper, Fig. 6)")
+    ax.set_title("Candidate views coloured by information gain\n(identification paper, Fig. 6)")
     return fig
 
 

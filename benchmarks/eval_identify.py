@@ -1,0 +1,238 @@
+"""The identification acceptance grid (issue 7): true models x seeds x planners, evasive mover.
+
+Run (from the repository root; resumable: an episode whose JSON exists is not run again)::
+
+    nice .venv/bin/python benchmarks/eval_identify.py --out out/eval_identify --jobs 2
+    nice .venv/bin/python benchmarks/eval_identify.py --out out/eval_identify --planners lut --seeds 0-4
+    .venv/bin/python benchmarks/eval_identify.py --out out/eval_identify --report-only
+
+Every episode is one ``lab identify --json`` in its own process (the command-line contract is what is
+measured). The report prints, per planner: successes (the true model ends as the argmax with
+``P >= 0.95`` held for the dwell, within the action budget), the distribution of planning actions and of
+simulated time, the true model's final pose error, the real-time factor (sim time / wall time, measured
+under whatever load the machine had: the report prints the load average), and the ratio of the median
+actions of ``lut`` to ``random`` over the seeds both ran. It writes the same as JSON (``summary.json``).
+
+An episode that did not identify its model counts ``max_actions`` actions (a lower bound: the budget
+ran out), and the report lists every failure with its final probabilities.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+
+def _range(text: str) -> list[int]:
+    out: list[int] = []
+    for part in text.split(","):
+        if "-" in part:
+            a, b = part.split("-")
+            out += list(range(int(a), int(b) + 1))
+        elif part:
+            out.append(int(part))
+    return out
+
+
+def episode_path(out: Path, planner: str, model: int, seed: int) -> Path:
+    return out / planner / f"m{model}_s{seed}.json"
+
+
+def run_episode(out: Path, planner: str, model: int, seed: int, args) -> dict | None:
+    path = episode_path(out, planner, model, seed)
+    if path.is_file():
+        return json.loads(path.read_text())
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cmd = [
+        sys.executable,
+        "-m",
+        "lab",
+        "identify",
+        "--true-model",
+        str(model),
+        "--seed",
+        str(seed),
+        "--mover",
+        args.mover,
+        "--planner",
+        planner,
+        "--max-actions",
+        str(args.max_actions),
+        "--max-time",
+        str(args.max_time),
+        "--json",
+        str(path),
+    ]
+    t0 = time.perf_counter()
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    load = os.getloadavg()[0]
+    if r.returncode != 0 or not path.is_file():
+        print(
+            f"{planner} M{model} seed {seed}: FAILED TO RUN (exit {r.returncode}): {r.stderr[-400:]}",
+            flush=True,
+        )
+        return None
+    res = json.loads(path.read_text())
+    res["load_avg_1min"] = load  # the machine's load when the episode ended (the RTF depends on it)
+    path.write_text(json.dumps(res))
+    print(
+        f"{planner:6s} M{model} seed {seed}: identified {res['identified_model']} after {res['actions']} "
+        f"actions, {res['sim_time_s']:.1f} s sim, {time.perf_counter() - t0:.0f} s wall (load {load:.1f})",
+        flush=True,
+    )
+    return res
+
+
+def _dist(xs) -> dict:
+    xs = sorted(xs)
+    if not xs:
+        return {"n": 0}
+    q = statistics.quantiles(xs, n=4) if len(xs) > 1 else [xs[0]] * 3
+    return {
+        "n": len(xs),
+        "min": xs[0],
+        "q1": q[0],
+        "median": statistics.median(xs),
+        "q3": q[2],
+        "max": xs[-1],
+    }
+
+
+def reached(res: dict, threshold: float = 0.95) -> bool:
+    """The true model reached the threshold at some step (the history's posteriors)."""
+    k = res["true_model"]
+    return any(h["posterior"][k] >= threshold for h in res["history"])
+
+
+def summarise(out: Path, planners, models, seeds, max_actions: int) -> dict:
+    summary: dict = {"planners": {}, "models": models, "seeds": seeds}
+    for planner in planners:
+        rows = []
+        for m in models:
+            for s in seeds:
+                p = episode_path(out, planner, m, s)
+                if p.is_file():
+                    rows.append(json.loads(p.read_text()))
+        ok = [r for r in rows if r["success"] and r["actions"] <= max_actions]
+        actions = [r["actions"] if r["success"] else max_actions for r in rows]
+        per_model = {}
+        for m in models:
+            mine = [r for r in rows if r["true_model"] == m]
+            per_model[f"M{m}"] = {
+                "n": len(mine),
+                "success": sum(r["success"] for r in mine),
+                "failures": [
+                    {
+                        "seed": r["seed"],
+                        "identified": r["identified_model"],
+                        "actions": r["actions"],
+                        "sim_time_s": round(r["sim_time_s"], 1),
+                        "reached_0.95": reached(r),
+                        "final_posterior": [round(p, 3) for p in r["final_posterior"]],
+                    }
+                    for r in mine
+                    if not r["success"]
+                ],
+            }
+        pe = [r["pose_error"] for r in rows if r["pose_error"]["translation_m"] is not None]
+        summary["planners"][planner] = {
+            "episodes": len(rows),
+            "success": len(ok),
+            "actions": _dist(actions),
+            "actions_identified": _dist([r["actions"] for r in ok]),
+            "sim_time_s": _dist([r["sim_time_s"] for r in rows]),
+            "sim_time_identified_s": _dist([r["sim_time_s"] for r in ok]),
+            "pose_error_translation_m": _dist([e["translation_m"] for e in pe]),
+            "pose_error_rotation_deg": _dist([e["rotation_deg"] for e in pe]),
+            "real_time_factor": _dist([r["real_time_factor"] for r in rows if r.get("real_time_factor")]),
+            "load_avg_1min": _dist([r["load_avg_1min"] for r in rows if "load_avg_1min" in r]),
+            "per_model": per_model,
+            "episode_keys": sorted((r["true_model"], r["seed"]) for r in rows),
+        }
+    if "lut" in summary["planners"] and "random" in summary["planners"]:
+        both = set(map(tuple, summary["planners"]["lut"]["episode_keys"])) & set(
+            map(tuple, summary["planners"]["random"]["episode_keys"])
+        )
+
+        def med(planner):
+            acts = []
+            for m, s in sorted(both):
+                r = json.loads(episode_path(out, planner, m, s).read_text())
+                acts.append(r["actions"] if r["success"] else max_actions)
+            return statistics.median(acts) if acts else None
+
+        ml, mr = med("lut"), med("random")
+        summary["lut_vs_random"] = {
+            "paired_episodes": len(both),
+            "median_actions_lut": ml,
+            "median_actions_random": mr,
+            "ratio": None if not mr else ml / mr,
+        }
+    return summary
+
+
+def print_table(summary: dict) -> None:
+    def f(d, key="median", fmt="{:.2f}"):
+        return "-" if d.get("n", 0) == 0 else fmt.format(d[key])
+
+    print()
+    print(
+        f"{'planner':8s} {'ok/n':>7s} {'actions med [q1,q3] max':>25s} {'sim s med [max]':>17s} "
+        f"{'pose err med cm / deg':>22s} {'RTF med':>8s} {'load':>5s}"
+    )
+    for planner, s in summary["planners"].items():
+        a, t = s["actions"], s["sim_time_s"]
+        acts = "-" if a["n"] == 0 else f"{a['median']:.1f} [{a['q1']:.1f},{a['q3']:.1f}] {a['max']}"
+        sim = "-" if t["n"] == 0 else f"{t['median']:.1f} [{t['max']:.1f}]"
+        pe_t, pe_r = s["pose_error_translation_m"], s["pose_error_rotation_deg"]
+        pe = "-" if pe_t["n"] == 0 else f"{100 * pe_t['median']:.1f} / {pe_r['median']:.1f}"
+        print(
+            f"{planner:8s} {s['success']:>3d}/{s['episodes']:<3d} {acts:>25s} {sim:>17s} {pe:>22s} "
+            f"{f(s['real_time_factor']):>8s} {f(s['load_avg_1min'], fmt='{:.1f}'):>5s}"
+        )
+        for m, pm in s["per_model"].items():
+            for fail in pm["failures"]:
+                print(f"    {planner} {m} failed: {fail}")
+    if "lut_vs_random" in summary:
+        c = summary["lut_vs_random"]
+        print(
+            f"\nmedian actions lut / random over {c['paired_episodes']} paired episodes: "
+            f"{c['median_actions_lut']} / {c['median_actions_random']} = "
+            f"{'-' if c['ratio'] is None else format(c['ratio'], '.2f')} (acceptance: <= 0.6)"
+        )
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("out/eval_identify"))
+    ap.add_argument("--models", type=_range, default=[0, 1, 2, 3], help="e.g. 0-3 (default)")
+    ap.add_argument("--seeds", type=_range, default=list(range(10)), help="e.g. 0-9 (default) or 0,3,5")
+    ap.add_argument("--planners", default="lut,random", help="comma-separated (default lut,random)")
+    ap.add_argument("--mover", default="evasive")
+    ap.add_argument("--max-actions", type=int, default=8)
+    ap.add_argument("--max-time", type=float, default=240.0)
+    ap.add_argument("--jobs", type=int, default=1, help="episodes run side by side (default 1)")
+    ap.add_argument("--report-only", action="store_true", help="summarise the JSONs already in --out")
+    args = ap.parse_args(argv)
+    planners = [p for p in args.planners.split(",") if p]
+    if not args.report_only:
+        todo = [(p, m, s) for p in planners for s in args.seeds for m in args.models]
+        with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+            list(pool.map(lambda job: run_episode(args.out, *job, args), todo))
+    summary = summarise(args.out, planners, args.models, args.seeds, args.max_actions)
+    print_table(summary)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "summary.json").write_text(json.dumps(summary, indent=2))
+    print(f"\nsummary: {args.out / 'summary.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
