@@ -207,3 +207,30 @@ def test_drive_to_stops_the_robot_when_the_robot_raises():
     with pytest.raises(RuntimeError, match="bump"):
         drive_to(robot, [[0.0, 0.0], [3.0, 0.0]])
     assert robot._v == 0.0 and robot._cmd == (0.0, 0.0)
+
+
+def test_pushed_off_after_the_end_of_its_path_it_steers_back_without_failing():
+    """The caller may keep commanding after the follower reached the end of its path (the
+    identification agent judges arrival with its own tolerances, and on hardware the watchdog can
+    stop the base short): pushed off the goal, the follower steers back to it."""
+    f = PathFollower(LIMITS)
+    f.set_path(np.array([[0.0, 0.0], [1.0, 0.0]]))
+    robot = KinematicRobot(Pose2D(0.0, 0.0, 0.0), LIMITS)
+    robot.enable()
+    for _ in range(1000):
+        cmd = f.command(robot.odometry(), robot.now())
+        if cmd.status is FollowStatus.ARRIVED:
+            break
+        robot.drive(cmd.v, cmd.omega)
+        robot.step(DT)
+    assert cmd.status is FollowStatus.ARRIVED
+    pushed = KinematicRobot(Pose2D(1.3, 0.25, 0.0), LIMITS)  # beyond the end of the path, to the side
+    pushed.enable()
+    for _ in range(1000):
+        cmd = f.command(pushed.odometry(), robot.now() + pushed.now())
+        if cmd.status is FollowStatus.ARRIVED:
+            break
+        pushed.drive(cmd.v, cmd.omega)
+        pushed.step(DT)
+    p = pushed.odometry()
+    assert cmd.status is FollowStatus.ARRIVED and math.hypot(p.x - 1.0, p.y) <= 0.1

@@ -224,13 +224,14 @@ class PathFollower:
         if len(W) < 2:
             return 0.0
         horizon = self._progress + 2.0 * self.lookahead + 0.5
-        k0 = max(0, int(np.searchsorted(S, self._progress, side="right")) - 1)
+        # the segment holding the progress (the last one once the progress reached the end)
+        k0 = min(max(0, int(np.searchsorted(S, self._progress, side="right")) - 1), len(W) - 2)
         k1 = max(k0 + 1, int(np.searchsorted(S, horizon, side="right")))
         k1 = min(k1, len(W) - 1)
         a, b = W[k0:k1], W[k0 + 1 : k1 + 1]
         ab = b - a
         L2 = np.einsum("ij,ij->i", ab, ab)
-        t = np.clip(np.einsum("ij,ij->i", p - a, ab) / L2, 0.0, 1.0)
+        t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(L2, 1e-12), 0.0, 1.0)
         d = np.linalg.norm(a + t[:, None] * ab - p, axis=1)
         i = int(np.argmin(d))
         return float(S[k0 + i] + t[i] * np.sqrt(L2[i]))
