@@ -4,7 +4,8 @@ Run from the repository root (each trial is a full closed-loop run in the simula
 costmap navigator that ``lab search`` uses; expect one to three minutes of CPU per trial)::
 
     python benchmarks/eval_search.py run --out eval.jsonl [--strategies paper,lawnmower,frontier]
-        [--seeds 0,1] [--obstacles both|no|yes] [--max-time 300] [--jobs 2] [--shard K/N]
+        [--seeds 0,1] [--obstacles both|no|yes] [--surfaces floor,table,shelf] [--max-time 300]
+        [--shard K/N]
     python benchmarks/eval_search.py report eval.jsonl
 
 **Trials.** Three textured objects (cereal_box, book, toy_block) x three heights (floor, table_a or
@@ -49,12 +50,14 @@ OBJECTS = ("cereal_box", "book", "toy_block")
 SURFACES = ("floor", "table", "shelf")
 
 
-def trial_list(strategies, seeds, obstacles) -> list[dict]:
+def trial_list(strategies, seeds, obstacles, surfaces=SURFACES) -> list[dict]:
     """Every trial: the shelf's last (the slowest: its failures run to the budget), strategies
     interleaved on the same placement."""
     obst = {"no": (False,), "yes": (True,), "both": (False, True)}[obstacles]
     out = []
     for s_i, surface in enumerate(SURFACES):
+        if surface not in surfaces:
+            continue
         for seed in seeds:
             for o_i, name in enumerate(OBJECTS):
                 for ob in obst:
@@ -160,7 +163,11 @@ def cmd_run(args) -> int:
 
     strategies = [s.strip() for s in args.strategies.split(",") if s.strip()]
     seeds = [int(s) for s in args.seeds.split(",")]
-    trials = trial_list(strategies, seeds, args.obstacles)
+    surfaces = [s.strip() for s in args.surfaces.split(",") if s.strip()]
+    bad = sorted(set(surfaces) - set(SURFACES))
+    if bad:
+        raise SystemExit(f"unknown surface(s) {', '.join(bad)}; surfaces: {', '.join(SURFACES)}")
+    trials = trial_list(strategies, seeds, args.obstacles, surfaces)
     k, n = (int(v) for v in args.shard.split("/"))
     trials = trials[k::n]
     out = Path(args.out)
@@ -285,6 +292,7 @@ def main(argv=None) -> int:
     r.add_argument("--strategies", default="paper,lawnmower,frontier")
     r.add_argument("--seeds", default="0,1")
     r.add_argument("--obstacles", choices=("no", "yes", "both"), default="both")
+    r.add_argument("--surfaces", default=",".join(SURFACES), help="a subset of floor,table,shelf")
     r.add_argument("--max-time", type=float, default=300.0, help="simulated-time budget per trial [s]")
     r.add_argument("--max-wall-time", type=float, default=None, help="wall-clock cap per trial [s]")
     r.add_argument("--shard", default="0/1", help="K/N: every N-th trial from the K-th")
