@@ -151,6 +151,7 @@ def run_one(t: dict, max_time: float, max_wall: float | None) -> dict:
         if t["obstacles"]:
             with_obst, _ = path_obstacles(with_obst, t["object"], place, np.random.default_rng(t["seed"]))
     lc = AgentConfig().local_search
+    d["obstacle_poses"] = d.get("obstacles", [])
     d.update({k: t[k] for k in ("object", "surface", "seed", "obstacles", "strategy")})
     d["place"] = [round(float(v), 4) for v in place]
     d["shortest_path_m"] = round(shortest_path_m(with_obst, place, lc.max_distance_m, lc.min_distance_m), 4)
@@ -192,6 +193,21 @@ def cmd_run(args) -> int:
     return 0
 
 
+def n_obstacles_placed(d: dict) -> int:
+    """Boxes ``path_obstacles`` actually put on the line (none fit when the object is near the start):
+    recomputed from the seed as ``run_search`` draws them."""
+    if not d["obstacles"]:
+        return 0
+    if "obstacle_poses" in d:
+        return len(d["obstacle_poses"])
+    from lab.search.trial import path_obstacles
+    from lab.sim.scene import load_scene
+
+    place = tuple(d["place"])
+    scene = load_scene("lab_room").with_pose(d["object"], place)
+    return len(path_obstacles(scene, d["object"], place, np.random.default_rng(int(d["seed"])))[1])
+
+
 def spl(rows) -> float:
     vals = []
     for d in rows:
@@ -224,6 +240,8 @@ def cmd_report(args) -> int:
     for d in rows:
         by.setdefault(key(d), d)  # first record of a trial wins
     rows = list(by.values())
+    for d in rows:
+        d["n_obstacles"] = n_obstacles_placed(d)
     strategies = sorted(
         {d["strategy"] for d in rows}, key=lambda s: ("paper", "frontier", "lawnmower").index(s)
     )
@@ -235,6 +253,9 @@ def cmd_report(args) -> int:
             sub = [d for d in rs if bool(d["obstacles"]) == ob]
             if sub:
                 print(summary_line(f"  {'with' if ob else 'without'} obstacles", sub))
+            if ob and sub:
+                placed = [d for d in sub if d["n_obstacles"] > 0]
+                print(summary_line("    (with >= 1 box actually placed)", placed))
         for surf in SURFACES:
             sub = [d for d in rs if d["surface"] == surf]
             if sub:
