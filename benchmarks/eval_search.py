@@ -17,7 +17,7 @@ same for every strategy and with and without obstacles. ``--obstacles yes`` adds
 Two seeds give the issue's 18 placements. A trial that runs out of ``--max-time`` (simulated
 seconds) is a failure: a slow baseline fails by its budget.
 
-``run`` appends one JSON line per trial (the ``lab search`` JSON without its event list, plus
+``run`` appends one JSON line per trial (the ``lab search`` JSON without its map snapshots, plus
 ``shortest_path_m``) and skips trials already in the file, so a killed run can be resumed; ``--shard
 K/N`` runs every N-th trial from the K-th (for several processes writing separate files).
 
@@ -135,8 +135,7 @@ def run_one(t: dict, max_time: float, max_wall: float | None) -> dict:
             obstacles=t["obstacles"],
             max_wall_time=max_wall,
         )
-        d = r.to_json()
-        d.pop("events", None)
+        d = r.to_json()  # with its events: what it visited and why it failed
         d["n_snapshots"] = len(d.pop("map_snapshots", []))
         with_obst = r.trace.scene
     except Exception as e:  # a crash is a failed trial, recorded with its reason
