@@ -433,8 +433,16 @@ def _cmd_search(args) -> int:
         raise LabError(f"unknown object {args.object!r}; searchable objects: {', '.join(names)}")
     if args.robot is not None:
         raise LabError("`lab search --robot` is not supported yet: the search runs in the simulator only")
+    from lab.io import write_json_atomic
     from lab.search.navigation import navigator_factory
     from lab.search.trial import run_search
+
+    navigators = []
+
+    def navigate(robot, spec):  # keeps the Navigator for its costmap (the figures)
+        nav = navigator_factory(robot, spec)
+        navigators.append(nav.navigator)
+        return nav
 
     res = run_search(
         args.object,
@@ -442,16 +450,23 @@ def _cmd_search(args) -> int:
         place=args.place,
         strategy=args.strategy,
         max_time=args.max_time,
-        navigate=navigator_factory,
+        navigate=navigate,
         obstacles=args.obstacles,
         progress=True,
         record=args.record,
     )
     data = res.to_json()
     if args.json is not None:
-        from lab.io import write_json_atomic
-
         write_json_atomic(args.json, data)
+    if args.out is not None:
+        from lab.search.figures import write_figures
+
+        cm = navigators[0].costmap if navigators else None
+        files = write_figures(
+            res, args.out, None if cm is None else cm.state, None if cm is None else cm.spec
+        )
+        write_json_atomic(args.out / "search.json", data)
+        print(f"wrote {len(files)} figures and search.json into {args.out}", file=sys.stderr)
     keys = ("object", "found", "position_error_m", "orientation_error_deg", "path_length_m", "sim_time_s")
     print(_json.dumps({k: data.get(k) for k in keys}, indent=2))
     return 0

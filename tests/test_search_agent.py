@@ -123,6 +123,28 @@ def test_a_cell_searched_again_is_approached_from_another_side(monkeypatch):
     assert any("another side" in e.detail for e in out.events if e.kind == "navigate")
 
 
+def test_a_revisit_goes_round_the_other_way_when_one_side_is_out_of_reach(monkeypatch):
+    """As above, but the texture faces west and the east side (the first turn) cannot be reached, like
+    a table end against a wall: the second visit comes round the other way."""
+    obj = (0.5, 0.5)
+
+    def east_blocked(robot):
+        inner = straight_navigator(robot)
+
+        def navigate(target_xy, min_distance, max_distance):
+            if target_xy[0] > obj[0] + 0.3:
+                return NavOutcome(False, "no path: UNREACHABLE", robot.odometry())
+            return inner(target_xy, min_distance, max_distance)
+
+        return navigate
+
+    out, script, _ = scripted_run(
+        monkeypatch, obj, [(obj, 0.9)], navigate=east_blocked, visible=lambda pose: pose.x < obj[0] - 0.3
+    )
+    assert out.found and script.local_cells == [SPEC.world_to_cell(*obj)] * 2
+    assert any("another side (-120 deg)" in e.detail for e in out.events if e.kind == "navigate")
+
+
 def test_unreachable_peak_is_skipped_with_a_reason(monkeypatch):
     distractor, obj = (1.5, 0.5), (-1.5, 1.9)
     out, script, _ = scripted_run(monkeypatch, obj, [(distractor, 0.9), (obj, 0.6)], refuse=[distractor])

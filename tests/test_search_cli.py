@@ -22,6 +22,16 @@ def test_list_objects_and_bad_input():
     r = _lab("search", "--object", "sofa")
     assert r.returncode == 2 and "unknown object 'sofa'; searchable objects: cereal_box" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+    for place, why in (
+        ("3.5,0,0,0", "outside the room or inside a wall"),
+        ("2.98,0,0,0", "outside the room or inside a wall"),
+        ("0,0,0.5,0", "does not stand on anything"),
+    ):
+        r = _lab("search", "--object", "book", "--place", place)
+        assert r.returncode != 0 and why in r.stderr, (place, r.stderr)
+        assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
+    r = _lab("search", "--object", "book", "--place", "0,0,0")
+    assert r.returncode == 2 and "--place must be 4 comma-separated numbers" in r.stderr
 
 
 @pytest.mark.slow
@@ -36,11 +46,19 @@ def test_search_run_finds_the_toy_block_and_keeps_the_contract(tmp_path):
         "240",
         "--json",
         str(tmp_path / "s.json"),
+        "--out",
+        str(tmp_path / "figs"),
     )
     assert r.returncode == 0, r.stderr[-2000:]
     res = json.loads((tmp_path / "s.json").read_text())
     assert res["found"] and res["position_error_m"] <= 0.05 and res["orientation_error_deg"] <= 10
     assert res["collisions"] == 0
+    # --out: the figures and the same JSON
+    figs = tmp_path / "figs"
+    assert json.loads((figs / "search.json").read_text()) == res
+    for name in ("fig2_global_search.png", "fig5_trial.png", "fig6_snapshots.png", "map_00.png"):
+        assert (figs / name).stat().st_size > 10_000, name
+    assert len(list(figs.glob("map_*.png"))) == len(res["map_snapshots"])
     if CHECKER.is_file():
         c = subprocess.run(
             [sys.executable, str(CHECKER), "search", str(tmp_path / "s.json")], capture_output=True, text=True

@@ -6,7 +6,14 @@ from search_standin import truth_navigator
 
 from lab.navigation import Costmap, GridSpec
 from lab.robot import StereoCamera
-from lab.search.figures import draw_pose, fig2_global_search, fig5_trial, fig6_snapshots, panorama
+from lab.search.figures import (
+    draw_pose,
+    fig2_global_search,
+    fig5_trial,
+    fig6_snapshots,
+    panorama,
+    write_figures,
+)
 from lab.search.trial import run_search
 from lab.sim.scene import load_scene
 
@@ -52,3 +59,17 @@ def test_draw_pose_draws_the_box_where_it_projects():
     assert abs(xs.mean() - cam.cx) < 15 and abs(ys.mean() - cam.cy) < 15  # around the centre
     assert xs.min() > cam.cx - 0.2 * cam.fx / 0.9 - 3  # and no wider than the near face
     assert not img.any()  # a copy was drawn on
+
+
+def test_write_figures_writes_every_snapshot(trial, tmp_path):
+    spec = GridSpec.from_bounds(-3, -4, 3, 4, 0.1)
+    state = np.ones(spec.shape, np.int8)  # all free
+    files = write_figures(trial, tmp_path / "out", state, spec)
+    names = sorted(f.name for f in files)
+    n = len(trial.trace.agent.snapshots)
+    assert n >= 1
+    maps = [f"map_{k:02d}.png" for k in range(n)]
+    assert names == sorted(["fig2_global_search.png", "fig5_trial.png", "fig6_snapshots.png", *maps])
+    for f in files:
+        assert f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f.stat().st_size > 5_000, f.name
+    assert not list((tmp_path / "out").glob(".*tmp*"))  # atomic: no temporary file left behind

@@ -10,7 +10,8 @@ The paper's strategy (:attr:`Strategy.PAPER`)::
             global search from where the robot stands                  (global_search.py)
         cell = the most probable cell (ties: the one nearest the robot)
         navigate(cell centre, local-search range)                     (injected: costmap + A*)
-                                 (a cell searched before: from another side, revisit_turn_deg round)
+                                 (a cell searched before: from another side, revisit_turn_deg round
+                                  one way or, when that side is out of reach, the other)
         if it did not arrive: exclude the cell (until the next global search; for good after
                               max_nav_failures failures) and go on -- no observation, no Bayes update
         local search facing the cell                                   (local_search.py)
@@ -612,18 +613,25 @@ class SearchAgent:
 
     def _approach(self, cell, xy):
         """Navigate to local-search range of the cell. A cell searched before is approached from
-        another side (``revisit_turn_deg`` further round it from where the robot stood last time),
-        by asking for a spot near that side's point; when that fails, from wherever the navigator can."""
+        another side: ``revisit_turn_deg`` further round it from where the robot stood last time, or
+        as far round the other way when that side cannot be reached (a table or shelf against a wall
+        is open on its ends: one of the two turns is often behind the wall), by asking for a spot near
+        that side's point; when both fail, from wherever the navigator can."""
         lc = self.config.local_search
         last = self._stood_at.get(tuple(cell))
         if last is not None:
-            r = 0.5 * (lc.min_distance_m + lc.max_distance_m)
-            a = math.atan2(last[1] - xy[1], last[0] - xy[0]) + math.radians(self.config.revisit_turn_deg)
-            side = (xy[0] + r * math.cos(a), xy[1] + r * math.sin(a))
-            nav = self._navigate(side, 0.0, 0.5 * (lc.max_distance_m - lc.min_distance_m))
-            p = nav.pose
-            if nav.arrived and lc.min_distance_m - 0.05 <= math.hypot(p.x - xy[0], p.y - xy[1]):
-                return nav, f"from another side: {nav.reason}"
+            a0 = math.atan2(last[1] - xy[1], last[0] - xy[0])
+            tol = 0.5 * (lc.max_distance_m - lc.min_distance_m)
+            for turn in (self.config.revisit_turn_deg, -self.config.revisit_turn_deg):
+                a = a0 + math.radians(turn)
+                # the middle of the band, then its far edge: beside a table's end, the middle may lie in
+                # the table's grown footprint while a spot a little farther out is free
+                for r in (0.5 * (lc.min_distance_m + lc.max_distance_m), lc.max_distance_m):
+                    side = (xy[0] + r * math.cos(a), xy[1] + r * math.sin(a))
+                    nav = self._navigate(side, 0.0, tol)
+                    p = nav.pose
+                    if nav.arrived and lc.min_distance_m - 0.05 <= math.hypot(p.x - xy[0], p.y - xy[1]):
+                        return nav, f"from another side ({turn:+.0f} deg): {nav.reason}"
         nav = self._navigate(xy, lc.min_distance_m, lc.max_distance_m)
         return nav, nav.reason
 

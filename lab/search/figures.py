@@ -9,6 +9,8 @@
 * :func:`fig6_snapshots`: the panorama of the first scan and the map after each failed local search
   (the paper's Fig. 6).
 * :func:`draw_pose`: a picture of an estimated pose: the object's box and axes projected on an image.
+* :func:`write_figures`: all of them for one trial, plus every map snapshot, as PNG files (``lab search
+  --out``).
 
 Each returns a :class:`matplotlib.figure.Figure` (no window is opened; save it with ``savefig``). Maps
 are shown the right way up (``P.T`` with ``origin="lower"``, world x to the right, y up).
@@ -26,7 +28,15 @@ from lab.robot import StereoCamera
 from lab.search.global_search import GlobalSearchResult
 from lab.search.probability_map import detection_likelihood, growing_beta_field
 
-__all__ = ["draw_pose", "fig2_global_search", "fig5_trial", "fig6_snapshots", "panorama"]
+__all__ = [
+    "draw_pose",
+    "fig2_global_search",
+    "fig5_trial",
+    "fig6_snapshots",
+    "panorama",
+    "snapshot_figure",
+    "write_figures",
+]
 
 
 def _figure(rows: int, cols: int, size=(4.0, 3.2)):
@@ -240,3 +250,67 @@ def fig6_snapshots(result, max_snapshots: int = 6):
         a.set_xticks([])
         a.set_yticks([])
     return fig
+
+
+def snapshot_figure(result, k: int):
+    """One map snapshot (``result.trace.agent.snapshots[k]``) with the trajectory up to its time."""
+    agent, spec, traj = result.trace.agent, result.trace.spec, result.trace.trajectory
+    s = agent.snapshots[k]
+    fig, ax = _figure(1, 1, size=(4.2, 5.0))
+    a = ax[0, 0]
+    im = _show_map(a, s.P, spec, f"M_p at t = {s.t:.0f} s, after {s.label}")
+    fig.colorbar(im, ax=a, shrink=0.8)
+    if len(traj):
+        upto = traj[traj[:, 0] <= s.t + 1e-9]
+        a.plot(upto[:, 1], upto[:, 2], "-", color="magenta", lw=1.0)
+    if s.cell is not None:
+        cx, cy = spec.cell_to_world(*s.cell)
+        a.plot(cx, cy, "x", color="red", ms=9, mew=2)
+    return fig
+
+
+def _save(fig, path) -> None:
+    """``savefig`` through :func:`lab.io.write_bytes_atomic` (never a half-written picture)."""
+    import io
+
+    from lab.io import write_bytes_atomic
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    write_bytes_atomic(path, buf.getvalue())
+
+
+def write_figures(result, out, costmap_state: np.ndarray | None = None, costmap_spec=None) -> list:
+    """Write the figures of one trial (a :class:`~lab.search.trial.SearchResult`) into the folder ``out``.
+
+    Files: ``fig2_global_search.png`` (the first global search, when there was one),
+    ``fig5_trial.png`` (map with the first planned path; costmap, when given, with the trajectory; the
+    6D pose on the image), ``fig6_snapshots.png`` (panorama and the map after each failed local
+    search), and ``map_NN.png`` for every map snapshot in order (the probability map after each global
+    search and each failed local search, with the trajectory so far).
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written.
+    """
+    from pathlib import Path
+
+    out = Path(out)
+    agent, spec = result.trace.agent, result.trace.spec
+    written = []
+
+    def save(fig, name):
+        _save(fig, out / name)
+        written.append(out / name)
+
+    if agent.globals_:
+        from lab.search.training import search_database
+
+        db = search_database(result.object)
+        save(fig2_global_search(agent.globals_[0], spec, db=db), "fig2_global_search.png")
+    save(fig6_snapshots(result), "fig6_snapshots.png")
+    save(fig5_trial(result, costmap_state, costmap_spec), "fig5_trial.png")
+    for k in range(len(agent.snapshots)):
+        save(snapshot_figure(result, k), f"map_{k:02d}.png")
+    return written

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from lab.navigation.astar import astar_to_region
 from lab.navigation.navigator import Navigator
 from lab.navigation.navigator import NavOutcome as _Outcome
 from lab.search.agent import NavOutcome
@@ -13,8 +14,9 @@ __all__ = ["navigator_factory"]
 def navigator_factory(robot, spec, timeout_s: float = 120.0):
     """``navigate`` for :func:`lab.search.trial.run_search`: scan once, then ``go_near`` each target.
 
-    The returned callable carries its :class:`~lab.navigation.Navigator` as ``navigate.navigator``, so
-    that a caller can show the costmap it built (e.g. :func:`lab.search.figures.fig5_trial`).
+    The returned callable keeps its :class:`~lab.navigation.Navigator` as ``navigate.navigator`` (its
+    costmap is what ``lab search --out`` draws under the trajectory). Each outcome carries the path A*
+    plans first on the current costmap (``path_xy``, for the figures; the navigator replans on the way).
     """
     nav = Navigator(robot)
     state = {"scanned": False}
@@ -23,9 +25,11 @@ def navigator_factory(robot, spec, timeout_s: float = 120.0):
         if not state["scanned"]:
             nav.scan()
             state["scanned"] = True
+        first = astar_to_region(nav.planning_grid(), robot.odometry(), target_xy, max_distance, min_distance)
         r = nav.go_near(target_xy, min_distance, max_distance, timeout=timeout_s)
         arrived = r.outcome is _Outcome.ARRIVED
-        return NavOutcome(arrived, r.reason or r.outcome.name, r.pose)
+        path = first.points_xy if first.found else None
+        return NavOutcome(arrived, r.reason or r.outcome.name, r.pose, path)
 
     navigate.navigator = nav
     return navigate
