@@ -460,7 +460,7 @@ assert entropy(P_shared[-1]) > 0.97 * math.log(4) and P_shared.max() < 0.3  # a 
         """\
 from scipy.stats import multivariate_normal
 from lab.estimation import measurement_jacobian_rv, measurement_model
-from lab.identification import apply_floor, state_for_scoring
+from lab.identification import apply_floor
 
 # Eq. (7) by hand, for the last frame of the unique face: prior times likelihood^kappa, normalised, floored
 prior, obs = hist_unique[-1]
