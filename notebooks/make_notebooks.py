@@ -663,8 +663,9 @@ drive along the ring to the goal; stop when one model stays above 0.95 for 1 s
 The box rides on a carrier driven by an **evasive mover**, our stand-in for the paper's operator: it
 turns the box so that its unique face points away from the robot, reacting after 0.5 s and turning at
 most 0.15 rad/s (the mover may look at the true poses; the agent never does). In fast mode the box
-starts with its unique face to the side and the planner is Monte Carlo (it needs no tables); in full
-mode the face starts pointing away, as in the paper, and the planner uses the lookup tables (`lab
+starts with its unique face half turned towards the robot (45 degrees off) and the planner is Monte Carlo
+(it needs no tables): a short episode, one decision, before the operator has turned the face away; in
+full mode the face starts pointing away, as in the paper, and the planner uses the lookup tables (`lab
 tables` builds them on first use).""",
     ),
     (
@@ -677,7 +678,7 @@ from lab.viz.live import LiveView
 
 true_model = 2
 world = SimWorld("arena")
-carrier = world.add_carrier(models[true_model], Pose2D(0.0, 0.0, 0.0), box_yaw=math.radians(90 if FAST else 0))
+carrier = world.add_carrier(models[true_model], Pose2D(0.0, 0.0, 0.0), box_yaw=math.radians(135 if FAST else 0))
 robot = SimRobot(world, start=Pose2D(-1.2, 0.0, 0.0), seed=0)
 robot.enable()
 carrier.mover = make_mover("evasive", carrier, observer_pose=world.truth.robot_pose)
