@@ -9,7 +9,8 @@ from nbclient import NotebookClient
 
 NOTEBOOKS = sorted((Path(__file__).resolve().parent.parent / "notebooks").glob("*.ipynb"))
 # Wall time of a fast-mode run on a quiet machine, measured: 02 runs two closed loops of rendered
-# frames (~29 s); the others take 3-15 s. The slow ones still run in the full suite (CI); `make test-fast` leaves them out.
+# frames (~29 s); the others take 3-15 s. The slow ones still run in the full suite (CI);
+# `make test-fast` leaves them out.
 SLOW = {"02_entropy_planning"}
 PARAMS = [pytest.param(p, id=p.stem, marks=[pytest.mark.slow] if p.stem in SLOW else []) for p in NOTEBOOKS]
 
