@@ -18,7 +18,6 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from lab.errors import ConfigError
 from lab.io import write_json_atomic, write_text_atomic
 
 __all__ = ["run_demo", "tables_missing"]
@@ -119,10 +118,10 @@ def run_demo(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     names = list(box_model_names())
-    if robot is None and not (isinstance(true_model, int) and 0 <= true_model < len(names)):
-        raise ConfigError(
-            f"unknown true model {true_model!r}; models: 0..{len(names) - 1} ({', '.join(names)})"
-        )
+    if robot is None:
+        from lab.sim import box_model
+
+        box_model(true_model)  # a clear error before anything starts
     missing = tables_missing()
     if planner == "lut" and missing:
         say(

@@ -293,20 +293,15 @@ def rehearsal(
     try:
         cfg = cfg.with_ports(base=emu.base_port, ptu=emu.ptu_port)
         if c.source == "sim":
-            from lab.sim import SimWorld, load_box_models
+            from lab.sim import SimWorld, box_model
             from lab.sim.movers import make_mover
             from lab.sim.world import RenderSettings
 
-            models = load_box_models()
-            if not (isinstance(true_model, int) and 0 <= true_model < len(models)):
-                raise ConfigError(
-                    f"unknown true model {true_model!r}; models: 0..{len(models) - 1} "
-                    f"({', '.join(m.name for m in models)})"
-                )
+            model = box_model(true_model)
             rng = np.random.default_rng(seed)
             yaw = float(rng.uniform(-0.3, 0.3)) if box_yaw is None else float(box_yaw)
             world = SimWorld(cfg.sim.world, RenderSettings(supersample=cfg.sim.supersample))
-            carrier = world.add_carrier(models[true_model], _pose_from(cfg.sim.carrier_start), box_yaw=yaw)
+            carrier = world.add_carrier(model, _pose_from(cfg.sim.carrier_start), box_yaw=yaw)
             source = SimRenderedStereoSource(world, emu.create, emu.ptu, cfg, calib)
             carrier.mover = make_mover(mover, carrier, observer_pose=source.base_pose_W, seed=seed)
         robot = HardwareRobot(cfg, camera_source=source, on_event=on_event)

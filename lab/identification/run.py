@@ -85,15 +85,11 @@ def run_identify(
         ``display(TeleopPanel(carrier.mover).widget)`` (with ``mover="teleop"``).
     """
     from lab.identification.agent import AgentConfig, IdentificationAgent
-    from lab.sim import SimRobot, SimWorld, load_box_models
+    from lab.sim import SimRobot, SimWorld, box_model, load_box_models
     from lab.sim.movers import make_mover
 
+    box_model(true_model)  # a clear error before anything starts
     models = load_box_models()
-    if not (isinstance(true_model, int) and 0 <= true_model < len(models)):
-        raise ConfigError(
-            f"unknown true model {true_model!r}; models: 0..{len(models) - 1} "
-            f"({', '.join(m.name for m in models)})"
-        )
     rng = np.random.default_rng(seed)
     t_wall = time.perf_counter()
     t_cpu = time.process_time()  # this process's CPU time: the cost of the episode whatever the load

@@ -7,7 +7,7 @@ truth is reached only through ``SimWorld.truth``.
 
 from lab.sim.robot import OdometryNoise, SimRobot
 from lab.sim.scene import Scene, list_worlds, load_scene
-from lab.sim.world import Carrier, RenderSettings, SimWorld, load_box_models, viewpoint_G_WC
+from lab.sim.world import Carrier, RenderSettings, SimWorld, box_model, load_box_models, viewpoint_G_WC
 
 __all__ = [
     "Carrier",
@@ -16,6 +16,7 @@ __all__ = [
     "Scene",
     "SimRobot",
     "SimWorld",
+    "box_model",
     "list_worlds",
     "load_box_models",
     "load_scene",

@@ -106,6 +106,17 @@ def load_box_models(scene: str = "box_database") -> tuple[ModelSpec, ...]:
     return models
 
 
+def box_model(index, scene: str = "box_database") -> ModelSpec:
+    """Box model ``index`` of :func:`load_box_models`, or a ConfigError naming the models there are."""
+    models = load_box_models(scene)
+    if not (isinstance(index, int) and not isinstance(index, bool) and 0 <= index < len(models)):
+        raise ConfigError(
+            f"unknown true model {index!r}; models: 0..{len(models) - 1} "
+            f"({', '.join(m.name for m in models)})"
+        )
+    return models[index]
+
+
 class Carrier:
     """A second differential-drive robot that carries a box: the moving object of the identification paper.
 
