@@ -380,8 +380,8 @@ def _run_one(test: GradedTest, limits: _Limits, timeout_s: float) -> TestResult:
         )
     finally:
         if child is not None:
-            printed = child.printed()
-            child.close()
+            child.close()  # ends the child and drains its output pipe to the end first:
+            printed = child.printed()  # what it printed just before answering is not lost
     if printed.strip():
         shown = printed if len(printed) <= _OUTPUT_SHOW else printed[:_OUTPUT_SHOW] + "\n..."
         output = (output + "\n\n" if output else "") + "Your code printed:\n" + shown
