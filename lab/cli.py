@@ -15,6 +15,37 @@ from lab.errors import LabError
 __all__ = ["main", "build_parser"]
 
 
+def _episode_arguments(p: argparse.ArgumentParser, movers: tuple[str, ...], max_time: float) -> None:
+    """The arguments of one identification episode, shared by ``lab demo`` and ``lab identify``."""
+    p.add_argument(
+        "--true-model", type=int, default=1, help="index of the box on the carrier, 0..3 (default 1)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument(
+        "--mover",
+        default="evasive",
+        choices=movers,
+        help="how the box moves (default: evasive, the paper's operator)",
+    )
+    p.add_argument(
+        "--planner",
+        default="lut",
+        choices=("lut", "mc", "random", "circle"),
+        help="how the next view is chosen (default: lut)",
+    )
+    p.add_argument("--max-actions", type=int, default=8, help="planning actions budget (default 8)")
+    p.add_argument(
+        "--max-time", type=float, default=max_time, help=f"time budget in seconds (default {max_time:g})"
+    )
+    p.add_argument("--record", type=Path, help="write an animation of the run (.gif, or .mp4 with ffmpeg)")
+    p.add_argument(
+        "--robot",
+        type=Path,
+        help="run on a real robot: its hardware TOML config (hardware/robot.toml); hardware/rehearsal.toml "
+        "rehearses on device emulators with simulator-rendered frames (--true-model, --mover set its scene)",
+    )
+
+
 def _floats(text: str, n: int, what: str) -> list[float]:
     try:
         vals = [float(v) for v in text.split(",")]
@@ -62,24 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
         "tables (several minutes, once).",
     )
     d.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default: out/demo)")
-    d.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
-    d.add_argument("--true-model", type=int, default=1, help="the box on the carrier, 0..3 (default 1)")
-    d.add_argument(
-        "--mover",
-        default="evasive",
-        choices=("static", "scripted", "random", "evasive"),
-        help="how the box moves (default: evasive, the paper's operator)",
-    )
-    d.add_argument(
-        "--planner",
-        default="lut",
-        choices=("lut", "mc", "random", "circle"),
-        help="how the next view is chosen (default: lut)",
-    )
-    d.add_argument("--max-actions", type=int, default=8, help="planning actions budget (default 8)")
-    d.add_argument("--max-time", type=float, default=150.0, help="simulated time budget [s] (default 150)")
-    d.add_argument("--record", type=Path, help="write an animation of the run (.gif, or .mp4 with ffmpeg)")
-    d.add_argument("--robot", type=Path, help="run on a real (or emulated) robot: its hardware TOML config")
+    _episode_arguments(d, movers=("static", "scripted", "random", "evasive"), max_time=150.0)
 
     r = sub.add_parser(
         "render",
@@ -136,33 +150,9 @@ def build_parser() -> argparse.ArgumentParser:
         "highest expected information gain until one model's probability stays >= 0.95. Writes the JSON "
         "(--json) and the paper's figures (--out).",
     )
-    idf.add_argument(
-        "--true-model", type=int, default=1, help="index of the box on the carrier, 0..3 (default 1)"
-    )
-    idf.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    idf.add_argument(
-        "--mover",
-        default="evasive",
-        choices=("static", "scripted", "random", "evasive", "teleop"),
-        help="how the box moves (default: evasive, the paper's operator)",
-    )
-    idf.add_argument(
-        "--planner",
-        default="lut",
-        choices=("lut", "mc", "random", "circle"),
-        help="how the next view is chosen (default: lut)",
-    )
-    idf.add_argument("--max-actions", type=int, default=8, help="planning actions budget (default 8)")
-    idf.add_argument("--max-time", type=float, default=240.0, help="time budget in seconds (default 240)")
+    _episode_arguments(idf, movers=("static", "scripted", "random", "evasive", "teleop"), max_time=240.0)
     idf.add_argument("--json", type=Path, help="write the result JSON here")
     idf.add_argument("--out", type=Path, help="write the figures (Fig. 5, 6, 7) and identify.json here")
-    idf.add_argument("--record", type=Path, help="write an animation of the run (.gif, or .mp4 with ffmpeg)")
-    idf.add_argument(
-        "--robot",
-        type=Path,
-        help="run on a real robot: its hardware TOML config (hardware/robot.toml); hardware/rehearsal.toml "
-        "rehearses on device emulators with simulator-rendered frames (--true-model, --mover set its scene)",
-    )
 
     se = sub.add_parser(
         "search",
