@@ -309,8 +309,8 @@ def _cmd_render(args) -> int:
     from lab.viz import disparity_picture, save_rgb
 
     w, h = args.size
-    cam = StereoCamera.from_fov(w, h, args.fov, 0.12, mount_R=(0.0, 0.0, 0.7))
     with SimWorld(args.world, RenderSettings(supersample=args.supersample)) as world:
+        cam = StereoCamera.from_fov(w, h, args.fov, 0.12, mount_R=(0.0, 0.0, world.scene.robot_mast_height))
         if args.model:
             models = {m.name: m for m in load_box_models()}
             if args.model not in models:

@@ -21,6 +21,18 @@ def test_shipped_worlds_load_with_named_bodies():
             assert w.body_id(name) >= 0
 
 
+def test_the_robot_camera_stands_on_the_scene_mast():
+    """The lab room's robot carries its head on a 1.1 m mast (to see onto the shelf); worlds that do not
+    say keep 0.7 m."""
+    from lab.sim import SimRobot
+
+    assert load_scene("lab_room").robot_mast_height == 1.1
+    assert load_scene("arena").robot_mast_height == 0.7
+    for world, z in (("lab_room", 1.1), ("arena", 0.7)):
+        with SimWorld(world) as w:
+            assert SimRobot(w).camera.mount_R[2] == pytest.approx(z)
+
+
 def test_override_a_pose():
     room = load_scene("lab_room").with_pose("book", (0.5, 0.5, 0.0, 45.0))
     assert room.body("book").pose == (0.5, 0.5, 0.0, 45.0)
@@ -63,6 +75,9 @@ def test_unknown_world_lists_the_available_ones():
         ),
         ('[[body]]\nname="a"\nshape="textured_box"\nsize=[1,1,1]\npose=[0,0,0,0]', "needs an 'atlas'"),
         ('[[body]]\nname="a"\nshape="box"\nsize=[1,1,1]\npose=[0,0,"x",0]', "pose: expected finite numbers"),
+        ("[robot]\nmast_height = 3.0", r"mast_height: 3.0 m is outside 0.4-2.0 m"),
+        ('[robot]\nmast_height = "tall"', "mast_height: expected finite numbers"),
+        ("[robot]\nheight = 1.0", r"unknown key\(s\) \['height'\]"),
     ],
 )
 def test_malformed_scene_files_name_the_field(tmp_path, text, pattern):

@@ -154,6 +154,28 @@ def test_unreachable_peak_is_skipped_with_a_reason(monkeypatch):
     assert SPEC.world_to_cell(*distractor) not in script.local_cells  # no observation, no Bayes update
 
 
+def test_a_cell_whose_band_is_blocked_is_approached_from_farther_out(monkeypatch):
+    """The object's cell against a wall: the navigator cannot reach the usual band (0.6-0.9 m), only
+    spots farther out; the agent asks once more with the far edge widened, arrives, and finds it."""
+    obj = (0.5, 0.5)
+
+    def band_blocked(robot):
+        inner = straight_navigator(robot)
+
+        def navigate(target_xy, min_distance, max_distance):
+            if max_distance <= 0.9 + 1e-9:
+                return NavOutcome(False, "no path: UNREACHABLE", robot.odometry())
+            return inner(target_xy, 0.95, max_distance)
+
+        return navigate
+
+    out, script, _ = scripted_run(monkeypatch, obj, [(obj, 0.9)], navigate=band_blocked)
+    assert out.found and script.local_cells == [SPEC.world_to_cell(*obj)]
+    assert any("from 1.2 m (no path: UNREACHABLE)" in e.detail for e in out.events if e.kind == "navigate")
+    with pytest.raises(ConfigError, match="wide_band_m"):
+        AgentConfig(wide_band_m=-0.1)
+
+
 def test_all_peaks_failed_triggers_a_new_global_search(monkeypatch):
     out, script, _ = scripted_run(monkeypatch, (2.5, 3.5), [((1.5, 0.5), 0.9)], max_time=200.0)
     assert out.global_searches >= 2  # the map went flat after the one peak failed

@@ -267,3 +267,35 @@ def test_matcher_on_a_tiny_database_does_not_crash():
     assert m.method == "brute"
     c = m.match(f)
     assert {(i, j) for i, j in zip(c.idx_meas, c.idx_db, strict=True) if i < 3} == {(0, 0), (1, 1), (2, 2)}
+
+
+def test_spatial_aliases_keep_one_point_seen_from_two_views():
+    """Two database features at one place in O (one physical point seen from two training rings,
+    descriptors too far apart to merge) are aliases with ``alias_radius``: the ratio test compares the
+    nearest with a feature elsewhere, and the point matches; without it the pair rejects itself.
+    Exact search, so the check is against plain arithmetic."""
+    from dataclasses import replace
+
+    from lab.vision.stereo import Features3D
+
+    rng = np.random.default_rng(1)
+    n = 40
+    D = (rng.random((n, 128)) * 100).astype(np.float32)
+    P = rng.uniform(-0.1, 0.1, (n, 3))
+    D[1] = D[0] + 15.0  # the same point from another ring: descriptor 150 away (> alias_distance)
+    P[1] = P[0] + 0.004  # 4 mm apart in O
+    db = train_database("M0", TrainingParams(step_deg=90.0))
+    small = replace(db, points_O=P, descriptors=D, seen_from=db.seen_from[:n])
+    q = D[:1] + 6.5  # the point seen from between the two views: D[0] nearest, D[1] at ratio 0.76
+    f = Features3D(np.zeros((1, 3)), q, np.zeros((1, 2)), np.ones(1), np.eye(3)[None])
+    assert np.linalg.norm(D[1] - D[0]) > 120.0
+    assert Matcher(small, method="brute").match(f).n_matched == 0
+    c = Matcher(small, method="brute", alias_radius=0.015).match(f)
+    assert c.n_matched == 1 and set(c.idx_db.tolist()) == {0, 1}
+    # a feature elsewhere with a close descriptor still makes the match ambiguous
+    P2 = P.copy()
+    P2[1] = P[0] + 0.05
+    far = replace(small, points_O=P2)
+    assert Matcher(far, method="brute", alias_radius=0.015).match(f).n_matched == 0
+    with pytest.raises(ConfigError, match="alias_radius"):
+        Matcher(small, alias_radius=-1.0)

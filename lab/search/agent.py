@@ -249,6 +249,10 @@ class AgentConfig:
         A cell searched again (the Bayes update may leave a cell with strong colour evidence the most
         probable after one miss) is approached from this much further round it: the first view may
         have shown the object's narrow side, or a face at a grazing angle.
+    wide_band_m : float [m]
+        A cell whose local-search band the navigator cannot reach is approached once more, the band's
+        far edge this much further out (a cell against a wall or a shelf's back: the band lies almost
+        all in the costmap's grown obstacles). 0 turns this off.
     max_nav_failures : int
         A cell the navigator failed to reach this often is excluded for the rest of the run (once:
         until the next global search).
@@ -266,6 +270,7 @@ class AgentConfig:
     vantage_margin_m: float = 0.8
     vantage_reach_m: float = 0.6
     revisit_turn_deg: float = 120.0
+    wide_band_m: float = 0.3
     max_nav_failures: int = 2
     max_actions: int = 500
 
@@ -273,6 +278,8 @@ class AgentConfig:
         object.__setattr__(self, "strategy", Strategy.parse(self.strategy))
         if not self.global_threshold > 0:
             raise ConfigError(f"global_threshold must be > 0, got {self.global_threshold}")
+        if not self.wide_band_m >= 0:
+            raise ConfigError(f"wide_band_m must be >= 0 m, got {self.wide_band_m}")
         if not self.lawnmower_spacing_m > 0 or not self.coverage_radius_m > 0:
             raise ConfigError("lawnmower_spacing_m and coverage_radius_m must be > 0")
 
@@ -633,7 +640,14 @@ class SearchAgent:
                     if nav.arrived and lc.min_distance_m - 0.05 <= math.hypot(p.x - xy[0], p.y - xy[1]):
                         return nav, f"from another side ({turn:+.0f} deg): {nav.reason}"
         nav = self._navigate(xy, lc.min_distance_m, lc.max_distance_m)
-        return nav, nav.reason
+        if nav.arrived or self.config.wide_band_m <= 0:
+            return nav, nav.reason
+        # a cell against a wall or behind furniture: its band may lie (almost) all in the costmap's
+        # grown obstacles, while a spot a little farther out is free and still close enough to look
+        wide = self._navigate(xy, lc.min_distance_m, lc.max_distance_m + self.config.wide_band_m)
+        if wide.arrived:
+            return wide, f"from {lc.max_distance_m + self.config.wide_band_m:.1f} m ({nav.reason}): {wide.reason}"
+        return wide, f"{nav.reason}; {wide.reason} with the band widened"
 
     def _visit(self, cell, xy) -> LocalSearchResult | None:
         """Navigate to local-search range of the cell, search, and update the map on a miss."""

@@ -68,8 +68,10 @@ class GlobalSearchConfig:
     pans_deg, tilts_deg : tuple of float
         The scan: every pan at every tilt. Six pans 60 degrees apart with the 75 degree horizontal field
         of view cover the full circle but for the 40 degrees behind the robot the PTU cannot reach;
-        the two tilts with the 60 degree vertical field of view cover -65 to +50 degrees of elevation
-        (the floor from 0.35 m out, and a shelf at 1.2 m from 1 m out).
+        the two tilts with the 60 degree vertical field of view cover -60 to +40 degrees of elevation:
+        from the lab room's 1.1 m mast, the floor from 0.65 m out, and the far floor, tables and shelf
+        near the horizon inside both views rather than at an edge (with -35 and +20, tuned for a 0.7 m
+        mast, an object on the floor 5.5 m away fell between the views' edges and was missed).
     window_px : int [px]
         Side of the fixed scanning window (box filter).
     n_hist : int
@@ -101,7 +103,7 @@ class GlobalSearchConfig:
     """
 
     pans_deg: tuple[float, ...] = (-150.0, -90.0, -30.0, 30.0, 90.0, 150.0)
-    tilts_deg: tuple[float, ...] = (-35.0, 20.0)
+    tilts_deg: tuple[float, ...] = (-30.0, 10.0)
     window_px: int = 7
     n_hist: int = 3
     min_strength: float = 0.15

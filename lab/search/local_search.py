@@ -67,8 +67,9 @@ class LocalSearchConfig:
         view, -60, 0 and +60 cover 195 degrees: the hemisphere in front.
     tilts_deg : tuple of float
         With the 60 degree vertical field of view, -35, 0 and +31 (the unit's limit) cover -65 to +61
-        degrees of elevation: from 0.6 to 0.9 m away, the floor, a table top (0.75 m) and a shelf top
-        (1.2 m, seen from 30-40 degrees below).
+        degrees of elevation: from 0.6 to 0.9 m away and a camera 1.1 m high (the lab room's mast),
+        the floor (50-60 degrees down), a table top (0.75 m, 10-30 degrees down) and a shelf top
+        (1.2 m, about level); with a 0.7 m mast, the shelf from 30-40 degrees below.
     min_distance_m, max_distance_m : float [m]
         The local-search range: the band around the cell's centre the robot is sent to. Close, because
         the objects are small (8-20 cm faces) at 320 x 240: at 0.6-0.9 m a face spans 40-100 px; from
@@ -239,10 +240,17 @@ def object_roi(
     return x0, y0, x1 - x0, y1 - y0
 
 
+#: Database features closer than this [m] in the object frame are one physical point for the ratio
+#: test (:class:`lab.vision.Matcher`'s ``alias_radius``): the search's several training rings see a
+#: point from directions far apart, with descriptors too different to merge.
+ALIAS_RADIUS_M = 0.015
+
+
 def make_matcher(db: FeatureDatabase) -> Matcher:
     """The database's matcher: FLANN, or exact search for a tiny database (OpenCV's KD-tree asserts
-    when asked for about as many neighbours as the database holds: the glossy cup has 7 features)."""
-    return Matcher(db, method="flann" if len(db) >= 64 else "brute")
+    when asked for about as many neighbours as the database holds: the glossy cup has 7 features);
+    with spatial aliases (:data:`ALIAS_RADIUS_M`)."""
+    return Matcher(db, method="flann" if len(db) >= 64 else "brute", alias_radius=ALIAS_RADIUS_M)
 
 
 def _stds(ekf: PoseEKF) -> tuple[float, float]:

@@ -66,7 +66,9 @@ class SimRobot(Robot):
     ----------
     world : SimWorld
     camera : StereoCamera, optional
-        Default: 320 x 240, 60 degree vertical field of view, 0.12 m baseline, pan axis 0.7 m high.
+        Default: 320 x 240, 60 degree vertical field of view, 0.12 m baseline, the pan-tilt axes at the
+        scene's ``[robot] mast_height`` (0.7 m unless the scene says otherwise; the lab room's robot
+        has a 1.1 m mast to see over a table and onto the 1.2 m shelf).
     start : Pose2D, optional
         Default: the scene's ``[robot] start``.
     seed : int
@@ -95,7 +97,9 @@ class SimRobot(Robot):
         if world.robot is not None:
             raise ConfigError("this world already has a robot")
         self.world = world
-        self._camera = camera or StereoCamera.from_fov(320, 240, 60.0, 0.12, mount_R=(0.0, 0.0, 0.7))
+        self._camera = camera or StereoCamera.from_fov(
+            320, 240, 60.0, 0.12, mount_R=(0.0, 0.0, world.scene.robot_mast_height)
+        )
         self._base_limits = base_limits or BaseLimits()
         self._pt_limits = pan_tilt_limits or PanTiltLimits()
         self._pt_limits.check_speed(pan_tilt_speed)

@@ -13,6 +13,7 @@ A scene file (``worlds/<name>.toml``) holds::
 
     [robot]
     start = [0.0, -3.0, 90.0]       # x [m], y [m], heading [deg] of the observing robot
+    mast_height = 1.1               # height of the pan-tilt axes above the floor [m] (default 0.7)
 
     [[body]]
     name = "table_a"                # unique; how code and tests address the body
@@ -116,6 +117,7 @@ class Scene:
     description: str = ""
     room: RoomSpec | None = None
     robot_start: tuple[float, float, float] = (0.0, 0.0, 0.0)  # x, y [m], heading [deg]
+    robot_mast_height: float = 0.7  # height of the robot's pan-tilt axes above the floor [m]
     bodies: tuple[BodySpec, ...] = ()
     models: tuple[ModelSpec, ...] = field(default=())
 
@@ -245,9 +247,16 @@ def load_scene(name_or_path: str | Path) -> Scene:
             tile_m=float(r.get("tile_m", 1.0)),
         )
     start = (0.0, 0.0, 0.0)
+    mast = 0.7
     if "robot" in d:
-        _check_keys(d["robot"], {"start"}, f"{where} [robot]")
+        _check_keys(d["robot"], {"start", "mast_height"}, f"{where} [robot]")
         start = _floats(d["robot"].get("start", [0, 0, 0]), 3, f"{where} [robot] start")
+        mast = _floats([d["robot"].get("mast_height", mast)], 1, f"{where} [robot] mast_height")[0]
+        if not 0.4 <= mast <= 2.0:
+            raise ConfigError(
+                f"{where} [robot] mast_height: {mast} m is outside 0.4-2.0 m (the pan-tilt axes must "
+                "stand above the 0.3 m base and below the ceiling)"
+            )
     bodies = tuple(
         _parse_body(b, base, f"{where} [[body]] #{i + 1}") for i, b in enumerate(d.get("body", []))
     )
@@ -276,6 +285,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
         description=str(d.get("description", "")),
         room=room,
         robot_start=start,
+        robot_mast_height=float(mast),
         bodies=bodies,
         models=tuple(models),
     )

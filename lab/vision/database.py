@@ -509,9 +509,19 @@ class Matcher:
     """Lowe's Best-Bin-First matching of measured features against one database (FLANN KD-tree).
 
     The ratio test is alias-aware: the nearest database descriptor must beat the nearest *different*
-    one (more than ``alias_distance`` away from it in descriptor space) by ``ratio``. Without this,
-    a page printed on three faces would fail the plain ratio test everywhere, since its three copies
-    are each other's second-nearest neighbours. All aliases of the nearest are returned as candidates.
+    one by ``ratio``. Two database features are aliases (not different) when
+
+    * their descriptors lie within ``alias_distance`` of each other: a page printed on three faces
+      would otherwise fail the plain ratio test everywhere, since its three copies are each other's
+      second-nearest neighbours; or
+    * (with ``alias_radius`` > 0) they lie within ``alias_radius`` [m] of each other in the object
+      frame: one physical point seen from training views far apart (another ring, another side)
+      gives descriptors too different to merge into one database feature, and each is then the
+      other's second-nearest neighbour -- the ratio test would reject the very point that matched
+      best. The search's databases, trained from several rings, need this (measured: an object on
+      the floor found in 5 of 6 fixed views with it, 3 of 6 without).
+
+    All aliases of the nearest are returned as candidates.
 
     The index is built once per database. ``method="brute"`` gives exact nearest neighbours by one
     matrix product (an independent check, and as fast for databases of a few thousand features).
@@ -527,12 +537,16 @@ class Matcher:
         checks: int = 64,
         k: int = 8,
         alias_distance: float = 120.0,
+        alias_radius: float = 0.0,
     ):
         if method not in ("flann", "brute"):
             raise ConfigError(f"method must be 'flann' or 'brute', got {method!r}")
         if not 0 < ratio <= 1:
             raise ConfigError(f"ratio must be within (0, 1], got {ratio}")
+        if not alias_radius >= 0:
+            raise ConfigError(f"alias_radius must be >= 0 m, got {alias_radius}")
         self.db, self.ratio, self.method, self.alias_distance = db, ratio, method, alias_distance
+        self.alias_radius = float(alias_radius)
         self.k = min(k, len(db))
         self._D = np.ascontiguousarray(db.descriptors, dtype=np.float32)
         self._checks = checks
@@ -569,6 +583,9 @@ class Matcher:
         n, k = idx.shape
         # aliases: neighbours whose database descriptor is close to the nearest one's
         alias = np.linalg.norm(self._D[idx] - self._D[idx[:, :1]], axis=2) < self.alias_distance
+        if self.alias_radius > 0:  # the same physical point, seen from far-apart training views
+            P = self.db.points_O
+            alias |= np.linalg.norm(P[idx] - P[idx[:, :1]], axis=2) < self.alias_radius
         has_other = ~alias.all(axis=1)
         first_other = np.argmax(~alias, axis=1)  # column of the nearest non-alias (when there is one)
         d_other = dist[np.arange(n), first_other]
