@@ -21,9 +21,10 @@ def worlds_dir() -> Path:
 def cache_dir() -> Path:
     """Per-user cache (meshes, feature databases, lookup tables): ``$LAB_CACHE`` or ``~/.cache/lab``.
 
-    ``$XDG_CACHE_HOME`` is honoured when set.
+    ``$XDG_CACHE_HOME`` is honoured when set. An empty ``$LAB_CACHE`` counts as unset (it would
+    otherwise put the cache in whatever folder the command runs from).
     """
-    if "LAB_CACHE" in os.environ:
+    if os.environ.get("LAB_CACHE"):
         p = Path(os.environ["LAB_CACHE"])
     else:
         p = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "lab"

@@ -7,4 +7,5 @@ The cache is keyed by asset hashes and a format version, so a changed texture or
 import os
 from pathlib import Path
 
-os.environ.setdefault("LAB_CACHE", str(Path(__file__).resolve().parent.parent / ".lab-cache-test"))
+if not os.environ.get("LAB_CACHE"):  # unset or empty
+    os.environ["LAB_CACHE"] = str(Path(__file__).resolve().parent.parent / ".lab-cache-test")

@@ -93,3 +93,14 @@ def test_missing_asset_names_the_file(tmp_path):
     )
     with pytest.raises(AssetError, match="nope.png does not exist"):
         load_scene(p)
+
+
+def test_an_empty_lab_cache_variable_means_the_default_cache(monkeypatch, tmp_path):
+    """``LAB_CACHE=`` (empty) must not put the cache in the working directory."""
+    from lab.paths import cache_dir
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.setenv("LAB_CACHE", "")
+    assert cache_dir() == tmp_path / "lab"
+    monkeypatch.setenv("LAB_CACHE", str(tmp_path / "mine"))
+    assert cache_dir() == tmp_path / "mine"
