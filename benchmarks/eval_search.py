@@ -169,6 +169,8 @@ def cmd_run(args) -> int:
         raise SystemExit(f"unknown surface(s) {', '.join(bad)}; surfaces: {', '.join(SURFACES)}")
     trials = trial_list(strategies, seeds, args.obstacles, surfaces)
     k, n = (int(v) for v in args.shard.split("/"))
+    if not 0 <= k < n:
+        raise SystemExit(f"--shard K/N needs 0 <= K < N (K counts from 0), got {args.shard}")
     trials = trials[k::n]
     out = Path(args.out)
     done = set()
@@ -315,7 +317,7 @@ def main(argv=None) -> int:
     r.add_argument("--surfaces", default=",".join(SURFACES), help="a subset of floor,table,shelf")
     r.add_argument("--max-time", type=float, default=300.0, help="simulated-time budget per trial [s]")
     r.add_argument("--max-wall-time", type=float, default=None, help="wall-clock cap per trial [s]")
-    r.add_argument("--shard", default="0/1", help="K/N: every N-th trial from the K-th")
+    r.add_argument("--shard", default="0/1", help="K/N: every N-th trial from the K-th (K from 0 to N-1)")
     rep = sub.add_parser("report")
     rep.add_argument("files", nargs="+")
     args = ap.parse_args(argv)
