@@ -311,3 +311,20 @@ def test_bad_inputs_are_clear_errors():
         run_search("book", 0, strategy="random", navigate=nav)
     with pytest.raises(ConfigError, match="needs a navigator"):
         run_search("book", 0)
+
+
+def test_a_device_fault_ends_the_run_with_its_reason(monkeypatch):
+    """A pan-tilt that never arrives (DeviceTimeout from the robot) mid-run: the run ends, the robot
+    stopped, and the reason names the fault -- no exception out of the search."""
+    from lab.errors import DeviceTimeout
+
+    def stuck(robot):
+        def navigate(target_xy, lo, hi):
+            raise DeviceTimeout("pan-tilt did not reach its target within 5.0 s")
+
+        return navigate
+
+    out, _, robot = scripted_run(monkeypatch, (0.5, 0.5), [((0.5, 0.5), 0.9)], navigate=stuck)
+    assert not out.found
+    assert "DeviceTimeout" in out.reason and "pan-tilt" in out.reason
+    assert out.events[-1].kind == "end"

@@ -66,7 +66,7 @@ from __future__ import annotations
 import contextlib
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import Enum
 
 import numpy as np
@@ -94,6 +94,9 @@ __all__ = [
 
 #: ``(x_min, y_min, x_max, y_max)`` [m] of the lab room's floor (``worlds/lab_room.toml``: 6 x 8 m)
 LAB_ROOM_BOUNDS = (-3.0, -4.0, 3.0, 4.0)
+
+#: Height of the stereo head above its pan-tilt axes [m]: the top of the robot is ``mount_R[2]`` plus this.
+HEAD_HEIGHT_M = 0.15
 
 
 @dataclass(frozen=True)
@@ -345,6 +348,10 @@ class Navigator:
     bounds : (x_min, y_min, x_max, y_max) [m], optional
         The workspace when ``spec`` is not given; default :data:`LAB_ROOM_BOUNDS`.
 
+    The costmap's ``robot_height`` is raised to the top of the robot's head (the pan-tilt axes,
+    ``camera.mount_R``, plus :data:`HEAD_HEIGHT_M`) when the configured one is lower: the lab room's
+    robot carries its head at 1.1 m, and a board at 1.1-1.2 m is something it would hit.
+
     Attributes
     ----------
     costmap : Costmap
@@ -371,7 +378,12 @@ class Navigator:
         bounds: Sequence[float] | None = None,
     ):
         self.robot = robot
-        self.config = cfg = config if config is not None else NavigatorConfig()
+        cfg = config if config is not None else NavigatorConfig()
+        head_top = float(robot.camera.mount_R[2]) + HEAD_HEIGHT_M
+        if cfg.costmap.robot_height < head_top:
+            # a taller robot than the costmap assumes: what its head would hit is an obstacle too
+            cfg = replace(cfg, costmap=replace(cfg.costmap, robot_height=head_top))
+        self.config = cfg
         if spec is None:
             x0, y0, x1, y1 = (float(v) for v in (bounds if bounds is not None else LAB_ROOM_BOUNDS))
             m = cfg.margin

@@ -46,7 +46,17 @@ from typing import Protocol
 
 import numpy as np
 
-from lab.errors import ConfigError, LabError
+from lab.errors import (
+    CommandRejected,
+    ConfigError,
+    ConnectionLost,
+    DeviceTimeout,
+    EStopActive,
+    LabError,
+    NotEnabled,
+    ProtocolError,
+    SafetyStop,
+)
 from lab.geometry import Pose2D, wrap_angle
 from lab.robot import Robot
 from lab.search.global_search import GlobalSearchConfig, GlobalSearchResult, global_search
@@ -68,6 +78,18 @@ __all__ = [
     "frontier_cells",
     "lawnmower_targets",
 ]
+
+
+#: Errors from the robot that end a run with their reason instead of raising out of it.
+_DEVICE_FAULTS = (
+    DeviceTimeout,
+    SafetyStop,
+    EStopActive,
+    NotEnabled,
+    ConnectionLost,
+    CommandRejected,
+    ProtocolError,
+)
 
 
 class Strategy(Enum):
@@ -476,7 +498,8 @@ class SearchAgent:
 
     # -- the loop ----------------------------------------------------------------------------------
     def run(self) -> AgentResult:
-        """Search until found, out of time (budget) or out of places to look; never raises for those."""
+        """Search until found, out of time (budget), out of places to look, or stopped by a device fault
+        (:class:`~lab.errors.LabError` from the robot: the reason names it); never raises for those."""
         t0 = self.robot.now()
         found: LocalSearchResult | None = None
         reason = "action limit reached"
@@ -496,6 +519,8 @@ class SearchAgent:
                     break
         except SearchBudgetExceeded as e:
             reason = str(e)
+        except _DEVICE_FAULTS as e:  # a pan-tilt that never arrives, a safety stop, a lost link: end cleanly
+            reason = f"stopped by a fault: {type(e).__name__}: {e}"
         finally:
             try:
                 self.robot.stop()
@@ -644,9 +669,10 @@ class SearchAgent:
             return nav, nav.reason
         # a cell against a wall or behind furniture: its band may lie (almost) all in the costmap's
         # grown obstacles, while a spot a little farther out is free and still close enough to look
-        wide = self._navigate(xy, lc.min_distance_m, lc.max_distance_m + self.config.wide_band_m)
+        far = lc.max_distance_m + self.config.wide_band_m
+        wide = self._navigate(xy, lc.min_distance_m, far)
         if wide.arrived:
-            return wide, f"from {lc.max_distance_m + self.config.wide_band_m:.1f} m ({nav.reason}): {wide.reason}"
+            return wide, f"from {far:.1f} m ({nav.reason}): {wide.reason}"
         return wide, f"{nav.reason}; {wide.reason} with the band widened"
 
     def _visit(self, cell, xy) -> LocalSearchResult | None:
@@ -691,7 +717,7 @@ class SearchAgent:
     def _navigate(self, xy, min_distance: float, max_distance: float):
         try:
             return self.navigate(xy, min_distance, max_distance)
-        except SearchBudgetExceeded:
+        except (SearchBudgetExceeded, *_DEVICE_FAULTS):
             raise
         except LabError as e:  # a navigator's clear refusal (outside the map, ...) is a failure to arrive
             return NavOutcome(False, f"navigation error: {e}", self.robot.odometry())

@@ -11,7 +11,8 @@ matched a handful of features on the small lab-room objects seen from above and 
 (0.8 m because the training object's centre stands 0.49 m above the floor: a camera 1 m away at
 -35 degrees would sit under the floor; at 0.8 m it is 3 cm above it.) One point seen from rings far
 apart keeps several descriptors in the database: the search's matcher treats database features
-within a centimetre of each other as one point (``alias_radius``, see :func:`lab.search.local_search.make_matcher`).
+within 1.5 cm of each other as one point (``alias_radius``, see
+:func:`lab.search.local_search.make_matcher`).
 
 These databases live in their own cache folder (``<cache>/search-databases``), so that they and
 ``lab train``'s default ones never overwrite each other. Building one takes about 30-40 s on first use.
