@@ -297,7 +297,8 @@ def local_search(
     limits = robot.pan_tilt_limits
     records: list[ViewRecord] = []
     ekf_cfg = EKFConfig(chart=OrientationChart.ROTATION_VECTOR, process=cfg.process)
-    last_reason = "no view had enough matches"
+    # the reason of the view that came closest: the most RANSAC inliers (a refined track beats a start)
+    best_reason, best_rank = "no view had enough matches", (-1, -1)
     for pan, tilt in local_views(cfg, bearing, limits):
         robot.command_pan_tilt(pan, tilt)
         robot.wait_pan_tilt()
@@ -319,7 +320,8 @@ def local_search(
                     **rec, n_inliers=n_start, outcome=f"RANSAC start with {n_start} inliers: {res.reason}"
                 )
             )
-            last_reason = f"best start had {n_start} inliers < {cfg.min_inliers}"
+            if (0, n_start) > best_rank:
+                best_reason, best_rank = f"best start had {n_start} inliers < {cfg.min_inliers}", (0, n_start)
             continue
         track = _refine(robot, db, matcher, detector, ekf, frame, cfg)
         records.append(ViewRecord(**rec, n_inliers=n_start, outcome=track.reason))
@@ -337,10 +339,12 @@ def local_search(
                 t_start,
                 robot.now(),
             )
-        last_reason = track.reason
+        if (1, n_start) > best_rank:
+            best_reason = f"best track ({n_start} inliers at the start): {track.reason}"
+            best_rank = (1, n_start)
     return LocalSearchResult(
         False,
-        f"not found in {len(records)} views: {last_reason}",
+        f"not found in {len(records)} views: {best_reason}",
         views=tuple(records),
         t_start=t_start,
         t_end=robot.now(),
