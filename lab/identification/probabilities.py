@@ -480,9 +480,19 @@ class ModelScorer:
         near = self._view_dirs @ u >= math.cos(math.radians(self.config.visibility_deg))
         return self.db.seen_from[:, near].any(axis=1)
 
+    @property
+    def k_neighbours(self) -> int:
+        """Nearest database descriptors searched per measured feature (at most the database's size)."""
+        return self._matcher.k
+
+    def neighbours(self, features: Features3D) -> tuple[np.ndarray, np.ndarray]:
+        """The exact ``k_neighbours`` nearest database descriptors of each measured feature (indices
+        and L2 distances, (n, k) each, nearest first). They do not depend on the pose, so a frame
+        scored at several poses (pose sharing, look-alike turns) searches once, and the EKF's matcher
+        reuses the same search (:func:`~lab.identification.step.observe_frame`)."""
+        return self._neighbours(features)
+
     def _neighbours(self, features: Features3D) -> tuple[np.ndarray, np.ndarray]:
-        """The nearest database descriptors of each measured feature; they do not depend on the pose,
-        so a frame scored at several poses (pose sharing, look-alike turns) searches once."""
         c = self._nn_cache
         if c is not None and c[0] is features:
             return c[1], c[2]
