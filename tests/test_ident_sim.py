@@ -166,3 +166,20 @@ def test_one_neighbour_search_per_model_gives_the_matches_of_two(models):
             if a is not None:
                 np.testing.assert_array_equal(a, b)
     assert any(m is not None for m in runs[0][-1][1])  # the filters did take the frames in
+
+
+def test_the_rendered_databases_share_the_shared_faces_and_not_the_unique_one(models):
+    """shared_features on the four trained databases, against the scene file's faces: nothing of the
+    unique face (worlds/box_database.toml: +X) is shared, nearly all of the three shared faces is."""
+    from lab.identification import shared_features
+
+    specs, dbs, _, _ = models
+    assert {m.unique_face for m in specs} == {"+X"}
+    for db, mask in zip(dbs, shared_features(dbs), strict=True):
+        p = db.points_O
+        on_x = np.abs(p[:, 0]) >= np.abs(p[:, 1])  # the face a feature lies on: the nearer side
+        faces = {"+X": on_x & (p[:, 0] > 0), "-X": on_x & (p[:, 0] < 0), "+Y": ~on_x & (p[:, 1] > 0)}
+        faces["-Y"] = ~on_x & (p[:, 1] < 0)
+        share = {f: float(mask[sel].mean()) for f, sel in faces.items()}
+        assert share["+X"] == 0.0, (db.name, share)
+        assert min(share["-X"], share["+Y"], share["-Y"]) >= 0.85, (db.name, share)
