@@ -67,8 +67,9 @@ whatever the true model, and frame after frame the posterior drifted towards ``M
   ``shared_region_fraction`` of its database's features have a counterpart in *every* other database
   (a feature within ``shared_radius_m`` of the same object-frame position whose descriptor is closer
   than ``max_descriptor_distance``), and its own descriptor is that close to some feature of every
-  other database (:func:`shared_features`; on the boxes: none of the unique face's, 94-99 % of the
-  shared faces');
+  other database (:func:`shared_features`; on the boxes: none of the unique face's, all of the
+  shared face opposite it and 86-95 % of the two beside it, whose edges with the unique face stay
+  the models' own);
 * a measured feature that any model explains with a shared database feature is **shared evidence**:
   every model is scored as explaining it, with the same density, the best of those models'
   ``log N(d; ...)``. It then cancels in Eq. (7); only the other features (the unique faces', and
@@ -283,7 +284,7 @@ class ScoringConfig:
     visibility_deg: float | None = None
     pool_shared: bool = True
     shared_radius_m: float = 0.01
-    shared_region_m: float = 0.03
+    shared_region_m: float = 0.05
     shared_region_fraction: float = 0.5
 
     def __post_init__(self):
