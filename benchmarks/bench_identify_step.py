@@ -18,7 +18,8 @@ each with its own filter bank from the same seed:
 It prints the median wall and CPU time (this process, all threads) per frame of the features
 (``stereo_features``) and of the filters and probabilities (``observe_frame``), and the ratios. CPU time
 is robust to other load on the machine; wall time is not (the load average is printed). Rendering is
-the same for both and is timed once (two 2x-supersampled renders per frame).
+the same for both and is timed once (two renders per frame at the camera's 320 x 240, without
+supersampling, as in ``lab identify``).
 """
 
 from __future__ import annotations
