@@ -59,7 +59,7 @@ class StereoParams:
     parallel : bool
         Detect the right image's keypoints in a second thread while this one does the left's (OpenCV
         releases the GIL; each thread has its own detector). The features are the same either way;
-        on two cores the pair takes about the time of one image instead of two.
+        on a free second core the pair takes less wall time (``benchmarks/bench_identify_step.py``).
     """
 
     ratio: float = 0.8
