@@ -276,6 +276,20 @@ def test_shared_evidence_counts_alike_for_every_model_and_the_unique_face_still_
         assert b.map_model == k and b.n_explained[k] > max(np.delete(b.n_explained, k)) + 15, b.n_explained
 
 
+def test_an_empty_database_shares_nothing_and_is_scored_as_before():
+    dbs = S.databases()
+    dbs[3] = _without(dbs[3], np.arange(len(dbs[3])))
+    assert all(not m.any() for m in shared_features(dbs))
+    f = S.observe(dbs[0], S.box_pose(0.0), S.camera_at(180.0), np.random.default_rng(8))
+    est = S.estimate(S.box_pose(0.0), S.camera_at(180.0))
+    pooled = calc_current_entropy(uniform(4), f, [ModelScorer(db) for db in dbs], [est] * 4)
+    raw = calc_current_entropy(
+        uniform(4), f, [ModelScorer(db, ScoringConfig(pool_shared=False)) for db in dbs], [est] * 4
+    )
+    np.testing.assert_array_equal(pooled.P, raw.P)
+    assert pooled.n_explained[3] == 0
+
+
 def test_pooling_is_the_rule_of_the_docstring():
     """pool_shared_evidence on hand-made explanations: shared evidence gets the best density for all."""
     from lab.identification import Explanation, ModelScore

@@ -670,7 +670,9 @@ def shared_features(dbs: Sequence[FeatureDatabase], config: ScoringConfig | None
         # a unique face's feature next to an edge would be shared by its neighbours on the shared face
         look_alike = np.ones(len(db), bool)
         for j, other in enumerate(dbs):
-            if j != i:
+            if j != i and len(other) == 0:  # an empty database shares nothing
+                look_alike[:] = False
+            elif j != i:
                 _, dist = Matcher(other, method="brute", k=1).neighbours(db.descriptors)
                 look_alike &= dist[:, 0] < cfg.max_descriptor_distance
         out.append((frac >= cfg.shared_region_fraction) & look_alike)
@@ -713,7 +715,12 @@ def pool_shared_evidence(
         return list(scores)
     idx = np.array([sc.explanation.idx_db for sc in scores])
     ld = np.array([sc.explanation.log_density for sc in scores])
-    by_shared = np.array([E[i] & mask[np.where(E[i], idx[i], 0)] for i, mask in enumerate(shared)])
+    by_shared = np.array(
+        [
+            E[i] & mask[np.where(E[i], idx[i], 0)] if len(mask) else E[i] & False
+            for i, mask in enumerate(shared)
+        ]
+    )
     S = by_shared.any(axis=0)  # shared evidence
     pooled = np.max(np.where(E, ld, -np.inf), axis=0)  # the best density among the models explaining it
     out = []
