@@ -58,8 +58,9 @@ class StereoParams:
         the boxes at the same 3D accuracy.
     parallel : bool
         Detect the right image's keypoints in a second thread while this one does the left's (OpenCV
-        releases the GIL; each thread has its own detector). The features are the same either way;
-        on a free second core the pair takes less wall time (``benchmarks/bench_identify_step.py``).
+        releases the GIL; each thread has its own detector). The features are the same either way.
+        Measured on a loaded 2-core machine it saved nothing (55 ms a pair either way); it is meant
+        for a free second core, where it has not been measured yet (``benchmarks/bench_identify_step.py``).
     """
 
     ratio: float = 0.8
