@@ -9,9 +9,11 @@ Run (from the repository root; resumable: an episode whose JSON exists is not ru
 Every episode is one ``lab identify --json`` in its own process (the command-line contract is what is
 measured). The report prints, per planner: successes (the true model ends as the argmax with
 ``P >= 0.95`` held for the dwell, within the action budget), the distribution of planning actions and of
-simulated time, the true model's final pose error, the real-time factor (sim time / wall time, measured
-under whatever load the machine had: the report prints the load average), and the ratio of the median
-actions of ``lut`` to ``random`` over the seeds both ran. It writes the same as JSON (``summary.json``).
+simulated time, the true model's final pose error, the real-time factors (sim time / wall time of the
+whole process, measured under whatever load the machine had: the report prints the load average; and of
+the loop alone, start-up and figures excluded, per wall second and per CPU second), and the ratio of
+the median actions of ``lut`` to ``random`` over the seeds both ran. It writes the same as JSON
+(``summary.json``).
 
 An episode that did not identify its model counts ``max_actions`` actions (a lower bound: the budget
 ran out), and the report lists every failure with its final probabilities.
@@ -152,6 +154,13 @@ def summarise(out: Path, planners, models, seeds, max_actions: int) -> dict:
             "pose_error_translation_m": _dist([e["translation_m"] for e in pe]),
             "pose_error_rotation_deg": _dist([e["rotation_deg"] for e in pe]),
             "real_time_factor": _dist([r["real_time_factor"] for r in rows if r.get("real_time_factor")]),
+            # the loop alone (no start-up, no figures): per wall second, and per CPU second of the episode
+            "real_time_factor_wall": _dist(
+                [r["real_time_factor_wall"] for r in rows if r.get("real_time_factor_wall")]
+            ),
+            "real_time_factor_loop_cpu": _dist(
+                [r["real_time_factor_loop_cpu"] for r in rows if r.get("real_time_factor_loop_cpu")]
+            ),
             "load_avg_1min": _dist([r["load_avg_1min"] for r in rows if "load_avg_1min" in r]),
             "per_model": per_model,
             "episode_keys": sorted((r["true_model"], r["seed"]) for r in rows),
@@ -185,7 +194,7 @@ def print_table(summary: dict) -> None:
     print()
     print(
         f"{'planner':8s} {'ok/n':>7s} {'actions med [q1,q3] max':>25s} {'sim s med [max]':>17s} "
-        f"{'pose err med cm / deg':>22s} {'RTF med':>8s} {'load':>5s}"
+        f"{'pose err med cm / deg':>22s} {'RTF med':>8s} {'loop/wall':>9s} {'loop/cpu':>8s} {'load':>5s}"
     )
     for planner, s in summary["planners"].items():
         a, t = s["actions"], s["sim_time_s"]
@@ -195,7 +204,8 @@ def print_table(summary: dict) -> None:
         pe = "-" if pe_t["n"] == 0 else f"{100 * pe_t['median']:.1f} / {pe_r['median']:.1f}"
         print(
             f"{planner:8s} {s['success']:>3d}/{s['episodes']:<3d} {acts:>25s} {sim:>17s} {pe:>22s} "
-            f"{f(s['real_time_factor']):>8s} {f(s['load_avg_1min'], fmt='{:.1f}'):>5s}"
+            f"{f(s['real_time_factor']):>8s} {f(s.get('real_time_factor_wall', {})):>9s} "
+            f"{f(s.get('real_time_factor_loop_cpu', {})):>8s} {f(s['load_avg_1min'], fmt='{:.1f}'):>5s}"
         )
         for m, pm in s["per_model"].items():
             for fail in pm["failures"]:

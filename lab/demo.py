@@ -67,6 +67,13 @@ def _report(res: dict, names: list[str], figures: list[tuple[str, str]], robot: 
         f"* planning actions: {res['actions']}",
         f"* simulated time: {res['sim_time_s']:.1f} s, wall time: {res['wall_time_s']:.1f} s "
         f"(real-time factor {res['sim_time_s'] / max(res['wall_time_s'], 1e-9):.2f})",
+    ]
+    if res.get("real_time_factor_wall") is not None:
+        lines.append(
+            f"* the loop alone (start-up and figures excluded): {res['real_time_factor_wall']:.2f} x real "
+            f"time on the wall clock, {res['real_time_factor_loop_cpu']:.2f} x per CPU second"
+        )
+    lines += [
         f"* final probabilities: {post}",
     ]
     pe = res.get("pose_error") or {}

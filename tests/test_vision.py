@@ -87,6 +87,17 @@ def test_triangulated_features_within_10mm_at_1m(models):
     assert np.median(e2) < np.median(e1)  # supersampling helps, as measured before the project
 
 
+def test_right_image_in_a_second_thread_gives_the_same_features():
+    with SimWorld("box_database") as w:
+        w.add_carrier(load_box_models()[2], Pose2D(0, 0, 0), box_yaw=0.3)
+        pair = w.render_stereo(viewpoint_G_WC((0.9, 0.3, 0.7), (0, 0, 0.49)), CAM)
+    a = stereo_features(*pair, CAM, StereoParams(parallel=True))
+    b = stereo_features(*pair, CAM, StereoParams(parallel=False))
+    assert len(a) > 50
+    for x, y in ((a.points_C, b.points_C), (a.descriptors, b.descriptors), (a.uv, b.uv)):
+        np.testing.assert_array_equal(x, y)
+
+
 def test_triangulation_agrees_with_opencv():
     rng = np.random.default_rng(0)
     uv_l = rng.uniform([20, 20], [300, 220], (50, 2))
@@ -136,6 +147,13 @@ def test_matcher_flann_agrees_with_exact_search(dbs):
     # and FLANN repeats itself exactly
     c = Matcher(db, method="flann").match(f)
     np.testing.assert_array_equal(a.idx_db, c.idx_db)
+    # a search made elsewhere (the model probabilities') is reused as is: exact neighbours give the
+    # exact matcher's matches, whatever the matcher's own method
+    d = Matcher(db, method="flann").match(f, neighbours=Matcher(db, method="brute").neighbours(f.descriptors))
+    for x, y in ((b.idx_meas, d.idx_meas), (b.idx_db, d.idx_db), (b.distance, d.distance)):
+        np.testing.assert_array_equal(x, y)
+    with pytest.raises(ConfigError, match="neighbours must be two"):
+        Matcher(db).match(f, neighbours=(idx[:, :3], idx[:, :3].astype(float)))
 
 
 def test_training_is_deterministic_and_remembers_visibility(dbs):

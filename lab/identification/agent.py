@@ -225,8 +225,13 @@ class IdentificationAgent:
         self.action_config = action_config or ActionConfig()
         self.rng = np.random.default_rng(seed)
         self.dbs = [get_database(n) for n in self.names]
-        self.matchers = [Matcher(db) for db in self.dbs]
         self.scorers = [ModelScorer(db, self.scoring) for db in self.dbs]
+        # the EKF's correspondences from the scorers' exact search, made once per frame and model
+        # (observe_frame): exact, and faster than a FLANN search of a few hundred features
+        self.matchers = [
+            Matcher(db, method="brute", k=s.k_neighbours)
+            for db, s in zip(self.dbs, self.scorers, strict=True)
+        ]
         self.bank = EKFBank(
             len(self.dbs), EKFConfig(chart=OrientationChart.ROTATION_VECTOR), rng=np.random.default_rng(seed)
         )

@@ -54,6 +54,39 @@ model (measured: P(M0) = 0.72 for a true M2 in 47 s of shared faces, the 3 filte
 wrong quarter-turn). At one common pose, shared faces are explained by every model alike, and on a
 view of the unique face of ``M_k`` the pose that explains it wins and the other models explain none of it.
 
+**Shared evidence.** The models share three faces, but their databases were trained apart: a feature
+of a shared page may be in one database and not in another (SIFT finds slightly different keypoints
+next to each model's unique face, the training merges views slightly differently), or sit a few
+millimetres elsewhere and fail the gate. Each such difference is worth ~15 nats, and they do not
+average out: a frame of shared faces explains, say, 13 features for ``M0`` and 12 for the others
+whatever the true model, and frame after frame the posterior drifted towards ``M0`` (measured: P(M0) =
+0.58, P(M3) = 0.06 for a true ``M3`` after 40 s of shared faces with the random planner). So, by default
+(``pool_shared``), what every database holds counts identically for every model:
+
+* a database feature is **shared** when, around it (within ``shared_region_m`` in O), at least
+  ``shared_region_fraction`` of its database's features have a counterpart in *every* other database
+  (a feature within ``shared_radius_m`` of the same object-frame position whose descriptor is closer
+  than ``max_descriptor_distance``), and its own descriptor is that close to some feature of every
+  other database (:func:`shared_features`; on the boxes: none of the unique face's, all of the
+  shared face opposite it and 86-95 % of the two beside it, whose edges with the unique face stay
+  the models' own);
+* a measured feature that any model explains with a shared database feature is **shared evidence**:
+  every model is scored as explaining it, with the same density, the best of those models'
+  ``log N(d; ...)``. It then cancels in Eq. (7); only the other features (the unique faces', and
+  whatever one database alone explains) tell the models apart:
+
+.. math::
+
+    \log p(\mathbf{D}_k \mid \cdot, M_i) = \sum_{m \in S} \max_j \log \mathcal{N}_j(\mathbf{d}_m)
+      + \sum_{m \in E_i \setminus S} \log \mathcal{N}_i(\mathbf{d}_m)
+      + (n_k - |S| - |E_i \setminus S|) \log c
+
+with ``S`` the shared evidence and ``E_i`` the features ``M_i`` explains. It applies where all models
+are scored at the one common pose (the default), so that "the same object-frame position" means the
+same place in the image, and to the per-feature form of Eq. (9) (the joint form is left as it is).
+The planning's lookup tables count each model's own matches, as before: they do not depend on this
+rule (nor does their cache key).
+
 **Visible features only (optional).** With ``visibility_deg`` set, a database feature can explain a
 measured one only if it was seen in training from (about) the direction the pose puts the camera in:
 its ``seen_from`` ring viewpoints include one within ``visibility_deg`` of that direction. It is meant
@@ -133,7 +166,9 @@ __all__ = [
     "clutter_log_density",
     "entropy",
     "pose_estimate_rv",
+    "pool_shared_evidence",
     "posterior",
+    "shared_features",
     "state_for_scoring",
     "uniform",
     "update_model_probabilities",
@@ -226,6 +261,14 @@ class ScoringConfig:
     visibility_deg : float or None [deg]
         A database feature explains only from directions within this angle of a training viewpoint
         that saw it (module docstring; 15 suits the 10-degree ring). None (default): any direction.
+    pool_shared : bool
+        Count shared evidence identically for every model (module docstring, "Shared evidence").
+    shared_radius_m : float [m]
+        A database feature's counterpart in another database is within this distance in O ...
+    shared_region_m : float [m]
+        ... and a database feature is shared when, within this distance of it, ...
+    shared_region_fraction : float
+        ... at least this fraction of its database's features have counterparts in every other one.
     """
 
     max_descriptor_distance: float = 250.0
@@ -239,6 +282,10 @@ class ScoringConfig:
     share_poses: bool = True
     common_pose: bool = True
     visibility_deg: float | None = None
+    pool_shared: bool = True
+    shared_radius_m: float = 0.01
+    shared_region_m: float = 0.05
+    shared_region_fraction: float = 0.5
 
     def __post_init__(self):
         if not self.max_descriptor_distance > 0:
@@ -257,6 +304,15 @@ class ScoringConfig:
             raise ConfigError(f"floor must be within [0, 0.5), got {self.floor}")
         if self.visibility_deg is not None and not 0.0 < self.visibility_deg <= 180.0:
             raise ConfigError(f"visibility_deg must be within (0, 180] or None, got {self.visibility_deg}")
+        if not (self.shared_radius_m > 0 and self.shared_region_m >= 0):
+            raise ConfigError(
+                f"shared_radius_m must be > 0 m and shared_region_m >= 0 m, got {self.shared_radius_m}, "
+                f"{self.shared_region_m}"
+            )
+        if not 0.0 < self.shared_region_fraction <= 1.0:
+            raise ConfigError(
+                f"shared_region_fraction must be within (0, 1], got {self.shared_region_fraction}"
+            )
 
 
 # --- probabilities and entropy ------------------------------------------------------------------------
@@ -463,6 +519,7 @@ class ModelScorer:
         self._matcher = Matcher(db, method="brute", k=self.config.k_neighbours)
         self._gate_m2 = chi2_quantile(self.config.gate_prob, 3)
         self._nn_cache: tuple | None = None  # (features, idx, dist) of the last feature set
+        self._shared: tuple | None = None  # (ids of the group's databases, shared_features mask)
         self._view_dirs = None
         if self.config.visibility_deg is not None and db.seen_from.size:
             from lab.identification.viewpoints import viewpoint_directions
@@ -480,9 +537,19 @@ class ModelScorer:
         near = self._view_dirs @ u >= math.cos(math.radians(self.config.visibility_deg))
         return self.db.seen_from[:, near].any(axis=1)
 
+    @property
+    def k_neighbours(self) -> int:
+        """Nearest database descriptors searched per measured feature (at most the database's size)."""
+        return self._matcher.k
+
+    def neighbours(self, features: Features3D) -> tuple[np.ndarray, np.ndarray]:
+        """The exact ``k_neighbours`` nearest database descriptors of each measured feature (indices
+        and L2 distances, (n, k) each, nearest first). They do not depend on the pose, so a frame
+        scored at several poses (pose sharing, look-alike turns) searches once, and the EKF's matcher
+        reuses the same search (:func:`~lab.identification.step.observe_frame`)."""
+        return self._neighbours(features)
+
     def _neighbours(self, features: Features3D) -> tuple[np.ndarray, np.ndarray]:
-        """The nearest database descriptors of each measured feature; they do not depend on the pose,
-        so a frame scored at several poses (pose sharing, look-alike turns) searches once."""
         c = self._nn_cache
         if c is not None and c[0] is features:
             return c[1], c[2]
@@ -548,6 +615,123 @@ class ModelScorer:
             )
         ll = ll_expl + (n - e.n_explained) * self.config.log_clutter_density  # clutter for the rest
         return ModelScore(float(ll), float(ll_expl), e.n_explained, n, e)
+
+
+# --- shared evidence ---------------------------------------------------------------------------------
+
+
+def shared_features(dbs: Sequence[FeatureDatabase], config: ScoringConfig | None = None) -> list[np.ndarray]:
+    """Which database features every model shares (module docstring, "Shared evidence").
+
+    Parameters
+    ----------
+    dbs : sequence of FeatureDatabase, length L
+    config : ScoringConfig, optional
+        ``shared_radius_m``, ``max_descriptor_distance``, ``shared_region_m``, ``shared_region_fraction``.
+
+    Returns
+    -------
+    list of ndarray, shape (N_i,), bool
+        Per database: its feature has, around it, enough features with a counterpart (same position in
+        O within ``shared_radius_m``, descriptor within ``max_descriptor_distance``) in every other
+        database, and a look-alike (descriptor within ``max_descriptor_distance``) in each of them.
+        With one database nothing is shared.
+    """
+    from scipy.spatial import cKDTree
+
+    cfg = config or ScoringConfig()
+    if len(dbs) < 2:
+        return [np.zeros(len(db), bool) for db in dbs]
+    trees = [cKDTree(db.points_O) if len(db) else None for db in dbs]
+    out = []
+    for i, db in enumerate(dbs):
+        counterpart = np.ones(len(db), bool)  # has one in every other database
+        for j, other in enumerate(dbs):
+            if j == i:
+                continue
+            if trees[i] is None or trees[j] is None:
+                counterpart[:] = False
+                continue
+            pairs = trees[i].sparse_distance_matrix(trees[j], cfg.shared_radius_m, output_type="ndarray")
+            a, b = pairs["i"], pairs["j"]
+            close = (
+                np.linalg.norm(db.descriptors[a].astype(float) - other.descriptors[b], axis=1)
+                < cfg.max_descriptor_distance
+            )
+            has = np.zeros(len(db), bool)
+            has[a[close]] = True
+            counterpart &= has
+        if len(db) == 0:
+            out.append(counterpart)
+            continue
+        around = trees[i].query_ball_point(db.points_O, cfg.shared_region_m)  # includes the feature itself
+        frac = np.array([counterpart[nb].mean() for nb in around])
+        # the feature's own page is in every other database, wherever (a look-alike face): without this
+        # a unique face's feature next to an edge would be shared by its neighbours on the shared face
+        look_alike = np.ones(len(db), bool)
+        for j, other in enumerate(dbs):
+            if j != i and len(other) == 0:  # an empty database shares nothing
+                look_alike[:] = False
+            elif j != i:
+                _, dist = Matcher(other, method="brute", k=1).neighbours(db.descriptors)
+                look_alike &= dist[:, 0] < cfg.max_descriptor_distance
+        out.append((frac >= cfg.shared_region_fraction) & look_alike)
+    return out
+
+
+def _shared_masks(scorers: Sequence[ModelScorer]) -> list[np.ndarray]:
+    """:func:`shared_features` of the scorers' databases, computed once per group of scorers."""
+    key = tuple(id(s.db) for s in scorers)
+    if all(s._shared is not None and s._shared[0] == key for s in scorers):
+        return [s._shared[1] for s in scorers]
+    masks = shared_features([s.db for s in scorers], scorers[0].config)
+    for s, m in zip(scorers, masks, strict=True):
+        s._shared = (key, m)
+    return masks
+
+
+def pool_shared_evidence(
+    scores: Sequence[ModelScore], shared: Sequence[np.ndarray], config: ScoringConfig
+) -> list[ModelScore]:
+    """Every model's score on one frame, with the shared evidence counted identically for all.
+
+    Parameters
+    ----------
+    scores : sequence of ModelScore, length L
+        Each model's score of the same frame at the same pose (per-feature form).
+    shared : sequence of ndarray (N_i,) bool
+        :func:`shared_features` of the models' databases.
+    config : ScoringConfig
+
+    Returns
+    -------
+    list of ModelScore
+        ``log p(D_k | ., M_i)`` of the module docstring's "Shared evidence": a measured feature that
+        any model explains with a shared database feature counts for every model with the best of
+        their densities; the others as before.
+    """
+    E = np.array([sc.explanation.explained for sc in scores])  # (L, n)
+    if E.size == 0:
+        return list(scores)
+    idx = np.array([sc.explanation.idx_db for sc in scores])
+    ld = np.array([sc.explanation.log_density for sc in scores])
+    by_shared = np.array(
+        [
+            E[i] & mask[np.where(E[i], idx[i], 0)] if len(mask) else E[i] & False
+            for i, mask in enumerate(shared)
+        ]
+    )
+    S = by_shared.any(axis=0)  # shared evidence
+    pooled = np.max(np.where(E, ld, -np.inf), axis=0)  # the best density among the models explaining it
+    out = []
+    n = E.shape[1]
+    for i, sc in enumerate(scores):
+        own = E[i] & ~S
+        ll_expl = float(np.sum(pooled[S]) + np.sum(ld[i, own]))
+        n_expl = int(np.count_nonzero(S) + np.count_nonzero(own))
+        ll = ll_expl + (n - n_expl) * config.log_clutter_density
+        out.append(ModelScore(ll, ll_expl, n_expl, n, sc.explanation))
+    return out
 
 
 # --- calcCurrentEntropy ------------------------------------------------------------------------------
@@ -642,10 +826,21 @@ def calc_current_entropy(
     if len(scorers) != L or len(states) != L:
         raise ConfigError(f"need one scorer and one state per model: {len(scorers)}, {len(states)} for {L}")
     config = config or scorers[0].config
+    pool = (
+        config.pool_shared
+        and config.share_poses
+        and config.common_pose
+        and config.likelihood is LikelihoodForm.PER_FEATURE
+        and L > 1
+    )
     poses = [x for x in states if x is not None]
     if config.share_poses and poses and config.common_pose:
         poses = _candidate_poses(states, symmetries)
         table = [[s.score(features, x) for x in poses] for s in scorers]  # (L, C): model i at pose c
+        if pool:  # shared evidence counted identically for every model, at each pose
+            masks = _shared_masks(scorers)
+            cols = [pool_shared_evidence([row[c] for row in table], masks, config) for c in range(len(poses))]
+            table = [[cols[c][i] for c in range(len(poses))] for i in range(L)]
         ll_LC = np.array([[sc.log_likelihood for sc in row] for row in table])
         with np.errstate(divide="ignore"):
             joint = np.log(prior)[:, None] + config.evidence_weight * ll_LC

@@ -127,7 +127,10 @@ def run_identify(
             return agent_step()
 
         agent.step = step_with_truth
+        sim_t0, loop_wall0, loop_cpu0 = world.t, time.perf_counter(), time.process_time()
         identified = agent.run()
+        loop_sim = world.t - sim_t0  # the loop alone: no start-up (databases, tables, scene), no figures
+        loop_wall, loop_cpu = time.perf_counter() - loop_wall0, time.process_time() - loop_cpu0
         est = agent.bank.estimates[true_model]
         pose_error = {"translation_m": None, "rotation_deg": None}
         if est is not None and truth:
@@ -174,6 +177,13 @@ def run_identify(
         "real_time_factor": sim_time / wall if wall > 0 else None,
         "cpu_time_s": cpu,
         "real_time_factor_cpu": sim_time / cpu if cpu > 0 else None,  # on one free core
+        # the loop alone (start-up and figures excluded): sim seconds per wall second, as it ran on this
+        # machine's cores under its load, and per CPU second of this process (robust to the load)
+        "loop_sim_time_s": loop_sim,
+        "loop_wall_time_s": loop_wall,
+        "loop_cpu_time_s": loop_cpu,
+        "real_time_factor_wall": loop_sim / loop_wall if loop_wall > 0 else None,
+        "real_time_factor_loop_cpu": loop_sim / loop_cpu if loop_cpu > 0 else None,
         "filter_reseats": agent.n_reseats,
         "ring_blocked": agent.n_blocked,
         "track_lost": agent.n_lost,

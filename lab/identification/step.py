@@ -41,6 +41,14 @@ class FrameObservation:
     updates: tuple[UpdateResult, ...] = field(repr=False)
 
 
+def _shared(matcher: Matcher, scorer: ModelScorer, features: Features3D):
+    """The scorer's exact nearest neighbours for the matcher, when both search the same database for
+    the same number of neighbours (None: the matcher searches itself)."""
+    if matcher.db is not scorer.db or matcher.k != scorer.k_neighbours or len(features) == 0:
+        return None
+    return scorer.neighbours(features)
+
+
 def observe_frame(
     P,
     features: Features3D,
@@ -65,6 +73,9 @@ def observe_frame(
         ``bank.predict(...)``'s output for this frame.
     matchers, scorers : sequences, one per model
         ``Matcher(db_i)`` (the EKF's correspondences) and ``ModelScorer(db_i)`` (the probabilities').
+        When a matcher and its scorer share the database and ``k``, the frame is searched once per
+        model: the matcher's ratio test runs on the scorer's exact nearest neighbours, which gives the
+        matches of ``Matcher(db_i, method="brute")`` (``tests/test_ident_sim.py``).
     config : ScoringConfig, optional
     symmetries : sequence of ndarray (4, 4), optional
         The object's look-alike turns, passed to :func:`calc_current_entropy`.
@@ -76,7 +87,13 @@ def observe_frame(
             f"{len(scorers)} for {L} filters"
         )
     updates = tuple(
-        bank.update(i, *matchers[i].match(features).pairs(features, scorers[i].db)) for i in range(L)
+        bank.update(
+            i,
+            *matchers[i]
+            .match(features, _shared(matchers[i], scorers[i], features))
+            .pairs(features, scorers[i].db),
+        )
+        for i in range(L)
     )
     states = [state_for_scoring(p, u) for p, u in zip(predicted, updates, strict=True)]
     belief = calc_current_entropy(P, features, scorers, states, config, symmetries)

@@ -202,7 +202,9 @@ def _asset_hash(obj: _Trainable, params: TrainingParams) -> str:
     if obj.texture is not None:
         h.update(Path(obj.texture).read_bytes())
     h.update(json.dumps(asdict(params), sort_keys=True, default=list).encode())
-    h.update(json.dumps(asdict(StereoParams()), sort_keys=True).encode())
+    stereo = asdict(StereoParams())
+    del stereo["parallel"]  # how the work is spread over threads: the same features either way
+    h.update(json.dumps(stereo, sort_keys=True).encode())
     h.update(str(FORMAT_VERSION).encode())
     return h.hexdigest()[:32]
 
@@ -575,11 +577,31 @@ class Matcher:
         idx = np.take_along_axis(idx, order, axis=1)
         return idx, np.sqrt(np.maximum(np.take_along_axis(part, order, axis=1), 0.0))
 
-    def match(self, features: Features3D) -> Correspondences:
-        """Candidates of every measured feature that passes the alias-aware ratio test."""
+    def match(
+        self, features: Features3D, neighbours: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> Correspondences:
+        """Candidates of every measured feature that passes the alias-aware ratio test.
+
+        Parameters
+        ----------
+        features : Features3D
+        neighbours : (ndarray (n, k) int, ndarray (n, k)), optional
+            The k nearest database features of each measured descriptor and their L2 distances, in
+            increasing distance, as :meth:`neighbours` returns them: a search already made for this
+            frame (the model probabilities make the same exact search) is reused instead of repeated.
+            With the exact neighbours the result is that of ``method="brute"``.
+        """
         if len(features) == 0 or len(self.db) < 2:
             return Correspondences.empty()
-        idx, dist = self.neighbours(features.descriptors)
+        if neighbours is None:
+            idx, dist = self.neighbours(features.descriptors)
+        else:
+            idx, dist = (np.asarray(a) for a in neighbours)
+            if idx.shape != (len(features), self.k) or dist.shape != idx.shape:
+                raise ConfigError(
+                    f"neighbours must be two ({len(features)}, {self.k}) arrays (one row per measured "
+                    f"feature, this matcher's k = {self.k}), got {idx.shape} and {dist.shape}"
+                )
         n, k = idx.shape
         # aliases: neighbours whose database descriptor is close to the nearest one's
         alias = np.linalg.norm(self._D[idx] - self._D[idx[:, :1]], axis=2) < self.alias_distance
