@@ -30,16 +30,7 @@ import statistics
 import subprocess
 import sys
 
-
-def _range(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        if "-" in part:
-            a, b = part.split("-")
-            out += list(range(int(a), int(b) + 1))
-        elif part:
-            out.append(int(part))
-    return out
+from eval_identify import _range  # "0-3,5" -> [0, 1, 2, 3, 5] (run from benchmarks/, as documented)
 
 
 def _episodes(text: str) -> list[tuple[int, int]]:
