@@ -55,7 +55,7 @@ from lab.identification.hypotheses import (
     z_turns,
 )
 from lab.identification.planner import plan_next_best_view
-from lab.identification.probabilities import ModelScorer, ScoringConfig, uniform
+from lab.identification.probabilities import ModelScorer, ScoringConfig, shared_masks, uniform
 from lab.identification.step import observe_frame
 from lab.navigation.follower import PathFollower
 from lab.robot import Robot
@@ -271,11 +271,16 @@ class IdentificationAgent:
             from lab.identification.lut import LookupTableEvaluator
             from lab.identification.tables import get_tables
 
-            return LookupTableEvaluator(get_tables(self.names, dbs=self.dbs), self.robot.camera, self.scoring)
+            tables = get_tables(self.names, dbs=self.dbs)
+            return LookupTableEvaluator(
+                tables, self.robot.camera, self.scoring, shared=shared_masks(self.scorers)
+            )
         if self.planner is PlannerChoice.MC:
             from lab.identification.montecarlo import MonteCarloEvaluator
 
-            return MonteCarloEvaluator(self.dbs, self.robot.camera, self.scoring)
+            return MonteCarloEvaluator(
+                self.dbs, self.robot.camera, self.scoring, shared=shared_masks(self.scorers)
+            )
         return None
 
     # --- one step ---------------------------------------------------------------------------------

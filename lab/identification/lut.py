@@ -27,6 +27,11 @@ For a candidate action ``u+`` and an assumed true model ``M_i`` (each of its pos
 4. the posterior over the models (Eq. (7), with the same evidence weight and floor as the real update)
    and its entropy, averaged over the samples and weighted by ``P(M_i)``: Eq. (10).
 
+Where the model probabilities pool shared evidence (the default; see
+:mod:`~lab.identification.probabilities`, "Shared evidence"), a feature every database holds counts
+alike for every model and cancels in Eq. (7): ``W_ij`` then counts only the features of ``M_j`` that
+are not shared, so a view of shared faces is expected to teach nothing, as it does.
+
 :math:`\Sigma_o` is the innovation covariance of a typical feature (the stereo error at the predicted
 depth plus the hypothesis's pose uncertainty) and :math:`\delta_o` a residual with
 :math:`\delta_o^T \Sigma_o^{-1} \delta_o = 3`, the mean of a chi-square(3) variable
@@ -47,7 +52,7 @@ import numpy as np
 from lab.errors import ConfigError
 from lab.identification.actions import CandidateAction
 from lab.identification.hypotheses import ModelHypotheses
-from lab.identification.probabilities import ScoringConfig, entropy, posterior
+from lab.identification.probabilities import ScoringConfig, entropy, pools_shared_evidence, posterior
 from lab.identification.tables import LookupTables
 from lab.identification.viewpoints import direction_std, viewpoint_weights
 from lab.robot import StereoCamera
@@ -145,6 +150,13 @@ class LookupTableEvaluator:
     n_frames : int
         Frames the robot observes at the goal; their evidence adds up.
     constants : Eq15Constants, optional
+    shared : sequence of ndarray (N_j,) bool, optional
+        The models' shared features (default: ``tables.shared``, which :func:`get_tables` fills in).
+        Where the scoring pools shared evidence
+        (:func:`~lab.identification.probabilities.pools_shared_evidence`), those features count
+        alike for every model and cancel in Eq. (7), so ``W_ij`` counts only the others
+        (:meth:`LookupTables.without_features`); with the raw tables the evaluator would expect a
+        view of shared faces to tell the models apart. Ignored where the scoring does not pool.
     """
 
     name = "lut"
@@ -156,6 +168,7 @@ class LookupTableEvaluator:
         scoring: ScoringConfig | None = None,
         n_frames: int = 1,
         constants: Eq15Constants | None = None,
+        shared: Sequence[np.ndarray] | None = None,
     ):
         if int(n_frames) != n_frames or n_frames < 1:
             raise ConfigError(f"n_frames must be a positive integer, got {n_frames}")
@@ -164,6 +177,16 @@ class LookupTableEvaluator:
         self.scoring = scoring or ScoringConfig()
         self.n_frames = int(n_frames)
         self.constants = constants or Eq15Constants()
+        self.pooled = pools_shared_evidence(self.scoring, tables.n_models)
+        shared = tables.shared if shared is None else shared
+        if self.pooled and shared is None:
+            raise ConfigError(
+                "the scoring pools shared evidence (ScoringConfig.pool_shared) but the tables carry no "
+                "shared features: pass shared=shared_features(dbs, scoring), "
+                "or a scoring with pool_shared=False"
+            )
+        #: the tables W is sampled from: without the shared features where the scoring pools them
+        self.W_tables = tables.without_features(shared) if self.pooled else tables
 
     def expected_entropy(self, actions: Sequence[CandidateAction], hypotheses: ModelHypotheses) -> np.ndarray:
         """``E[H+]`` of every action, Eq. (10), shape (A,) [nats].
@@ -185,7 +208,7 @@ class LookupTableEvaluator:
         Sigma_o = self.constants.Sigma_o(self.camera, np.linalg.norm(G_CO[..., :3, 3], axis=-1), Sigma)
         lam = self.constants.log_N_o(Sigma_o) - self.scoring.log_clutter_density  # (A, H)
         # W[e, s, j]: features of M_j corresponding when hypothesis h is true, at quantile level s
-        W = np.moveaxis(self.tables.W_quantiles[hypotheses.model[h], :, v, :], 1, 2).astype(float)
+        W = np.moveaxis(self.W_tables.W_quantiles[hypotheses.model[h], :, v, :], 1, 2).astype(float)
         # log p(D~ | M_j) = W_ij log N_o + (n - W_ij) log c; n log c is the same for every j and cancels
         ll = W * lam[a, h][:, None, None]
         with np.errstate(divide="ignore"):

@@ -21,7 +21,9 @@ For a candidate action ``u+`` and an assumed truth, a pose hypothesis ``h`` of m
    (the real scoring shares the bank's poses, and the truth is among them) or, without pose sharing,
    at its own hypotheses. Each explained feature contributes
    ``N(d~_m; mu^j_m, C_m Sigma+ C_m^T + Sigma_m)`` (Eq. (12): independent features), each other one
-   the clutter density.
+   the clutter density. Where the model probabilities pool shared evidence (the default), a sampled
+   feature that some model explains with one of its shared features counts for every model with the
+   best of their densities (:func:`~lab.identification.probabilities.pool_shared_evidence`).
 4. **Posterior and entropy** of every sample (Eq. (7), the same evidence weight and floor as the real
    update), averaged and weighted by the hypothesis's probability:
 
@@ -47,7 +49,13 @@ from lab.errors import ConfigError
 from lab.estimation.fit import chi2_quantile
 from lab.identification.actions import CandidateAction
 from lab.identification.hypotheses import ModelHypotheses
-from lab.identification.probabilities import ScoringConfig, entropy, posterior
+from lab.identification.probabilities import (
+    ScoringConfig,
+    entropy,
+    pools_shared_evidence,
+    posterior,
+    shared_features,
+)
 from lab.identification.viewpoints import direction_std, viewpoint_directions, viewpoint_weights
 from lab.robot import StereoCamera
 from lab.vision import FeatureDatabase, Matcher
@@ -114,6 +122,11 @@ class MonteCarloEvaluator:
         Frames the robot observes at the goal; their evidence adds up.
     config : MonteCarloConfig, optional
     stereo : StereoParams, optional
+    shared : sequence of ndarray (N_j,) bool, optional
+        The databases' shared features; computed from ``dbs`` (:func:`shared_features`) where the
+        scoring pools shared evidence (:func:`pools_shared_evidence`), which the evaluator then does
+        too: a sampled feature that some model explains with a shared feature counts for every model
+        with the best of their densities, as in :func:`pool_shared_evidence`.
     """
 
     name = "mc"
@@ -126,6 +139,7 @@ class MonteCarloEvaluator:
         n_frames: int = 1,
         config: MonteCarloConfig | None = None,
         stereo: StereoParams | None = None,
+        shared: Sequence[np.ndarray] | None = None,
     ):
         if int(n_frames) != n_frames or n_frames < 1:
             raise ConfigError(f"n_frames must be a positive integer, got {n_frames}")
@@ -144,6 +158,16 @@ class MonteCarloEvaluator:
         self._ring_step = [_ring_step(db.viewpoints) for db in self.dbs]
         #: _cand[i][j]: (N_i, k) candidate features of M_j for every feature of M_i
         self._cand = [[cross_correspondences(a, b, self.scoring) for b in self.dbs] for a in self.dbs]
+        # pooling needs one pose per model (the common pose), which pools_shared_evidence implies
+        self.pooled = pools_shared_evidence(self.scoring, len(self.dbs))
+        if self.pooled:
+            shared = shared_features(self.dbs, self.scoring) if shared is None else shared
+            if len(shared) != len(self.dbs) or any(
+                np.shape(m) != (len(db),) for m, db in zip(shared, self.dbs, strict=False)
+            ):
+                raise ConfigError("shared needs one (N_j,) bool mask per database")
+            #: per database, its shared features; index -1 (no candidate) reads the appended False
+            self.shared = [np.append(np.asarray(m, bool), False) for m in shared]
 
     @property
     def n_models(self) -> int:
@@ -197,10 +221,14 @@ class MonteCarloEvaluator:
         ``G_CO`` (H, 4, 4) and ``Sigma`` (H, 6, 6) are the pose hypotheses at the action; model ``j`` is
         scored at each of ``poses[j]`` (indices into them) and keeps its best.
         """
-        N = d.shape[0]
+        N, n = d.shape[:2]
         L = self.n_models
         log_c = self.scoring.log_clutter_density
         ll = np.full((N, L), -np.inf)
+        # pooling (one pose per model): each model's density of each sampled feature, and whether the
+        # database feature that explains it is a shared one
+        log_N_j = np.full((L, N, n), -np.inf)
+        by_shared = np.zeros((L, N, n), bool)
         for j in range(L):
             cand = self._cand[i][j][idx]  # (n, k) candidates in M_j of each sampled feature
             K = int((cand >= 0).sum(axis=1).max(initial=0))
@@ -230,9 +258,20 @@ class MonteCarloEvaluator:
                 ok = valid[None] & (m2 <= self._gate_m2)
                 ok &= rx * rx + ry * ry + rz * rz <= self.scoring.dist_max_m**2
                 log_N = -0.5 * (m2 + logdet[None] + 3 * _LOG_2PI)
-                best = np.max(np.where(ok, log_N, -np.inf), axis=-1)  # the gated candidate nearest, (N, n)
+                gated = np.where(ok, log_N, -np.inf)
+                best = np.max(gated, axis=-1)  # the gated candidate nearest, (N, n)
                 per_feature = np.where(np.isfinite(best), best, log_c)
                 ll[:, j] = np.maximum(ll[:, j], np.sum(np.where(detected, per_feature, 0.0), axis=1))
+                if self.pooled:
+                    chosen = np.take_along_axis(cand, np.argmax(gated, axis=-1).T, axis=1).T  # (N, n)
+                    log_N_j[j] = best
+                    by_shared[j] = np.isfinite(best) & self.shared[j][chosen]
+        if self.pooled:  # pool_shared_evidence: shared evidence counts alike, the best density, for all
+            S = by_shared.any(axis=0) & detected  # (N, n)
+            pooled = np.max(log_N_j, axis=0)
+            per_feature = np.where(np.isfinite(log_N_j), log_N_j, log_c)  # (L, N, n)
+            per_feature = np.where(S[None], pooled[None], per_feature)
+            ll = np.sum(np.where(detected[None], per_feature, 0.0), axis=2).T
         return ll
 
     def expected_entropy(self, actions: Sequence[CandidateAction], hypotheses: ModelHypotheses) -> np.ndarray:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lab.identification.probabilities import shared_features
 from lab.identification.tables import LookupTables
 from lab.identification.viewpoints import viewpoint_directions
 from lab.vision import FeatureDatabase
@@ -109,4 +110,4 @@ def synthetic_tables(
             p = np.where(shared | (i == j), p_match, p_false)
             row.append(seen * p[None, :])
         P.append(row)
-    return LookupTables([db.name for db in dbs], dbs[0].viewpoints, P, n_levels)
+    return LookupTables([db.name for db in dbs], dbs[0].viewpoints, P, n_levels, shared_features(dbs))

@@ -283,6 +283,10 @@ class LookupTables:
         ``P[i][j]``, shape (V, N_j): true model ``i`` against model ``j``.
     n_levels : int
         ``S``, the stratified quantile levels of :attr:`W_quantiles`.
+    shared : sequence of ndarray (N_j,) bool, optional
+        The shared features of the databases the tables were built from
+        (:func:`~lab.identification.probabilities.shared_features`): what the lookup-table evaluator
+        leaves out of ``W`` where the scoring pools shared evidence. :func:`get_tables` fills it in.
 
     Attributes
     ----------
@@ -292,7 +296,7 @@ class LookupTables:
         ``E[W_ij]`` at each training pose: the sum of the row.
     """
 
-    def __init__(self, names, viewpoints, P, n_levels: int = 16):
+    def __init__(self, names, viewpoints, P, n_levels: int = 16, shared=None):
         self.names = tuple(names)
         L = len(self.names)
         if L == 0:
@@ -324,10 +328,48 @@ class LookupTables:
             Wm[:, j] = rows.sum(axis=1).reshape(L, V)
         self.W_quantiles = _freeze(Wq)
         self.W_mean = _freeze(Wm)
+        self.shared = None if shared is None else tuple(self._checked_masks(shared))
+
+    def _checked_masks(self, masks) -> list[np.ndarray]:
+        """One bool mask per model over its features, or ConfigError naming the one that is not."""
+        if len(masks) != self.n_models:
+            raise ConfigError(f"need one feature mask per model: {len(masks)} for {self.n_models} models")
+        out = []
+        for j, m in enumerate(masks):
+            m = np.asarray(m)
+            n = self.P[0][j].shape[1]
+            if m.dtype != bool or m.shape != (n,):
+                raise ConfigError(
+                    f"the feature mask of {self.names[j]} must be a bool array of shape ({n},), "
+                    f"got {m.dtype} {m.shape}"
+                )
+            out.append(_freeze(m))
+        return out
 
     @property
     def n_models(self) -> int:
         return len(self.names)
+
+    def without_features(self, masks: Sequence[np.ndarray]) -> LookupTables:
+        """The same tables with some features of each model never counted in ``W``.
+
+        Parameters
+        ----------
+        masks : sequence of ndarray, shape (N_j,), bool, length L
+            Per model ``M_j``: the features to leave out of ``W_ij`` for every true model ``i`` (the
+            shared features, :func:`~lab.identification.probabilities.shared_features`, when the model
+            probabilities pool shared evidence: they explain a frame equally for every model, so only
+            the other features' count tells the models apart).
+
+        Returns
+        -------
+        LookupTables
+            Their probabilities set to 0 in the masked columns; ``W_quantiles`` and ``W_mean`` follow.
+        """
+        L = self.n_models
+        keep = [~m for m in self._checked_masks(masks)]
+        P = [[np.where(keep[j], self.P[i][j], 0.0) for j in range(L)] for i in range(L)]
+        return LookupTables(self.names, self.viewpoints, P, len(self.levels), self.shared)
 
     def index(self, model: int | str) -> int:
         """Position of a model (index or name); :class:`~lab.errors.ConfigError` for an unknown one."""
@@ -346,7 +388,9 @@ class LookupTables:
         return (rng.random((size, len(p))) < p).sum(axis=1)
 
     @classmethod
-    def from_model_tables(cls, tables: Sequence[ModelTables], n_levels: int = 16) -> LookupTables:
+    def from_model_tables(
+        cls, tables: Sequence[ModelTables], n_levels: int = 16, shared=None
+    ) -> LookupTables:
         """Assemble from one :class:`ModelTables` per true model (all built against the same models)."""
         if not tables:
             raise ConfigError("no model tables given")
@@ -361,7 +405,7 @@ class LookupTables:
         if missing:
             raise ConfigError(f"no tables for true model(s) {', '.join(missing)}")
         P = [list(by_name[n].P) for n in names]
-        return cls(names, tables[0].viewpoints, P, n_levels)
+        return cls(names, tables[0].viewpoints, P, n_levels, shared)
 
 
 # --- building ----------------------------------------------------------------------------------------
@@ -637,8 +681,11 @@ def get_tables(
     n_levels: int = 16,
 ) -> LookupTables:
     """The tables of ``names`` (default: the box models) from the cache, building what is missing,
-    stale or corrupt (:func:`get_model_tables` for each true model)."""
+    stale or corrupt (:func:`get_model_tables` for each true model), with the databases' shared
+    features under ``scoring`` (:attr:`LookupTables.shared`)."""
+    from lab.identification.probabilities import shared_features
+
     names = tuple(names or box_model_names())
     dbs = _databases(names, dbs)
     out = [get_model_tables(n, dbs, folder, params, scoring, rebuild, progress) for n in names]
-    return LookupTables.from_model_tables(out, n_levels)
+    return LookupTables.from_model_tables(out, n_levels, shared_features(dbs, scoring))
