@@ -3,20 +3,28 @@
 Run: .venv/bin/python benchmarks/bench_vision.py [--repeats N]
 Prints the median ms per frame of each stage and the share of the frame spent in SIFT, side by side
 for FLANN and exact (brute-force) matching, in one run. Rendering is not included.
+
+OpenBLAS runs on one thread, as under the `lab` command (``lab.cli._one_blas_thread``), unless
+``OPENBLAS_NUM_THREADS`` is set: on a loaded 2-core machine its spinning worker threads made the
+frame 154 ms (FLANN) and 192 ms (exact) against 93 ms and 89 ms with one thread.
 """
 
-import argparse
-import statistics
-import time
+import os
 
-import cv2
-import numpy as np
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy is imported; see the docstring
 
-from lab.geometry import Pose2D
-from lab.robot import StereoCamera
-from lab.sim import SimWorld, load_box_models, viewpoint_G_WC
-from lab.vision.database import Matcher, get_database
-from lab.vision.stereo import StereoParams, _epipolar_matches, stereo_features
+import argparse  # noqa: E402
+import statistics  # noqa: E402
+import time  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+from lab.geometry import Pose2D  # noqa: E402
+from lab.robot import StereoCamera  # noqa: E402
+from lab.sim import SimWorld, load_box_models, viewpoint_G_WC  # noqa: E402
+from lab.vision.database import Matcher, get_database  # noqa: E402
+from lab.vision.stereo import StereoParams, _epipolar_matches, stereo_features  # noqa: E402
 
 
 def main():
@@ -30,6 +38,7 @@ def main():
         w.add_carrier(load_box_models()[1], Pose2D(0, 0, 0), box_yaw=0.4)
         for a in np.linspace(0, 2 * np.pi, 5, endpoint=False):
             pairs.append(w.render_stereo(viewpoint_G_WC((np.cos(a), np.sin(a), 0.7), (0, 0, 0.49)), cam))
+    print(f"OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}")
     params = StereoParams()
     det = cv2.SIFT_create(contrastThreshold=params.contrast_threshold)
     for method in ("flann", "brute"):
