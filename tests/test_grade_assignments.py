@@ -38,7 +38,7 @@ def released(tmp_path_factory):
 
 
 def _check_report(report, tmp_path):
-    assert report.execution_time_s < 60.0  # bounded by the assignment's budget_s (50 s)
+    # how long grading takes is measured in benchmarks/bench_grade.py, not asserted here
     path = report.write_json(tmp_path / f"{report.assignment.name}.json")
     if CONTRACT.exists():
         r = subprocess.run(

@@ -150,7 +150,6 @@ def test_each_misbehaviour_costs_its_own_test_and_says_what_happened(tmp_path):
     assert "returned shape (2, 2); expected shape (4,)" in out["wrong_shape"]
     assert "importing 'lab' is not allowed in a submission" in out["imports_lab"]
     assert "cannot read" in out["garbles_channel"] or "answer" in out["garbles_channel"]
-    assert report.execution_time_s < 60
 
 
 def test_the_scoring_process_never_runs_the_submission(tmp_path):
@@ -219,7 +218,9 @@ def test_a_module_that_hangs_on_import_fails_every_test_once(tmp_path):
     assert report.score == 0.0
     for r in report.tests:
         assert "importing toy.py did not finish within 3 s" in r.output
-    assert report.execution_time_s < 3 + 5  # one import timeout, not one per test
+    # one import timeout, not one per test: four would take at least 4 x 3 s (a bound of behaviour,
+    # not of speed: the time of one timeout plus any load stays far below it)
+    assert report.execution_time_s < 4 * 3
 
 
 def test_a_bug_in_a_graded_test_is_reported_as_a_grader_error(tmp_path):
@@ -255,8 +256,8 @@ def test_the_time_budget_bounds_a_submission_that_loops_everywhere(tmp_path):
     src = "def a(x):\n    while True: pass\n\nb = c = d = e = a\n"
     report = grade_submission(toy, _submit(tmp_path, src), jobs=1)
     assert report.score == 0.0
+    # the budget stopped it (running every test to its own limit would take 5 x 2 s)
     assert any("not run: grading stopped after its time budget of 5 s" in r.output for r in report.tests)
-    assert report.execution_time_s < 5 + 3
 
 
 @pytest.mark.parametrize(
