@@ -153,36 +153,3 @@ def test_the_optional_visibility_rule_keeps_the_features_seen_from_that_directio
     assert scorer.explain(f, S.estimate(G_WO, G_WC)).n_explained == len(f)  # what is seen stays explained
     with pytest.raises(ConfigError, match="visibility_deg"):
         ScoringConfig(visibility_deg=0.0)
-
-
-def test_the_agent_measures_how_the_box_turns_from_its_filters():
-    """The planner's object motion (ObjectMotion) comes from the filters' poses, not the simulator: a
-    box turned by a teleoperated carrier at 0.12 rad/s while the robot stands still."""
-    from lab.sim import SimWorld
-    from lab.sim.movers import make_mover
-
-    with SimWorld("arena") as world:
-        agent, carrier = _agent(world, settle_s=100.0)  # tracks, never plans: the robot stays put
-        carrier.mover = make_mover("teleop", carrier)
-        carrier.mover.set(box_rate=0.12)
-        for _ in range(18):
-            agent.step()
-        frame = agent.robot.capture_stereo()
-        centre = carrier.G_WO[:3, 3]
-        motion = agent._object_motion(frame, centre)
-    assert motion is not None
-    assert motion.yaw_rate == pytest.approx(0.12, abs=0.03)
-    assert np.linalg.norm(motion.velocity_W) < 0.03
-    here = math.atan2(frame.odom.y - centre[1], frame.odom.x - centre[0])
-
-    class Goal:  # a goal where the robot stands, and one a quarter of the ring away
-        radius_m = 1.2
-
-        def __init__(self, azimuth):
-            self.azimuth = azimuth
-
-    limits = agent.robot.base_limits
-    turns = math.pi / limits.max_turn_rate
-    assert motion.travel_time(Goal(here)) == pytest.approx(turns, abs=0.05)
-    quarter = turns + (math.pi / 2) * 1.2 / (0.8 * limits.max_speed)
-    assert motion.travel_time(Goal(here + math.pi / 2)) == pytest.approx(quarter, abs=0.05)

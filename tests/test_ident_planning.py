@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lab.errors import ConfigError
-from lab.geometry import Pose2D, Rz, se3, se3_inv, transform_points
+from lab.geometry import Pose2D, se3_inv, transform_points
 from lab.identification import (
     ActionConfig,
     LookupTableEvaluator,
@@ -22,7 +22,6 @@ from lab.identification import (
     MonteCarloConfig,
     MonteCarloEvaluator,
     NoObjectEstimate,
-    ObjectMotion,
     RingBlocked,
     ScoringConfig,
     calc_expected_entropy,
@@ -34,7 +33,6 @@ from lab.identification import (
     plan_next_best_view,
     reachable_on,
     uniform,
-    viewed_at_arrival,
     z_turns,
 )
 from lab.identification.lut import Eq15Constants
@@ -247,31 +245,6 @@ def test_lookup_tables_choose_what_the_monte_carlo_rates_highly(synth):
         g_mc = information_gain(lut_plan.H, mc.expected_entropy(lut_plan.actions, hyp))
         ratios.append(g_mc[lut_plan.best] / g_mc.max())
     assert min(ratios) >= 0.9, ratios
-
-
-def test_a_moving_object_is_rated_where_it_will_be_on_arrival(synth):
-    dbs, tables, lut, mc = synth
-    centre, yaw0 = S.box_pose(0.0)[:3, 3], 0.4
-    G_WO = se3(Rz(yaw0), centre)
-    actions = calc_possible_control_actions(centre, S.CAMERA)
-    motion = ObjectMotion([0.05, -0.02], 0.15, lambda a: 2.0 + 0.1 * a.index)
-    for a, b in zip(actions, viewed_at_arrival(actions, centre, motion), strict=True):
-        T = motion.travel_time(a)
-        G_WO_T = se3(Rz(yaw0 + 0.15 * T), centre + np.array([0.05 * T, -0.02 * T, 0.0]))
-        # the moved camera sees the unmoved object as the real camera will see the moved one
-        np.testing.assert_allclose(se3_inv(b.G_WC) @ G_WO, se3_inv(a.G_WC) @ G_WO_T, atol=1e-12)
-        assert (b.pose, b.azimuth, b.index) == (a.pose, a.azimuth, a.index)
-    # the unique face (towards yaw 0) turns at 0.15 rad/s; 6 s later it faces 52 deg: go there
-    turning = ObjectMotion([0.0, 0.0], 0.15, lambda a: 6.0)
-    hyp = S.hypotheses(uniform(4), 0.0)
-    still = plan_next_best_view(hyp, S.CAMERA, lut)
-    ahead = plan_next_best_view(hyp, S.CAMERA, lut, motion=turning)
-    at = {round(math.degrees(a.azimuth)): a.index for a in still.actions}
-    assert still.gain[at[100]] < 0.01 < 0.2 < ahead.gain[at[100]]  # sees it only after the turn
-    assert ahead.gain[at[310]] < 0.01 < 0.2 < still.gain[at[310]]  # sees it now, not after the turn
-    assert unique_face_visible(ahead.action, math.degrees(0.9))
-    with pytest.raises(ConfigError, match="finite"):
-        ObjectMotion([0.0, np.nan], 0.1, lambda a: 1.0)
 
 
 def test_symmetric_hypotheses_spread_the_gain_over_the_possible_sides(synth):

@@ -39,7 +39,6 @@ from lab.identification.hypotheses import (
 from lab.identification.lut import Eq15Constants, LookupTableEvaluator, eq15_log_likelihood
 from lab.identification.montecarlo import MonteCarloConfig, MonteCarloEvaluator, cross_correspondences
 from lab.identification.planner import (
-    ObjectMotion,
     Plan,
     PlannerKind,
     calc_expected_entropy,
@@ -47,7 +46,6 @@ from lab.identification.planner import (
     next_best_action,
     plan_next_best_view,
     ring_smoothed,
-    viewed_at_arrival,
 )
 from lab.identification.probabilities import (
     Belief,
@@ -102,7 +100,6 @@ __all__ = [
     "MonteCarloConfig",
     "MonteCarloEvaluator",
     "NoObjectEstimate",
-    "ObjectMotion",
     "Plan",
     "PlannerKind",
     "RingBlocked",
@@ -127,7 +124,6 @@ __all__ = [
     "next_best_action",
     "observe_frame",
     "plan_next_best_view",
-    "viewed_at_arrival",
     "pose_estimate_rv",
     "pool_shared_evidence",
     "pools_shared_evidence",

@@ -376,9 +376,8 @@ class IdentificationAgent:
         filters' poses in W at each step (each model's, weighted by its probability), and the time the
         drive to each goal will take. None when no filter has followed the object for that long.
 
-        Per model, the least-squares slopes of its yaw and position against time (a filter that skips
-        a frame stays put, so step-to-step rates would be biased low); yaw steps are wrapped to a
-        quarter turn, as a filter re-seated on a look-alike turn jumps by one.
+        Per model, the median of the step-to-step rates (robust to a re-initialisation); yaw steps are
+        wrapped to a quarter turn, as a filter re-seated on a look-alike turn jumps by one.
         """
         cfg = self.config
         recent = [s for s in self.steps if s.t >= frame.t - cfg.motion_window_s - 1e-9]
@@ -392,10 +391,11 @@ class IdentificationAgent:
             if np.count_nonzero(ok) < 3:
                 continue
             ti, Gi = t[ok], G[ok, i]
+            dt = np.diff(ti)
             yaw = np.arctan2(Gi[:, 1, 0], Gi[:, 0, 0])
             dyaw = (np.diff(yaw) + np.pi / 4) % (np.pi / 2) - np.pi / 4
-            track = np.column_stack([np.concatenate([[0.0], np.cumsum(dyaw)]), Gi[:, :2, 3]])
-            rates.append(np.polyfit(ti - ti[0], track, 1)[0])  # least-squares slopes: yaw, x, y
+            dxy = np.diff(Gi[:, :2, 3], axis=0)
+            rates.append([np.median(dyaw / dt), *np.median(dxy / dt[:, None], axis=0)])
             weights.append(self.P[i])
         if not rates:
             return None
