@@ -54,7 +54,7 @@ from lab.identification.hypotheses import (
     turn_between,
     z_turns,
 )
-from lab.identification.planner import ObjectMotion, plan_next_best_view
+from lab.identification.planner import plan_next_best_view
 from lab.identification.probabilities import ModelScorer, ScoringConfig, shared_masks, uniform
 from lab.identification.step import observe_frame
 from lab.navigation.follower import PathFollower
@@ -116,12 +116,6 @@ class AgentConfig:
     retry_s : float [s]
         When no goal of the ring is reachable (:class:`RingBlocked`), the robot holds position and keeps
         observing, and plans again after this long.
-    predict_motion : bool
-        Rate each candidate goal at the pose the object will have when the robot gets there
-        (:class:`~lab.identification.planner.ObjectMotion`): the object's yaw rate and velocity over
-        the last ``motion_window_s``, measured from the filters, times the drive's duration. Off: the
-        object is taken to stay put during the drive, as in the paper.
-    motion_window_s : float [s]
     """
 
     dt: float = 0.2
@@ -134,8 +128,6 @@ class AgentConfig:
     arrive_theta_deg: float = 15.0
     settle_s: float = 1.0
     final_observe_s: float = 4.0
-    predict_motion: bool = True
-    motion_window_s: float = 2.0
     symmetry_turns: int = 4
     keyframe_s: float = 1.0
     keyframes: int = 8
@@ -371,50 +363,6 @@ class IdentificationAgent:
             self.P, self.bank.estimates, G_WC, self.turns, self.turn_evidence.total()
         )
 
-    def _object_motion(self, frame, centre_W) -> ObjectMotion | None:
-        """The object's yaw rate and planar velocity over the last ``motion_window_s``, from the
-        filters' poses in W at each step (each model's, weighted by its probability), and the time the
-        drive to each goal will take. None when no filter has followed the object for that long.
-
-        Per model, the median of the step-to-step rates (robust to a re-initialisation); yaw steps are
-        wrapped to a quarter turn, as a filter re-seated on a look-alike turn jumps by one.
-        """
-        cfg = self.config
-        recent = [s for s in self.steps if s.t >= frame.t - cfg.motion_window_s - 1e-9]
-        if len(recent) < 3 or recent[-1].t - recent[0].t < 0.5 * cfg.motion_window_s:
-            return None
-        t = np.array([s.t for s in recent])
-        G = np.stack([s.estimates_W for s in recent])  # (n, L, 4, 4), NaN where a model had no estimate
-        rates, weights = [], []
-        for i in range(G.shape[1]):
-            ok = np.isfinite(G[:, i, 0, 0])
-            if np.count_nonzero(ok) < 3:
-                continue
-            ti, Gi = t[ok], G[ok, i]
-            dt = np.diff(ti)
-            yaw = np.arctan2(Gi[:, 1, 0], Gi[:, 0, 0])
-            dyaw = (np.diff(yaw) + np.pi / 4) % (np.pi / 2) - np.pi / 4
-            dxy = np.diff(Gi[:, :2, 3], axis=0)
-            rates.append([np.median(dyaw / dt), *np.median(dxy / dt[:, None], axis=0)])
-            weights.append(self.P[i])
-        if not rates:
-            return None
-        w = np.array(weights) / np.sum(weights)
-        yaw_rate, vx, vy = w @ np.array(rates)
-        limits = self.robot.base_limits
-        pose = frame.odom
-        c = np.asarray(centre_W, dtype=float)
-
-        def travel_time(action) -> float:
-            """Turn towards the ring's tangent and back (two quarter turns), then the arc along the ring
-            (at 80 % of the top speed: the follower slows on the curve) and the way onto the ring."""
-            r_now = math.hypot(pose.x - c[0], pose.y - c[1])
-            here = math.atan2(pose.y - c[1], pose.x - c[0])
-            arc = abs(wrap_angle(action.azimuth - here)) * action.radius_m + abs(r_now - action.radius_m)
-            return math.pi / limits.max_turn_rate + arc / (0.8 * limits.max_speed)
-
-        return ObjectMotion(np.array([vx, vy]), float(yaw_rate), travel_time)
-
     def _arc_path(self, centre_xy, goal: Pose2D, pose: Pose2D) -> np.ndarray:
         """Waypoints along the ring from the robot's angle to the goal's, the short way round."""
         cx, cy = centre_xy
@@ -444,9 +392,8 @@ class IdentificationAgent:
             reachable = reachable_on(self.floor_plan, frame.odom)
         try:
             if self.planner in (PlannerChoice.LUT, PlannerChoice.MC):
-                motion = self._object_motion(frame, centre) if self.config.predict_motion else None
                 plan = plan_next_best_view(
-                    hyp, self.robot.camera, self.evaluator, self.action_config, reachable, motion
+                    hyp, self.robot.camera, self.evaluator, self.action_config, reachable
                 )
                 actions, gains, best = plan.actions, np.asarray(plan.gain), plan.best
             else:

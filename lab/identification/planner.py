@@ -12,28 +12,20 @@ and :func:`calc_expected_entropy` (with an evaluator: lookup tables or Monte Car
         - E_{\mathbf{D}_{k+1}}[H(M \mid \mathbf{D}_{1:k+1}, \mathbf{u}_{1:k})]     \qquad \text{Eq. (4)}
 
     \mathbf{u}^* = \operatorname{argmax}_{\mathbf{u}} I_{\mathbf{u}}               \qquad \text{Eq. (6)}
-
-**A moving object.** The measurement ``D_{k+1}`` is taken when the robot reaches the goal, ``T_u``
-seconds from now, and the object may move meanwhile (Eq. (2)'s ``G_{O(k-1)O(k)}``). With an
-:class:`ObjectMotion` (the object's recent planar velocity and yaw rate, measured by the agent from
-its filters), each candidate is evaluated at the relative pose it will have on arrival: the object
-moved by ``T_u`` of that motion, which for the relative pose is the same as moving the camera by the
-inverse (:func:`viewed_at_arrival`). Without it the object is taken to stay where it is, as in the
-paper.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from enum import Enum
 from typing import Protocol
 
 import numpy as np
 
 from lab.errors import ConfigError
-from lab.geometry import Pose2D, Rz, se3, se3_inv
+from lab.geometry import Pose2D
 from lab.identification.actions import ActionConfig, CandidateAction, calc_possible_control_actions
 from lab.identification.hypotheses import ModelHypotheses
 from lab.identification.probabilities import entropy
@@ -41,7 +33,6 @@ from lab.robot import StereoCamera
 
 __all__ = [
     "ExpectedEntropyEvaluator",
-    "ObjectMotion",
     "Plan",
     "PlannerKind",
     "calc_expected_entropy",
@@ -49,7 +40,6 @@ __all__ = [
     "next_best_action",
     "plan_next_best_view",
     "ring_smoothed",
-    "viewed_at_arrival",
 ]
 
 
@@ -173,61 +163,14 @@ class Plan:
         return self.actions[self.best]
 
 
-@dataclass(frozen=True)
-class ObjectMotion:
-    """How the object moves while the robot drives to a goal, and how long that drive takes.
-
-    Attributes
-    ----------
-    velocity_W : ndarray, shape (2,) [m/s]
-        Planar velocity of the object's centre in W.
-    yaw_rate : float [rad/s]
-        Its turn rate about the vertical through its centre.
-    travel_time : callable
-        ``travel_time(action) -> T_u`` [s], the time until the robot measures from that goal.
-    """
-
-    velocity_W: np.ndarray
-    yaw_rate: float
-    travel_time: Callable[[CandidateAction], float]
-
-    def __post_init__(self):
-        v = np.asarray(self.velocity_W, dtype=float)
-        if v.shape != (2,) or not np.all(np.isfinite(v)) or not np.isfinite(self.yaw_rate):
-            raise ConfigError(
-                f"ObjectMotion needs a finite (2,) velocity_W and yaw_rate, got {v} and {self.yaw_rate}"
-            )
-        object.__setattr__(self, "velocity_W", v)
-
-    def G(self, centre_W, T: float) -> np.ndarray:
-        """The object's motion over ``T`` seconds, (4, 4) in W: a turn by ``yaw_rate T`` about the
-        vertical through ``centre_W``, then a shift by ``velocity_W T``."""
-        c = np.asarray(centre_W, dtype=float)
-        shift = c + np.array([*(self.velocity_W * T), 0.0])
-        return se3(np.eye(3), shift) @ se3(Rz(self.yaw_rate * T), np.zeros(3)) @ se3(np.eye(3), -c)
-
-
-def viewed_at_arrival(
-    actions: Sequence[CandidateAction], centre_W, motion: ObjectMotion
-) -> list[CandidateAction]:
-    """The candidates with the camera pose that sees the object, unmoved, as the real camera will see
-    the moved one on arrival: ``G_WC' = M(T_u)^-1 G_WC``, so that ``G_WC'^-1 G_WO = G_WC^-1 M G_WO``
-    (what the evaluators use); everything else of each candidate is unchanged."""
-    return [replace(a, G_WC=se3_inv(motion.G(centre_W, motion.travel_time(a))) @ a.G_WC) for a in actions]
-
-
 def plan_next_best_view(
     hypotheses: ModelHypotheses,
     camera: StereoCamera,
     evaluator: ExpectedEntropyEvaluator,
     action_config: ActionConfig | None = None,
     is_reachable: Callable[[Pose2D], bool] | None = None,
-    motion: ObjectMotion | None = None,
 ) -> Plan:
     """Candidate goals around the object, their expected entropies and the best one (Eqs. (4)-(6), (10)).
-
-    With ``motion``, each candidate is rated at the relative pose the object will have when the robot
-    gets there (module docstring); the plan's actions are the goals themselves.
 
     Raises
     ------
@@ -235,10 +178,8 @@ def plan_next_best_view(
         No candidate goal is reachable (from :func:`calc_possible_control_actions`).
     """
     t0 = time.perf_counter()
-    centre = hypotheses.object_centre_W()
-    actions = calc_possible_control_actions(centre, camera, action_config, is_reachable)
-    rated = actions if motion is None else viewed_at_arrival(actions, centre, motion)
-    EH = calc_expected_entropy(evaluator, rated, hypotheses)
+    actions = calc_possible_control_actions(hypotheses.object_centre_W(), camera, action_config, is_reachable)
+    EH = calc_expected_entropy(evaluator, actions, hypotheses)
     H = entropy(hypotheses.P)
     gain = information_gain(H, EH)
     best = next_best_action(gain, tie_break=ring_smoothed(gain, actions))
