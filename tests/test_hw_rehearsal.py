@@ -132,6 +132,27 @@ def test_head_and_odometry_are_read_at_the_frames_time():
     assert (q.x, q.y, q.theta) == pytest.approx((1, 2, 0.1))
 
 
+def _small_lookup_tables(camera):
+    """The lookup-table evaluator on tables of four training poses (one render each): the planner's
+    machinery as it runs, without the minutes the full tables take to build (`lab tables`); this test
+    is about the hardware path, not about how good the plan is."""
+    from lab.identification import (
+        LookupTableEvaluator,
+        LookupTables,
+        TableParams,
+        build_model_tables,
+        shared_features,
+    )
+    from lab.vision import get_database
+
+    names = ("M0", "M1", "M2", "M3")
+    dbs = [get_database(n, progress=False) for n in names]
+    rows = (0, 9, 18, 27)  # the unique face and the three shared ones
+    built = [build_model_tables(n, dbs, TableParams(repeats=1), viewpoint_indices=rows) for n in names]
+    shared = shared_features(dbs)
+    return LookupTableEvaluator(LookupTables.from_model_tables(built, shared=shared), camera, shared=shared)
+
+
 @pytest.mark.slow
 def test_identification_agent_unchanged_on_the_emulators_with_rendered_frames():
     """Two planning actions of the unchanged IdentificationAgent through HardwareRobot (emulators, wall
@@ -145,7 +166,11 @@ def test_identification_agent_unchanged_on_the_emulators_with_rendered_frames():
     with rehearsal(REHEARSAL_TOML, true_model=true_model, mover="static", seed=0) as r:
         robot, create, ptu = r.robot, r.emulators.create, r.emulators.ptu
         agent = IdentificationAgent(
-            robot, planner="lut", seed=0, config=AgentConfig(max_actions=2, max_time_s=120.0)
+            robot,
+            planner="lut",
+            seed=0,
+            config=AgentConfig(max_actions=2, max_time_s=120.0),
+            evaluator=_small_lookup_tables(robot.camera),
         )
         after_second = []
 
