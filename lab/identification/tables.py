@@ -56,7 +56,7 @@ import numpy as np
 
 from lab.errors import AssetError, ConfigError
 from lab.geometry import G_to_pose6, se3_inv
-from lab.identification.probabilities import ModelScorer, ScoringConfig, pose_estimate_rv
+from lab.identification.probabilities import ModelScorer, ScoringConfig, pose_estimate_rv, shared_features
 from lab.paths import cache_dir
 from lab.robot import StereoCamera
 from lab.vision import FeatureDatabase
@@ -683,8 +683,6 @@ def get_tables(
     """The tables of ``names`` (default: the box models) from the cache, building what is missing,
     stale or corrupt (:func:`get_model_tables` for each true model), with the databases' shared
     features under ``scoring`` (:attr:`LookupTables.shared`)."""
-    from lab.identification.probabilities import shared_features
-
     names = tuple(names or box_model_names())
     dbs = _databases(names, dbs)
     out = [get_model_tables(n, dbs, folder, params, scoring, rebuild, progress) for n in names]
