@@ -165,7 +165,10 @@ class MonteCarloEvaluator:
             if len(shared) != len(self.dbs) or any(
                 np.shape(m) != (len(db),) for m, db in zip(shared, self.dbs, strict=False)
             ):
-                raise ConfigError("shared needs one (N_j,) bool mask per database")
+                raise ConfigError(
+                    f"shared needs one bool mask per database, of shapes {[(len(db),) for db in self.dbs]}; "
+                    f"got {[np.shape(m) for m in shared]}"
+                )
             #: per database, its shared features; index -1 (no candidate) reads the appended False
             self.shared = [np.append(np.asarray(m, bool), False) for m in shared]
 
