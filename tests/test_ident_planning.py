@@ -24,8 +24,10 @@ from lab.identification import (
     NoObjectEstimate,
     RingBlocked,
     ScoringConfig,
+    ahead_on_ring,
     calc_expected_entropy,
     calc_possible_control_actions,
+    continue_direction,
     entropy,
     eq15_log_likelihood,
     information_gain,
@@ -341,6 +343,37 @@ def test_next_best_action_and_information_gain():
         next_best_action([])
     with pytest.raises(ConfigError):
         next_best_action([0.1, np.nan])
+
+
+def test_keeping_the_direction_of_travel_round_the_ring():
+    actions = calc_possible_control_actions(np.zeros(3), S.CAMERA, ActionConfig(radius_m=1.0, step_deg=10.0))
+    idx = np.array([a.index for a in actions])
+    assert len(actions) == 36
+    # from azimuth 0: counter-clockwise ahead are 10..180 deg, clockwise 180..350 deg (across counts twice)
+    np.testing.assert_array_equal(idx[ahead_on_ring(actions, 0.0, 1)], np.arange(1, 19))
+    np.testing.assert_array_equal(np.sort(idx[ahead_on_ring(actions, 0.0, -1)]), np.arange(18, 36))
+    np.testing.assert_array_equal(
+        np.sort(idx[ahead_on_ring(actions, math.radians(350.0), 1)]), [0, *range(1, 18)]
+    )
+    # the best gain is behind (clockwise, at 300 deg); ahead (counter-clockwise) the best is 75 % of it
+    gains = np.zeros(36)
+    gains[30], gains[6] = 0.4, 0.3
+    assert next_best_action(gains) == 30
+    assert continue_direction(gains, actions, 0.0, 1, ratio=0.7) == 6
+    assert continue_direction(gains, actions, 0.0, 1, ratio=0.8) is None  # not good enough: turn back
+    assert continue_direction(gains, actions, 0.0, -1, ratio=0.7) == 30  # the best is ahead anyway
+    assert continue_direction(gains, actions, 0.0, 1, ratio=1.0) is None
+    assert continue_direction(np.zeros(36), actions, 0.0, -1, ratio=0.7) in set(range(18, 36))
+    # within 5 % ahead, the ring-smoothed tie-break picks the middle of the plateau
+    gains[5] = gains[7] = 0.295
+    tie = np.convolve(np.r_[gains[-1], gains, gains[0]], [0.25, 0.5, 0.25], "valid")
+    assert continue_direction(gains, actions, 0.0, 1, ratio=0.7, tie_break=tie) == 6
+    with pytest.raises(ConfigError, match="direction must be"):
+        ahead_on_ring(actions, 0.0, 0)
+    with pytest.raises(ConfigError, match="ratio must be within"):
+        continue_direction(gains, actions, 0.0, 1, ratio=0.0)
+    with pytest.raises(ConfigError, match="one per action"):
+        continue_direction(gains[:5], actions, 0.0, 1, ratio=0.7)
 
 
 def test_unknown_models_and_mismatched_inputs_are_refused(synth):

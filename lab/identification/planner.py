@@ -35,7 +35,9 @@ __all__ = [
     "ExpectedEntropyEvaluator",
     "Plan",
     "PlannerKind",
+    "ahead_on_ring",
     "calc_expected_entropy",
+    "continue_direction",
     "information_gain",
     "next_best_action",
     "plan_next_best_view",
@@ -119,6 +121,57 @@ def ring_smoothed(gains, actions: Sequence[CandidateAction]) -> np.ndarray:
         side = [by_key.get((round(a.radius_m, 6), (a.index + d) % n)) for d in (-1, 1)]
         out[k] = 0.5 * g[k] + sum(0.25 * g[s] for s in side if s is not None)
     return out
+
+
+def ahead_on_ring(actions: Sequence[CandidateAction], azimuth: float, direction: int) -> np.ndarray:
+    """Which goals lie ahead of ``azimuth`` [rad] when travelling the ring in ``direction`` (+1
+    counter-clockwise, -1 clockwise): at least one ring step along it and at most half a turn and half a
+    step (so the goal straight across counts for both directions)."""
+    if direction not in (1, -1):
+        raise ConfigError(f"direction must be +1 (counter-clockwise) or -1 (clockwise), got {direction!r}")
+    step = np.radians(_ring_step_deg(actions))
+    az = np.array([a.azimuth for a in actions])
+    d = np.mod(direction * (az - azimuth), 2 * np.pi)
+    return (d >= 0.5 * step) & (d <= np.pi + 0.5 * step)
+
+
+def continue_direction(
+    gains, actions: Sequence[CandidateAction], azimuth: float, direction: int, ratio: float, tie_break=None
+) -> int | None:
+    """The best goal ahead in the direction of travel when its gain is at least ``ratio`` times the best
+    gain anywhere; None when no goal ahead is that good (then Eq. (6)'s argmax stands).
+
+    Against an operator who keeps turning the unique face away (the paper's experiment), only travel
+    that keeps one direction round the ring gains on the face: it closes the angle at the robot's
+    angular speed minus the box's turn rate, and a reversal gives the gained angle back. The gain of
+    Eq. (4) is computed for the object as it is now and cannot see that; ``ratio`` says how much of it
+    to give up for keeping on (1: none).
+
+    Parameters
+    ----------
+    gains : array_like, shape (A,) [nats]
+    actions : sequence of CandidateAction
+    azimuth : float [rad]
+        The robot's direction from the object's centre.
+    direction : int
+        +1 (counter-clockwise) or -1 (clockwise): the last drive's.
+    ratio : float
+        In (0, 1].
+    tie_break : array_like, shape (A,), optional
+        As in :func:`next_best_action`, among the goals ahead.
+    """
+    g = np.asarray(gains, dtype=float)
+    if not 0 < ratio <= 1:
+        raise ConfigError(f"ratio must be within (0, 1], got {ratio}")
+    if g.shape != (len(actions),):
+        raise ConfigError(f"gains has shape {g.shape}; expected ({len(actions)},), one per action")
+    ahead = np.flatnonzero(ahead_on_ring(actions, azimuth, direction))
+    if len(ahead) == 0:
+        return None
+    tb = None if tie_break is None else np.asarray(tie_break, dtype=float)[ahead]
+    k = int(ahead[next_best_action(g[ahead], tie_break=tb)])
+    top = float(g.max())
+    return k if top <= 0 or g[k] >= ratio * top else None
 
 
 def _ring_step_deg(actions: Sequence[CandidateAction]) -> float:
