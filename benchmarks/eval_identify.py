@@ -72,6 +72,8 @@ def run_episode(out: Path, planner: str, model: int, seed: int, args) -> dict | 
         "--json",
         str(path),
     ]
+    if args.keep_direction is not None:
+        cmd += ["--keep-direction", str(args.keep_direction)]
     t0 = time.perf_counter()
     r = subprocess.run(cmd, capture_output=True, text=True)
     load = os.getloadavg()[0]
@@ -228,6 +230,11 @@ def main(argv=None) -> int:
     ap.add_argument("--mover", default="evasive")
     ap.add_argument("--max-actions", type=int, default=8)
     ap.add_argument("--max-time", type=float, default=240.0)
+    ap.add_argument(
+        "--keep-direction",
+        type=float,
+        help="the agent's keep_direction ratio (default: the agent's, 0.7; 1 = Eq. (6)'s argmax)",
+    )
     ap.add_argument("--jobs", type=int, default=1, help="episodes run side by side (default 1)")
     ap.add_argument("--report-only", action="store_true", help="summarise the JSONs already in --out")
     args = ap.parse_args(argv)

@@ -154,6 +154,13 @@ def build_parser() -> argparse.ArgumentParser:
     _episode_arguments(idf, movers=("static", "scripted", "random", "evasive", "teleop"), max_time=240.0)
     idf.add_argument("--json", type=Path, help="write the result JSON here")
     idf.add_argument("--out", type=Path, help="write the figures (Fig. 5, 6, 7) and identify.json here")
+    idf.add_argument(
+        "--keep-direction",
+        type=float,
+        metavar="RATIO",
+        help="keep driving the same way round the object when the best goal that way has at least RATIO "
+        "of the best information gain (default 0.7; 1 = always the best gain, Eq. (6))",
+    )
 
     se = sub.add_parser(
         "search",
@@ -376,6 +383,7 @@ def _cmd_identify(args) -> int:
             json_path=args.json,
             progress=print,
             record=args.record,
+            keep_direction=args.keep_direction,
         )
         keys = ("true_model", "identified_model", "success", "actions", "sim_time_s", "wall_time_s")
         summary = {k: res[k] for k in (*keys, "final_posterior", "pose_error", "watchdog_stops")}
@@ -393,6 +401,7 @@ def _cmd_identify(args) -> int:
         args.json,
         args.max_time,
         record=args.record,
+        keep_direction=args.keep_direction,
     )
     summary = {
         k: res[k]

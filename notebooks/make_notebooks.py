@@ -666,7 +666,14 @@ most 0.15 rad/s (the mover may look at the true poses; the agent never does). In
 starts with its unique face half turned towards the robot (45 degrees off) and the planner is Monte Carlo
 (it needs no tables): a short episode, one decision, before the operator has turned the face away; in
 full mode the face starts pointing away, as in the paper, and the planner uses the lookup tables (`lab
-tables` builds them on first use).""",
+tables` builds them on first use).
+
+One departure from Eq. (6): once the robot has driven one way round the box, it keeps going that way
+when the best goal ahead has at least 70 % of the best gain (`AgentConfig(keep_direction=0.7)`). The
+gain is computed for the box as it stands, and the operator turns the face away while the robot drives:
+only steady travel one way gains on the face (the robot circles at 15-17 deg/s, the box turns at 8.6),
+and a reversal gives the gained angle back. Try `keep_direction=1.0` (the plain argmax) in full mode
+and compare the paths in Fig. 6 and the number of actions.""",
     ),
     (
         "code",

@@ -153,3 +153,20 @@ def test_the_optional_visibility_rule_keeps_the_features_seen_from_that_directio
     assert scorer.explain(f, S.estimate(G_WO, G_WC)).n_explained == len(f)  # what is seen stays explained
     with pytest.raises(ConfigError, match="visibility_deg"):
         ScoringConfig(visibility_deg=0.0)
+
+
+def test_a_goal_across_the_ring_is_reached_the_way_the_robot_was_going():
+    from lab.identification.agent import AgentConfig, IdentificationAgent
+
+    arc = IdentificationAgent._arc_path  # uses no agent state
+    here = Pose2D(-1.0, 0.0, 0.0)  # azimuth 180 deg from the centre
+    across = Pose2D(1.0, 0.02, math.pi)  # azimuth ~1 deg: the short way is clockwise, through y > 0
+    assert np.all(arc(None, (0.0, 0.0), across, here)[1:-1, 1] > 0)
+    assert np.all(arc(None, (0.0, 0.0), across, here, direction=-1)[1:-1, 1] > 0)
+    ccw = arc(None, (0.0, 0.0), across, here, direction=1)  # the long way, through y < 0
+    assert np.all(ccw[1:-1, 1] < 0)
+    np.testing.assert_allclose(np.hypot(ccw[:, 0], ccw[:, 1]), 1.0, atol=1e-3)  # along the ring
+    near = Pose2D(math.cos(math.radians(120)), math.sin(math.radians(120)), 0.0)
+    assert np.all(arc(None, (0.0, 0.0), near, here, direction=1)[1:-1, 1] > 0)  # not across: short way
+    with pytest.raises(ConfigError, match="keep_direction must be within"):
+        AgentConfig(keep_direction=1.5)

@@ -10,6 +10,7 @@ fields of the ``lab identify`` contract. On a real robot there is no truth: ``tr
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -43,6 +44,7 @@ def identify_on_robot(
     json_path: Path | None = None,
     progress=None,
     record: Path | None = None,
+    keep_direction: float | None = None,
 ) -> dict:
     """Run the unchanged :class:`~lab.identification.agent.IdentificationAgent` on the robot a config
     describes and return the ``lab identify`` JSON (also written to ``json_path``).
@@ -50,12 +52,17 @@ def identify_on_robot(
     ``true_model`` and ``mover`` set the rendered scene of a rehearsal and are ignored otherwise.
     ``progress`` (callable(str)), if given, gets one line per decision. ``record``, if given, is where
     the run's animation goes: the live view (:mod:`lab.viz.live`) drawn at every step.
+    ``keep_direction``, if given, replaces :attr:`AgentConfig.keep_direction
+    <lab.identification.agent.AgentConfig>`.
     """
     from lab.hardware.rehearsal import rehearsal
     from lab.hardware.robot import HardwareRobot
     from lab.identification.agent import AgentConfig, IdentificationAgent
 
     cfg = config if isinstance(config, HardwareConfig) else load_config(config)
+    agent_config = AgentConfig(max_actions=max_actions, max_time_s=max_time_s)
+    if keep_direction is not None:
+        agent_config = dataclasses.replace(agent_config, keep_direction=keep_direction)
     sim = cfg.camera.source == "sim"
     t_wall = time.perf_counter()
     with contextlib.ExitStack() as stack:
@@ -69,7 +76,7 @@ def identify_on_robot(
             robot,
             planner=planner,
             seed=seed,
-            config=AgentConfig(max_actions=max_actions, max_time_s=max_time_s),
+            config=agent_config,
         )
         if progress is not None:
             seen = [0]
@@ -125,15 +132,8 @@ def identify_on_robot(
         "robot": str(cfg.path) if cfg.path is not None else cfg.robot.name,
         "rehearsal": sim,
         "watchdog_stops": watchdog_stops,
-        "decisions": [
-            {
-                "t": d.t - t0,
-                "chosen": d.chosen,
-                "gain": None if not np.isfinite(d.gains[d.chosen]) else float(d.gains[d.chosen]),
-                "elapsed_s": d.elapsed_s,
-            }
-            for d in agent.decisions
-        ],
+        "keep_direction": agent.config.keep_direction,
+        "decisions": [d.to_json(t0) for d in agent.decisions],
     }
     if json_path is not None:
         write_json_atomic(Path(json_path), result)

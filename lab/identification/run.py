@@ -8,6 +8,7 @@ Ground truth is used only to score the run (pose error) and by the mover, never 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -64,6 +65,7 @@ def run_identify(
     figures: bool = True,
     record: Path | None = None,
     attach=None,
+    keep_direction: float | None = None,
 ) -> dict:
     """Run one episode in the simulator and return the ``lab identify`` JSON (also written to ``json_path``).
 
@@ -79,6 +81,9 @@ def run_identify(
         lut, mc, random or circle.
     record : Path, optional
         Write an animation of the run there: the live view (:mod:`lab.viz.live`) at every step.
+    keep_direction : float, optional
+        :attr:`AgentConfig.keep_direction <lab.identification.agent.AgentConfig>` (default 0.7; 1.0 is
+        the plain argmax of Eq. (6)).
     attach : callable, optional
         ``attach(agent, carrier)`` once the agent is built, before it runs: a notebook's live view
         and teleoperation panel, e.g. ``display(LiveView.for_identification(agent).widget)`` and
@@ -89,6 +94,9 @@ def run_identify(
     from lab.sim.movers import make_mover
 
     box_model(true_model)  # a clear error before anything starts
+    config = AgentConfig(max_actions=max_actions, max_time_s=max_time_s)
+    if keep_direction is not None:
+        config = dataclasses.replace(config, keep_direction=keep_direction)
     models = load_box_models()
     rng = np.random.default_rng(seed)
     t_wall = time.perf_counter()
@@ -105,7 +113,7 @@ def run_identify(
             tuple(m.name for m in models),
             planner=planner,
             seed=seed,
-            config=AgentConfig(max_actions=max_actions, max_time_s=max_time_s),
+            config=config,
             floor_plan=None
             if world.scene.room is None
             else floor_plan(world.scene.room.size, robot.base_limits.radius),
@@ -165,15 +173,8 @@ def run_identify(
         "seed": seed,
         "mover": mover,
         "collisions": collisions,
-        "decisions": [
-            {
-                "t": d.t,
-                "chosen": d.chosen,
-                "gain": None if not np.isfinite(d.gains[d.chosen]) else float(d.gains[d.chosen]),
-                "elapsed_s": d.elapsed_s,
-            }
-            for d in agent.decisions
-        ],
+        "keep_direction": config.keep_direction,
+        "decisions": [d.to_json() for d in agent.decisions],
         "real_time_factor": sim_time / wall if wall > 0 else None,
         "cpu_time_s": cpu,
         "real_time_factor_cpu": sim_time / cpu if cpu > 0 else None,  # on one free core
