@@ -416,7 +416,8 @@ class IdentificationAgent:
         return pts
 
     def _decide(self, frame) -> bool:
-        """Choose the next goal (Eq. (6)); False when no decision is possible (no estimate, ring blocked)."""
+        """Choose the next goal (Eq. (6), or the best goal ahead when it is nearly as good: see
+        ``keep_direction``); False when no decision is possible (no estimate, ring blocked)."""
         try:
             hyp = self._hypotheses(frame)
         except NoObjectEstimate:
