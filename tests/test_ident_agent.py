@@ -1,9 +1,12 @@
-"""The identification loop's handling of the box's look-alike turns, a blocked ring and a lost track.
+"""The identification loop's handling of the box's look-alike turns, a blocked ring, a lost track and
+its direction of travel round the ring.
 
 Synthetic scenes (no rendering) check the turn bookkeeping and the common scoring pose; two short
 simulator episodes (the circling baseline, so no lookup tables) check the defined fallbacks: a ring
 whose goals are all unreachable makes the robot hold and retry, and a box that vanishes from view makes
-the head scan and the base halt until the box is back, then the loop goes on.
+the head scan and the base halt until the box is back, then the loop goes on. Two more, with gains
+scripted by the test, check that the planner keeps its direction of travel when the goal ahead is nearly
+as good as the best (``keep_direction``) and turns back otherwise.
 """
 
 import math
@@ -19,6 +22,7 @@ from lab.identification import (
     ScoringConfig,
     TurnEvidence,
     calc_current_entropy,
+    entropy,
     turn_between,
     uniform,
     z_turns,
@@ -83,8 +87,8 @@ def test_the_common_pose_can_be_turned_off():
 # --- the loop in the simulator ------------------------------------------------------------------------
 
 
-def _agent(world, carrier_model=1, floor_plan=None, **config):
-    """An agent (circling baseline: no lookup tables) 1.2 m from a box showing a shared face."""
+def _agent(world, carrier_model=1, floor_plan=None, planner="circle", evaluator=None, **config):
+    """An agent (circling baseline by default: no lookup tables) 1.2 m from a box showing a shared face."""
     from lab.identification.agent import AgentConfig, IdentificationAgent
     from lab.sim import SimRobot, load_box_models
 
@@ -94,7 +98,8 @@ def _agent(world, carrier_model=1, floor_plan=None, **config):
     agent = IdentificationAgent(
         robot,
         tuple(m.name for m in models),
-        planner="circle",
+        planner=planner,
+        evaluator=evaluator,
         config=AgentConfig(**config),
         floor_plan=floor_plan,
     )
@@ -153,6 +158,53 @@ def test_the_optional_visibility_rule_keeps_the_features_seen_from_that_directio
     assert scorer.explain(f, S.estimate(G_WO, G_WC)).n_explained == len(f)  # what is seen stays explained
     with pytest.raises(ConfigError, match="visibility_deg"):
         ScoringConfig(visibility_deg=0.0)
+
+
+class _ScriptedGains:
+    """An expected-entropy evaluator whose gains the test sets: one profile over the goals' azimuths
+    [deg] per decision."""
+
+    name = "lut"
+
+    def __init__(self, *profiles):
+        self.profiles = list(profiles)
+
+    def expected_entropy(self, actions, hypotheses):
+        gain = self.profiles.pop(0)(np.degrees([a.azimuth for a in actions]))
+        return entropy(hypotheses.P) - gain
+
+
+def _bump(centre_deg, height):
+    return lambda az: height * np.clip(1 - np.abs((az - centre_deg + 180) % 360 - 180) / 30, 0, None)
+
+
+@pytest.mark.parametrize("keep", [0.7, 1.0])
+def test_the_planner_keeps_its_direction_round_the_ring_when_the_goal_ahead_is_nearly_as_good(keep):
+    from lab.sim import SimWorld
+
+    # the robot starts at azimuth 180 deg; the first decision sends it clockwise to 120 deg; at the
+    # second the best goal is back at 180 deg (0.5 nats), and 60 deg ahead has 0.4 (80 % of it)
+    scripted = _ScriptedGains(_bump(120, 0.5), lambda az: _bump(180, 0.5)(az) + _bump(60, 0.4)(az))
+    with SimWorld("arena") as world:
+        agent, _ = _agent(world, planner="lut", evaluator=scripted, keep_direction=keep)
+        for _ in range(150):
+            agent.step()
+            if agent.n_actions == 2:
+                break
+    first, second = agent.decisions
+
+    def azimuth(d):  # of the chosen goal, from the ring's centre [deg]
+        x, y, _ = d.candidates[d.chosen]
+        return math.degrees(math.atan2(y - d.centre_W[1], x - d.centre_W[0]))
+
+    assert azimuth(first) == pytest.approx(120, abs=1) and first.direction == -1 and not first.kept_direction
+    if keep < 0.8:  # keeps going clockwise, to the goal ahead
+        assert azimuth(second) == pytest.approx(60, abs=1)
+        assert second.direction == -1 and second.kept_direction
+    else:  # Eq. (6): turns back to the best goal
+        assert azimuth(second) == pytest.approx(180, abs=1)
+        assert second.direction == 1 and not second.kept_direction
+    assert second.to_json()["kept_direction"] is second.kept_direction
 
 
 def test_a_goal_across_the_ring_is_reached_the_way_the_robot_was_going():
