@@ -233,7 +233,7 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--keep-direction",
         type=float,
-        help="the agent's keep_direction ratio (default: the agent's, 0.7; 1 = Eq. (6)'s argmax)",
+        help="the agent's keep_direction ratio (default: the agent's, 0.5; 1 = Eq. (6)'s argmax)",
     )
     ap.add_argument("--jobs", type=int, default=1, help="episodes run side by side (default 1)")
     ap.add_argument("--report-only", action="store_true", help="summarise the JSONs already in --out")

@@ -159,7 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         metavar="RATIO",
         help="keep driving the same way round the object when the best goal that way has at least RATIO "
-        "of the best information gain (default 0.7; 1 = always the best gain, Eq. (6))",
+        "of the best information gain (default 0.5; 1 = always the best gain, Eq. (6))",
     )
 
     se = sub.add_parser(

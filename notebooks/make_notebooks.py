@@ -669,7 +669,7 @@ full mode the face starts pointing away, as in the paper, and the planner uses t
 tables` builds them on first use).
 
 One departure from Eq. (6): once the robot has driven one way round the box, it keeps going that way
-when the best goal ahead has at least 70 % of the best gain (`AgentConfig(keep_direction=0.7)`). The
+when the best goal ahead has at least half the best gain (`AgentConfig(keep_direction=0.5)`). The
 gain is computed for the box as it stands, and the operator turns the face away while the robot drives:
 only steady travel one way gains on the face (the robot circles at 15-17 deg/s, the box turns at 8.6),
 and a reversal gives the gained angle back. Try `keep_direction=1.0` (the plain argmax) in full mode

@@ -27,6 +27,7 @@ from lab.identification import (
     uniform,
     z_turns,
 )
+from lab.identification.agent import AgentConfig
 
 
 def test_turn_between_names_the_quarter_turn_and_refuses_other_rotations():
@@ -89,7 +90,7 @@ def test_the_common_pose_can_be_turned_off():
 
 def _agent(world, carrier_model=1, floor_plan=None, planner="circle", evaluator=None, **config):
     """An agent (circling baseline by default: no lookup tables) 1.2 m from a box showing a shared face."""
-    from lab.identification.agent import AgentConfig, IdentificationAgent
+    from lab.identification.agent import IdentificationAgent
     from lab.sim import SimRobot, load_box_models
 
     models = load_box_models()
@@ -178,12 +179,13 @@ def _bump(centre_deg, height):
     return lambda az: height * np.clip(1 - np.abs((az - centre_deg + 180) % 360 - 180) / 30, 0, None)
 
 
-@pytest.mark.parametrize("keep", [0.7, 1.0])
+@pytest.mark.parametrize("keep", [AgentConfig().keep_direction, 1.0])
 def test_the_planner_keeps_its_direction_round_the_ring_when_the_goal_ahead_is_nearly_as_good(keep):
     from lab.sim import SimWorld
 
     # the robot starts at azimuth 180 deg; the first decision sends it clockwise to 120 deg; at the
     # second the best goal is back at 180 deg (0.5 nats), and 60 deg ahead has 0.4 (80 % of it)
+    assert AgentConfig().keep_direction < 0.8
     scripted = _ScriptedGains(_bump(120, 0.5), lambda az: _bump(180, 0.5)(az) + _bump(60, 0.4)(az))
     with SimWorld("arena") as world:
         agent, _ = _agent(world, planner="lut", evaluator=scripted, keep_direction=keep)
@@ -208,7 +210,7 @@ def test_the_planner_keeps_its_direction_round_the_ring_when_the_goal_ahead_is_n
 
 
 def test_a_goal_across_the_ring_is_reached_the_way_the_robot_was_going():
-    from lab.identification.agent import AgentConfig, IdentificationAgent
+    from lab.identification.agent import IdentificationAgent
 
     arc = IdentificationAgent._arc_path  # uses no agent state
     here = Pose2D(-1.0, 0.0, 0.0)  # azimuth 180 deg from the centre

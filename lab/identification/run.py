@@ -82,7 +82,7 @@ def run_identify(
     record : Path, optional
         Write an animation of the run there: the live view (:mod:`lab.viz.live`) at every step.
     keep_direction : float, optional
-        :attr:`AgentConfig.keep_direction <lab.identification.agent.AgentConfig>` (default 0.7; 1.0 is
+        :attr:`AgentConfig.keep_direction <lab.identification.agent.AgentConfig>` (default 0.5; 1.0 is
         the plain argmax of Eq. (6)).
     attach : callable, optional
         ``attach(agent, carrier)`` once the agent is built, before it runs: a notebook's live view
