@@ -6,7 +6,8 @@ simulator episodes (the circling baseline, so no lookup tables) check the define
 whose goals are all unreachable makes the robot hold and retry, and a box that vanishes from view makes
 the head scan and the base halt until the box is back, then the loop goes on. Two more, with gains
 scripted by the test, check that the planner keeps its direction of travel when the goal ahead is nearly
-as good as the best (``keep_direction``) and turns back otherwise.
+as good as the best (``keep_direction``) and turns back otherwise; and an identified model's filter is
+seated on the turn at which its most decisive frame was scored.
 """
 
 import math
@@ -16,13 +17,15 @@ import numpy as np
 import pytest
 
 from lab.errors import ConfigError
-from lab.geometry import Pose2D, Rz, se3
+from lab.geometry import G_to_pose6, Pose2D, Rz, se3
 from lab.identification import (
+    Belief,
     ModelScorer,
     ScoringConfig,
     TurnEvidence,
     calc_current_entropy,
     entropy,
+    pose_estimate_rv,
     turn_between,
     uniform,
     z_turns,
@@ -207,6 +210,37 @@ def test_the_planner_keeps_its_direction_round_the_ring_when_the_goal_ahead_is_n
         assert azimuth(second) == pytest.approx(180, abs=1)
         assert second.direction == 1 and not second.kept_direction
     assert second.to_json()["kept_direction"] is second.kept_direction
+
+
+def test_an_identified_models_filter_is_seated_on_the_turn_its_most_decisive_frame_was_scored_at():
+    from lab.sim import SimWorld
+
+    with SimWorld("arena") as world:
+        agent, _ = _agent(world)
+    G = se3(Rz(0.3), [0.1, 0.0, 1.2])  # model 1's filter, in C
+    Sigma_rv = np.diag([1e-4] * 3 + [1e-3] * 3)
+    agent.bank[1].initialize(G_to_pose6(G), None, Sigma_rv=Sigma_rv)
+
+    def frame(G_scored, ll):  # a frame's belief: scored at G_scored, with these log-likelihoods
+        return Belief(
+            uniform(4),
+            0.0,
+            np.asarray(ll, float),
+            np.zeros(4, int),
+            0,
+            pose_estimate_rv(G_to_pose6(G_scored), Sigma_rv),
+        )
+
+    agent._note_decisive_turn(frame(G @ agent.turns[2], [0.0, 60.0, 0.0, 0.0]))  # the unique face: turn 2
+    agent._note_decisive_turn(frame(G, [0.0, 0.5, 0.0, 0.0]))  # then shared faces, at its own pose
+    agent._note_decisive_turn(frame(G @ agent.turns[1], [0.0, -3.0, 2.0, 0.0]))  # against it: ignored
+    agent._seat_identified(1)
+    np.testing.assert_allclose(agent.bank[1].estimate.G_CO, G @ agent.turns[2], atol=1e-6)
+    assert agent.n_reseats == 1
+    agent._seat_identified(1)  # seated once: the record went with the old pose
+    assert agent.n_reseats == 1
+    agent._seat_identified(0)  # no decisive frame for model 0: nothing to do
+    assert agent.n_reseats == 1
 
 
 def test_a_goal_across_the_ring_is_reached_the_way_the_robot_was_going():

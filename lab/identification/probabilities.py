@@ -777,6 +777,10 @@ class Belief:
         Measured features each model explains.
     n_features : int
         Size of ``D_k``.
+    pose : PoseEstimate or None
+        Under the common pose (``ScoringConfig.common_pose``): the candidate pose, in C, that every
+        model was scored at on this frame (a filter's pose or one of its look-alike turns: the one that
+        explains the frame best over the models). None under the other scorings.
     """
 
     P: np.ndarray
@@ -784,6 +788,7 @@ class Belief:
     log_likelihoods: np.ndarray = field(repr=False)
     n_explained: np.ndarray = field(repr=False)
     n_features: int = 0
+    pose: PoseEstimate | None = field(default=None, repr=False)
 
     @property
     def map_model(self) -> int:
@@ -852,6 +857,7 @@ def calc_current_entropy(
     config = config or scorers[0].config
     pool = pools_shared_evidence(config, L)
     poses = [x for x in states if x is not None]
+    scored_at = None
     if config.share_poses and poses and config.common_pose:
         poses = _candidate_poses(states, symmetries)
         table = [[s.score(features, x) for x in poses] for s in scorers]  # (L, C): model i at pose c
@@ -866,6 +872,7 @@ def calc_current_entropy(
         marginal = top + np.log(np.exp(joint - top).sum(axis=0))  # log sum_i P_i p(D | x_c, M_i)^kappa
         c = int(np.argmax(marginal))
         scores = [row[c] for row in table]
+        scored_at = poses[c]
     elif config.share_poses:
         scores = [
             max((s.score(features, x) for x in poses), key=_by_likelihood, default=None) for s in scorers
@@ -877,7 +884,7 @@ def calc_current_entropy(
         scores = [s.score(features, x) for s, x in zip(scorers, states, strict=True)]
     ll = np.array([s.log_likelihood for s in scores])
     P = update_model_probabilities(prior, ll, config)
-    return Belief(P, entropy(P), ll, np.array([s.n_explained for s in scores]), len(features))
+    return Belief(P, entropy(P), ll, np.array([s.n_explained for s in scores]), len(features), scored_at)
 
 
 def _by_likelihood(score: ModelScore) -> float:
