@@ -84,6 +84,8 @@ from lab.vision import Matcher, get_database, stereo_features
 
 __all__ = ["PlannerChoice", "AgentConfig", "StepRecord", "DecisionRecord", "IdentificationAgent"]
 
+_ACROSS_RING = math.radians(150.0)  # a goal this far round the ring is reached the way the robot was going
+
 
 class PlannerChoice(Enum):
     """How the next goal is chosen: the paper's planners and two baselines."""
@@ -456,7 +458,7 @@ class IdentificationAgent:
         a0 = math.atan2(pose.y - cy, pose.x - cx)
         a1 = math.atan2(goal.y - cy, goal.x - cx)
         da = wrap_angle(a1 - a0)
-        if direction and da * direction < 0 and abs(da) > math.radians(150.0):
+        if direction and da * direction < 0 and abs(da) > _ACROSS_RING:
             da += direction * 2 * math.pi  # across the ring: keep going the way the robot was going
         n = max(2, int(abs(da) / math.radians(10)) + 1)
         a = a0 + np.linspace(0.0, da, n)
@@ -517,7 +519,7 @@ class IdentificationAgent:
         goal = actions[best].pose
         self._goal = goal
         da = wrap_angle(actions[best].azimuth - here)
-        if kept or abs(abs(da) - math.pi) < math.radians(30.0):
+        if kept or abs(da) > _ACROSS_RING:
             direction = self._direction or (1 if da >= 0 else -1)  # ahead, or across the ring
         elif abs(da) < 0.5 * math.radians(self.action_config.step_deg):
             direction = 0  # stays put: the direction of travel is kept for the next decision
