@@ -119,7 +119,7 @@ def run_one(t: dict, max_time: float, max_wall: float | None) -> dict:
     from lab.search.navigation import navigator_factory
     from lab.search.placement import random_placement
     from lab.search.trial import path_obstacles, run_search
-    from lab.sim.scene import load_scene
+    from lab.scene import load_scene
 
     scene = load_scene("lab_room")
     place = random_placement(scene, t["object"], np.random.default_rng(t["placement_key"]), t["surface"])
@@ -202,7 +202,7 @@ def n_obstacles_placed(d: dict) -> int:
     if "obstacle_poses" in d:
         return len(d["obstacle_poses"])
     from lab.search.trial import path_obstacles
-    from lab.sim.scene import load_scene
+    from lab.scene import load_scene
 
     place = tuple(d["place"])
     scene = load_scene("lab_room").with_pose(d["object"], place)

@@ -296,7 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_worlds(args) -> int:
-    from lab.sim.scene import list_worlds, load_scene
+    from lab.scene import list_worlds, load_scene
 
     for name in list_worlds():
         s = load_scene(name)

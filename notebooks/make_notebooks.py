@@ -960,7 +960,7 @@ uses $\alpha = 0.05$ and $\lambda = 0.2$ m, and never lets $\beta_0$ drop below 
         """\
 from lab.search import GlobalSearchConfig, growing_beta_field
 from lab.search.trial import map_spec
-from lab.sim.scene import load_scene
+from lab.scene import load_scene
 
 scene = load_scene("lab_room")           # the search paper's laboratory: 6 x 8 m, tables, a shelf, obstacles
 room = map_spec(scene)                   # M_p's grid: the room's floor in 20 cm cells

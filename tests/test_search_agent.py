@@ -28,7 +28,7 @@ from lab.search.agent import (
 from lab.search.local_search import LocalSearchResult
 from lab.search.probability_map import ProbabilityMap
 from lab.search.trial import run_search
-from lab.sim.scene import load_scene
+from lab.scene import load_scene
 
 SPEC = GridSpec.from_bounds(-3, -4, 3, 4, 0.2)
 

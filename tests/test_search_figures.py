@@ -15,7 +15,7 @@ from lab.search.figures import (
     write_figures,
 )
 from lab.search.trial import run_search
-from lab.sim.scene import load_scene
+from lab.scene import load_scene
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,7 @@ from lab.search.global_search import (
 from lab.search.probability_map import ProbabilityMap, map_peaks
 from lab.search.training import search_database
 from lab.sim import RenderSettings, SimRobot, SimWorld
-from lab.sim.scene import load_scene
+from lab.scene import load_scene
 
 
 # --- pieces -------------------------------------------------------------------------------------------

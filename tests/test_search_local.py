@@ -13,7 +13,7 @@ from lab.search.local_search import LocalSearchConfig, aim_at, local_search, loc
 from lab.search.training import search_database
 from lab.search.trial import pose_errors
 from lab.sim import RenderSettings, SimRobot, SimWorld
-from lab.sim.scene import load_scene
+from lab.scene import load_scene
 
 SCENE = load_scene("lab_room")
 TEXTURED = ("cereal_box", "book", "toy_block")

@@ -17,7 +17,7 @@ from lab.search.placement import (
     searchable_objects,
     supports,
 )
-from lab.sim.scene import load_scene
+from lab.scene import load_scene
 
 SCENE = load_scene("lab_room")
 

@@ -296,7 +296,7 @@ def _check_values(c: HardwareConfig, where: str) -> None:
         )
     need(sim.supersample in (1, 2, 3, 4), f"[sim] supersample must be 1, 2, 3 or 4, got {sim.supersample}")
     if cam.source == "sim":
-        from lab.sim.scene import list_worlds
+        from lab.scene import list_worlds
 
         worlds = list_worlds()
         need(sim.world in worlds, f"[sim] world {sim.world!r} is not a world; worlds: {', '.join(worlds)}")

@@ -413,7 +413,7 @@ class LookupTables:
 
 def box_model_names() -> tuple[str, ...]:
     """The identification database's models (``worlds/box_database.toml``): M0..M3."""
-    from lab.sim.scene import load_scene
+    from lab.scene import load_scene
 
     return tuple(m.name for m in load_scene("box_database").models)
 

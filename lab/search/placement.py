@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lab.errors import ConfigError
-from lab.sim.scene import BodySpec, Scene, load_scene
+from lab.scene import BodySpec, Scene, load_scene
 
 __all__ = [
     "SURFACES",

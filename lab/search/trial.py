@@ -31,7 +31,7 @@ from lab.search.placement import (
 )
 from lab.search.probability_map import ProbabilityMap
 from lab.search.training import search_database
-from lab.sim.scene import BodySpec, Scene, load_scene
+from lab.scene import BodySpec, Scene, load_scene
 
 __all__ = ["SearchResult", "SearchTrace", "map_spec", "path_obstacles", "pose_errors", "run_search"]
 

@@ -6,7 +6,7 @@ truth is reached only through ``SimWorld.truth``.
 """
 
 from lab.sim.robot import OdometryNoise, SimRobot
-from lab.sim.scene import Scene, list_worlds, load_scene
+from lab.scene import Scene, list_worlds, load_scene
 from lab.sim.world import Carrier, RenderSettings, SimWorld, box_model, load_box_models, viewpoint_G_WC
 
 __all__ = [

@@ -184,7 +184,7 @@ class _Trainable:
 
 def trainable_objects() -> dict[str, _Trainable]:
     """Objects with a database: the identification box models (M0..M3) and the lab room's objects."""
-    from lab.sim.scene import load_scene
+    from lab.scene import load_scene
 
     out = {}
     for m in load_scene("box_database").models:
@@ -212,7 +212,7 @@ def _asset_hash(obj: _Trainable, params: TrainingParams) -> str:
 def _object_world(obj: _Trainable, supersample: int):
     """A bare-floor world with the object alone, its centre at (0, 0, 0.49): returns (world, G_WO)."""
     from lab.sim import RenderSettings, SimWorld, load_scene
-    from lab.sim.scene import BodySpec
+    from lab.scene import BodySpec
 
     scene = load_scene("box_database")
     centre_z = 0.49
