@@ -115,11 +115,11 @@ def shortest_path_m(scene, place, local_max_m: float, local_min_m: float) -> flo
 
 
 def run_one(t: dict, max_time: float, max_wall: float | None) -> dict:
+    from lab.scene import load_scene
     from lab.search.agent import AgentConfig
     from lab.search.navigation import navigator_factory
     from lab.search.placement import random_placement
     from lab.search.trial import path_obstacles, run_search
-    from lab.scene import load_scene
 
     scene = load_scene("lab_room")
     place = random_placement(scene, t["object"], np.random.default_rng(t["placement_key"]), t["surface"])
@@ -201,8 +201,8 @@ def n_obstacles_placed(d: dict) -> int:
         return 0
     if "obstacle_poses" in d:
         return len(d["obstacle_poses"])
-    from lab.search.trial import path_obstacles
     from lab.scene import load_scene
+    from lab.search.trial import path_obstacles
 
     place = tuple(d["place"])
     scene = load_scene("lab_room").with_pose(d["object"], place)

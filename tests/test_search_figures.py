@@ -6,6 +6,7 @@ from search_standin import truth_navigator
 
 from lab.navigation import Costmap, GridSpec
 from lab.robot import StereoCamera
+from lab.scene import load_scene
 from lab.search.figures import (
     draw_pose,
     fig2_global_search,
@@ -15,7 +16,6 @@ from lab.search.figures import (
     write_figures,
 )
 from lab.search.trial import run_search
-from lab.scene import load_scene
 
 
 @pytest.fixture(scope="module")

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from lab.robot import PanTiltLimits
+from lab.scene import load_scene
 from lab.search.global_search import (
     GlobalSearchConfig,
     global_search,
@@ -19,7 +20,6 @@ from lab.search.global_search import (
 from lab.search.probability_map import ProbabilityMap, map_peaks
 from lab.search.training import search_database
 from lab.sim import RenderSettings, SimRobot, SimWorld
-from lab.scene import load_scene
 
 
 # --- pieces -------------------------------------------------------------------------------------------

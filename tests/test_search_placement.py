@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from lab.errors import ConfigError
+from lab.scene import load_scene
 from lab.search.placement import (
     SURFACES,
     check_placement,
@@ -17,7 +18,6 @@ from lab.search.placement import (
     searchable_objects,
     supports,
 )
-from lab.scene import load_scene
 
 SCENE = load_scene("lab_room")
 

@@ -18,6 +18,7 @@ from lab.errors import ConfigError
 from lab.geometry import R_to_euler_zyx, se3_inv
 from lab.navigation.grid import GridSpec
 from lab.robot import Robot
+from lab.scene import BodySpec, Scene, load_scene
 from lab.search.agent import AgentConfig, AgentResult, BudgetedRobot, SearchAgent, SearchEvent, Strategy
 from lab.search.placement import (
     check_placement,
@@ -31,7 +32,6 @@ from lab.search.placement import (
 )
 from lab.search.probability_map import ProbabilityMap
 from lab.search.training import search_database
-from lab.scene import BodySpec, Scene, load_scene
 
 __all__ = ["SearchResult", "SearchTrace", "map_spec", "path_obstacles", "pose_errors", "run_search"]
 

@@ -5,8 +5,8 @@ stereo views; ``SimRobot`` is the simulated robot behind the :class:`lab.robot.R
 truth is reached only through ``SimWorld.truth``.
 """
 
-from lab.sim.robot import OdometryNoise, SimRobot
 from lab.scene import Scene, list_worlds, load_scene
+from lab.sim.robot import OdometryNoise, SimRobot
 from lab.sim.world import Carrier, RenderSettings, SimWorld, box_model, load_box_models, viewpoint_G_WC
 
 __all__ = [

@@ -24,8 +24,8 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D, R_to_quat_xyzw, Rz, compose, planar_G, quat_xyzw_to_R, se3, translation
-from lab.sim.assets import box_mesh
 from lab.scene import BodySpec, ModelSpec, Scene, load_scene
+from lab.sim.assets import box_mesh
 
 __all__ = ["RenderSettings", "SimWorld", "Carrier", "Truth", "load_box_models", "pybullet"]
 

@@ -211,8 +211,8 @@ def _asset_hash(obj: _Trainable, params: TrainingParams) -> str:
 
 def _object_world(obj: _Trainable, supersample: int):
     """A bare-floor world with the object alone, its centre at (0, 0, 0.49): returns (world, G_WO)."""
-    from lab.sim import RenderSettings, SimWorld, load_scene
     from lab.scene import BodySpec
+    from lab.sim import RenderSettings, SimWorld, load_scene
 
     scene = load_scene("box_database")
     centre_z = 0.49
