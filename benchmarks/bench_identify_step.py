@@ -40,7 +40,8 @@ from lab.estimation import EKFBank, EKFConfig, OrientationChart
 from lab.geometry import Pose2D
 from lab.identification import ModelScorer, observe_frame, uniform, z_turns
 from lab.sim import SimRobot, SimWorld, load_box_models
-from lab.vision import Matcher, get_database, stereo_features
+from lab.training import get_database
+from lab.vision import Matcher, stereo_features
 from lab.vision.stereo import StereoParams
 
 

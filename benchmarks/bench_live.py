@@ -21,6 +21,7 @@ import numpy as np
 from lab.geometry import Pose2D
 from lab.identification.agent import AgentConfig, IdentificationAgent
 from lab.sim import SimRobot, SimWorld, load_box_models
+from lab.training import get_database
 from lab.viz.live import LiveView
 
 
@@ -31,7 +32,7 @@ def one_run(with_view: bool, sim_time_s: float, rate_hz: float) -> dict:
         robot = SimRobot(world, start=Pose2D(-1.2, 0.0, 0.0), seed=3)
         agent = IdentificationAgent(
             robot,
-            tuple(m.name for m in models),
+            [get_database(m.name) for m in models],
             planner="circle",
             seed=3,
             config=AgentConfig(max_actions=2, max_time_s=sim_time_s),

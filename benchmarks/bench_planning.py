@@ -39,7 +39,6 @@ from lab.identification import (
     aim_pan_tilt,
     calc_possible_control_actions,
     entropy,
-    get_tables,
     information_gain,
     next_best_action,
     observe_frame,
@@ -53,7 +52,8 @@ from lab.identification import (
 from lab.identification.synthetic import synthetic_box_databases, synthetic_tables
 from lab.robot import StereoCamera
 from lab.sim import SimWorld, load_box_models
-from lab.vision import Matcher, get_database, stereo_features
+from lab.training import get_database, get_tables
+from lab.vision import Matcher, stereo_features
 
 CAM = StereoCamera.from_fov(320, 240, 60.0, 0.12, mount_R=(0.0, 0.0, 0.7))  # the simulated robot's
 SYMMETRIES = z_turns(4)  # the boxes' side faces look alike: a filter's pose may be off by a quarter turn

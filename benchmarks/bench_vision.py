@@ -23,7 +23,8 @@ import numpy as np  # noqa: E402
 from lab.geometry import Pose2D  # noqa: E402
 from lab.robot import StereoCamera  # noqa: E402
 from lab.sim import SimWorld, load_box_models, viewpoint_G_WC  # noqa: E402
-from lab.vision.database import Matcher, get_database  # noqa: E402
+from lab.training.databases import get_database
+from lab.vision.matching import Matcher
 from lab.vision.stereo import StereoParams, _epipolar_matches, stereo_features  # noqa: E402
 
 

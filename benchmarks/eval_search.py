@@ -12,7 +12,7 @@ costmap navigator that ``lab search`` uses; expect one to three minutes of CPU p
 table_b at 0.75 m, the shelf at 1.2 m) x the seeds: each (object, surface, seed) is one seeded random
 placement (``random_placement`` with ``default_rng([seed, object, surface])``: position and yaw), the
 same for every strategy and with and without obstacles. ``--obstacles yes`` adds the two boxes of
-``lab.search.trial.path_obstacles`` on the straight line from the start to the object (the paper's
+``lab.runs.search.path_obstacles`` on the straight line from the start to the object (the paper's
 "obstacles placed in the planned path"; the boxes are not in the robot's map, it must see them).
 Two seeds give the issue's 18 placements. A trial that runs out of ``--max-time`` (simulated
 seconds) is a failure: a slow baseline fails by its budget.
@@ -91,7 +91,7 @@ def shortest_path_m(scene, place, local_max_m: float, local_min_m: float) -> flo
     robot's radius. Evaluation only."""
     from lab.navigation import Costmap, GridSpec, astar_to_region
     from lab.robot import BaseLimits
-    from lab.search.placement import footprint
+    from lab.runs.placement import footprint
 
     sx, sy = scene.room.size
     spec = GridSpec.from_bounds(-sx / 2, -sy / 2, sx / 2, sy / 2, 0.05)
@@ -115,11 +115,10 @@ def shortest_path_m(scene, place, local_max_m: float, local_min_m: float) -> flo
 
 
 def run_one(t: dict, max_time: float, max_wall: float | None) -> dict:
+    from lab.runs.placement import random_placement
+    from lab.runs.search import navigator_factory, path_obstacles, run_search
     from lab.scene import load_scene
     from lab.search.agent import AgentConfig
-    from lab.search.navigation import navigator_factory
-    from lab.search.placement import random_placement
-    from lab.search.trial import path_obstacles, run_search
 
     scene = load_scene("lab_room")
     place = random_placement(scene, t["object"], np.random.default_rng(t["placement_key"]), t["surface"])
@@ -201,8 +200,8 @@ def n_obstacles_placed(d: dict) -> int:
         return 0
     if "obstacle_poses" in d:
         return len(d["obstacle_poses"])
+    from lab.runs.search import path_obstacles
     from lab.scene import load_scene
-    from lab.search.trial import path_obstacles
 
     place = tuple(d["place"])
     scene = load_scene("lab_room").with_pose(d["object"], place)

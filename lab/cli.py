@@ -343,7 +343,7 @@ def _cmd_render(args) -> int:
 def _cmd_train(args) -> int:
     import time
 
-    from lab.vision.database import TrainingParams, database_path, get_database, trainable_objects
+    from lab.training.databases import TrainingParams, database_path, get_database, trainable_objects
 
     names = list(trainable_objects())
     if args.list:
@@ -369,27 +369,7 @@ def _cmd_identify(args) -> int:
 
     if args.max_actions < 0:
         raise LabError(f"--max-actions must be >= 0, got {args.max_actions}")
-    if args.robot is not None:
-        from lab.hardware.run import identify_on_robot
-
-        res = identify_on_robot(
-            args.robot,
-            planner=args.planner,
-            seed=args.seed,
-            max_actions=args.max_actions,
-            max_time_s=args.max_time,
-            true_model=args.true_model,
-            mover=args.mover,
-            json_path=args.json,
-            progress=print,
-            record=args.record,
-            keep_direction=args.keep_direction,
-        )
-        keys = ("true_model", "identified_model", "success", "actions", "sim_time_s", "wall_time_s")
-        summary = {k: res[k] for k in (*keys, "final_posterior", "pose_error", "watchdog_stops")}
-        print(_json.dumps(summary, indent=2))
-        return 0
-    from lab.identification.run import run_identify
+    from lab.runs.identify import run_identify
 
     res = run_identify(
         args.true_model,
@@ -397,25 +377,17 @@ def _cmd_identify(args) -> int:
         args.mover,
         args.planner,
         args.max_actions,
-        args.out,
+        None if args.robot is not None else args.out,
         args.json,
         args.max_time,
         record=args.record,
         keep_direction=args.keep_direction,
+        robot_config=args.robot,
+        progress=print if args.robot is not None else None,
     )
-    summary = {
-        k: res[k]
-        for k in (
-            "true_model",
-            "identified_model",
-            "success",
-            "actions",
-            "sim_time_s",
-            "wall_time_s",
-            "final_posterior",
-            "pose_error",
-        )
-    }
+    keys = ["true_model", "identified_model", "success", "actions", "sim_time_s", "wall_time_s"]
+    keys += ["final_posterior", "pose_error"] + (["watchdog_stops"] if args.robot is not None else [])
+    summary = {k: res[k] for k in keys}
     print(_json.dumps(summary, indent=2))
     return 0
 
@@ -423,7 +395,7 @@ def _cmd_identify(args) -> int:
 def _cmd_search(args) -> int:
     import json as _json
 
-    from lab.search.placement import searchable_objects
+    from lab.runs.placement import searchable_objects
 
     names = searchable_objects()
     if args.list_objects:
@@ -434,8 +406,7 @@ def _cmd_search(args) -> int:
     if args.robot is not None:
         raise LabError("`lab search --robot` is not supported yet: the search runs in the simulator only")
     from lab.io import write_json_atomic
-    from lab.search.navigation import navigator_factory
-    from lab.search.trial import run_search
+    from lab.runs.search import navigator_factory, run_search
 
     navigators = []
 
@@ -483,8 +454,8 @@ def _cmd_hardware(args) -> int:
 def _cmd_tables(args) -> int:
     import time
 
-    from lab.identification.tables import TableParams, box_model_names, get_model_tables, tables_path
-    from lab.vision.database import get_database
+    from lab.training.databases import get_database
+    from lab.training.tables import TableParams, box_model_names, get_model_tables, tables_path
 
     names = box_model_names()
     unknown = [n for n in args.models if n not in names]
@@ -532,7 +503,7 @@ def _cmd_notebooks(args) -> int:
 
 
 def _cmd_demo(args) -> int:
-    from lab.demo import run_demo
+    from lab.runs.demo import run_demo
 
     if args.max_actions < 0:
         raise LabError(f"--max-actions must be >= 0, got {args.max_actions}")

@@ -249,7 +249,8 @@ The filter starts itself from the first frame by RANSAC on the matches.""",
 from lab.estimation import EKFConfig, OrientationChart, PoseEKF
 from lab.geometry import Pose2D, se3_inv
 from lab.sim import SimWorld, SimRobot, load_box_models
-from lab.vision import Matcher, get_database, stereo_features
+from lab.vision import Matcher, stereo_features
+from lab.training import get_database
 
 model = load_box_models()[0]
 db = get_database(model.name)
@@ -411,7 +412,8 @@ from lab.estimation import EKFBank, EKFConfig, OrientationChart
 from lab.geometry import Pose2D
 from lab.identification import ModelScorer, ScoringConfig, observe_frame, uniform
 from lab.sim import SimRobot, SimWorld, load_box_models
-from lab.vision import Matcher, get_database, stereo_features
+from lab.vision import Matcher, stereo_features
+from lab.training import get_database
 
 models = load_box_models()                                  # M0 .. M3 (the paper's Fig. 4)
 names = tuple(m.name for m in models)
@@ -615,7 +617,7 @@ unique face, row 18 at the opposite, shared face. The expected count $E[W_{2j}]$
     (
         "code",
         """\
-from lab.identification import TableParams, build_model_tables
+from lab.training import TableParams, build_model_tables
 
 rows = (0, 18)
 t2 = build_model_tables("M2", dbs, TableParams(repeats=2), viewpoint_indices=rows)
@@ -692,8 +694,12 @@ carrier.mover = make_mover("evasive", carrier, observer_pose=world.truth.robot_p
 if FAST:
     planner, evaluator = "mc", MonteCarloEvaluator(dbs, robot.camera, config=MonteCarloConfig(n_samples=8))
 else:
-    planner, evaluator = "lut", None                 # the agent loads (or builds) the lookup tables
-agent = IdentificationAgent(robot, names, planner=planner, seed=0, evaluator=evaluator,
+    from lab.identification import make_evaluator
+    from lab.training import get_tables              # the lookup tables (built on first use: `lab tables`)
+
+    planner = "lut"
+    evaluator = make_evaluator(planner, dbs, robot.camera, tables=get_tables(names, dbs=dbs))
+agent = IdentificationAgent(robot, dbs, planner=planner, seed=0, evaluator=evaluator,
                             config=AgentConfig(max_actions=8, max_time_s=60 if FAST else 240))
 true_poses = []                                      # the box's true pose at every frame: for the plot only
 agent.on_step = lambda agent_, frame: true_poses.append(carrier.G_WO.copy())
@@ -748,7 +754,7 @@ robot = SimRobot(world, start=Pose2D(-1.2, 0.0, 0.0), seed=1)
 robot.enable()
 carrier.mover = TeleopMover(carrier, MoverLimits(max_box_turn_rate=0.8))    # you are the operator
 panel = TeleopPanel(carrier.mover, TeleopSpeeds(box_turn_rate=0.8))
-agent = IdentificationAgent(robot, names, planner=planner, seed=0, evaluator=evaluator,
+agent = IdentificationAgent(robot, dbs, planner=planner, seed=0, evaluator=evaluator,
                             config=AgentConfig(max_actions=8, max_time_s=600))
 view = LiveView.for_identification(agent)
 
@@ -959,7 +965,7 @@ uses $\alpha = 0.05$ and $\lambda = 0.2$ m, and never lets $\beta_0$ drop below 
         "code",
         """\
 from lab.search import GlobalSearchConfig, growing_beta_field
-from lab.search.trial import map_spec
+from lab.runs.search import map_spec
 from lab.scene import load_scene
 
 scene = load_scene("lab_room")           # the search paper's laboratory: 6 x 8 m, tables, a shelf, obstacles
@@ -1019,7 +1025,8 @@ search for the cereal box.""",
         "code",
         """\
 from lab.geometry import Pose2D
-from lab.search import ProbabilityMap, search_database
+from lab.search import ProbabilityMap
+from lab.training import search_database
 from lab.search.global_search import object_likelihood_ratio, process_view, strongest_clusters, window_mean
 from lab.sim import RenderSettings, SimRobot, SimWorld
 from lab.vision.colour import back_project, chromaticity, colour_histogram
@@ -1211,8 +1218,9 @@ afterwards scores the result against the simulator's truth (the agent never sees
     (
         "code",
         """\
-from lab.search import run_search, searchable_objects
-from lab.search.navigation import navigator_factory
+from lab.runs.search import run_search
+from lab.runs.placement import searchable_objects
+from lab.runs.search import navigator_factory
 
 target = "toy_block" if FAST else "cereal_box"       # the toy block stands near the start: a short run
 navigators = []
@@ -1317,7 +1325,7 @@ import dataclasses
 from pathlib import Path
 from lab.geometry import Pose2D
 from lab.hardware import HardwareRobot, load_config
-from lab.hardware.rehearsal import rehearsal
+from lab.runs.rehearsal import rehearsal
 from lab.sim import SimRobot, SimWorld, load_box_models
 
 REPO = Path.cwd().parent                          # the notebooks run in notebooks/
@@ -1480,7 +1488,8 @@ both robots. The stereo features of notebook 00 and the matching against a box d
     (
         "code",
         """\
-from lab.vision import Matcher, get_database, stereo_features
+from lab.vision import Matcher, stereo_features
+from lab.training import get_database
 
 db = get_database("M1")
 fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))

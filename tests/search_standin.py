@@ -18,8 +18,8 @@ import numpy as np
 from lab.geometry import Pose2D
 from lab.navigation import Costmap, GridSpec, astar_to_region, drive_to, heading_towards, simplify_path
 from lab.navigation.follower import DriveOutcome
+from lab.runs.placement import footprint
 from lab.search.agent import NavOutcome
-from lab.search.placement import footprint
 
 
 def _inside_convex(points: np.ndarray, poly: np.ndarray) -> np.ndarray:

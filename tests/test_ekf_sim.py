@@ -13,7 +13,8 @@ import pytest
 from lab.estimation import EKFConfig, OrientationChart, PoseEKF, nees
 from lab.geometry import G_to_pose6, Pose2D, relative_pose2d, se3_inv
 from lab.sim import OdometryNoise, SimRobot, SimWorld, load_box_models
-from lab.vision import Matcher, get_database, stereo_features
+from lab.training import get_database
+from lab.vision import Matcher, stereo_features
 
 
 def _errors(estimate, G_CO_true):

@@ -20,9 +20,9 @@ from hw_helpers import REPO
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
 from lab.hardware.config import load_config
-from lab.hardware.rehearsal import rehearsal
 from lab.hardware.robot import _pan_tilt_at, _pose_at, make_camera_source
 from lab.robot import PanTiltState
+from lab.runs.rehearsal import rehearsal
 from lab.vision.rectify import StereoCalibration
 
 REHEARSAL_TOML = REPO / "hardware" / "rehearsal.toml"
@@ -136,14 +136,8 @@ def _small_lookup_tables(camera):
     """The lookup-table evaluator on tables of four training poses (one render each): the planner's
     machinery as it runs, without the minutes the full tables take to build (`lab tables`); this test
     is about the hardware path, not about how good the plan is."""
-    from lab.identification import (
-        LookupTableEvaluator,
-        LookupTables,
-        TableParams,
-        build_model_tables,
-        shared_features,
-    )
-    from lab.vision import get_database
+    from lab.identification import LookupTableEvaluator, LookupTables, shared_features
+    from lab.training import TableParams, build_model_tables, get_database
 
     names = ("M0", "M1", "M2", "M3")
     dbs = [get_database(n, progress=False) for n in names]
@@ -158,6 +152,7 @@ def test_identification_agent_unchanged_on_the_emulators_with_rendered_frames():
     """Two planning actions of the unchanged IdentificationAgent through HardwareRobot (emulators, wall
     clock); the base and head move in the emulators' truth, and the beliefs are sensible."""
     from lab.identification.agent import AgentConfig, IdentificationAgent
+    from lab.training import get_database
 
     class Enough(Exception):
         pass
@@ -167,6 +162,7 @@ def test_identification_agent_unchanged_on_the_emulators_with_rendered_frames():
         robot, create, ptu = r.robot, r.emulators.create, r.emulators.ptu
         agent = IdentificationAgent(
             robot,
+            [get_database(n, progress=False) for n in ("M0", "M1", "M2", "M3")],
             planner="lut",
             seed=0,
             config=AgentConfig(max_actions=2, max_time_s=120.0),

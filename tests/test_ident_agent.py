@@ -95,13 +95,14 @@ def _agent(world, carrier_model=1, floor_plan=None, planner="circle", evaluator=
     """An agent (circling baseline by default: no lookup tables) 1.2 m from a box showing a shared face."""
     from lab.identification.agent import IdentificationAgent
     from lab.sim import SimRobot, load_box_models
+    from lab.training import get_database
 
     models = load_box_models()
     carrier = world.add_carrier(models[carrier_model], Pose2D(0.0, 0.0, 0.0), box_yaw=0.0)
     robot = SimRobot(world, start=Pose2D(-1.2, 0.0, 0.0), seed=0)
     agent = IdentificationAgent(
         robot,
-        tuple(m.name for m in models),
+        [get_database(m.name) for m in models],
         planner=planner,
         evaluator=evaluator,
         config=AgentConfig(**config),
@@ -112,7 +113,7 @@ def _agent(world, carrier_model=1, floor_plan=None, planner="circle", evaluator=
 
 
 def test_a_blocked_ring_holds_position_and_retries():
-    from lab.identification.run import floor_plan
+    from lab.runs.identify import floor_plan
     from lab.sim import SimWorld
 
     with SimWorld("arena") as world:

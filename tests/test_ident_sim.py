@@ -15,7 +15,8 @@ from lab.estimation import EKFBank, EKFConfig, OrientationChart
 from lab.geometry import Pose2D
 from lab.identification import ModelScorer, observe_frame, uniform
 from lab.sim import SimRobot, SimWorld, load_box_models
-from lab.vision import Matcher, get_database, stereo_features
+from lab.training import get_database
+from lab.vision import Matcher, stereo_features
 
 # box yaw that turns each face towards a robot on the -x side: the unique +X face and the shared ones
 UNIQUE = math.pi

@@ -11,19 +11,17 @@ import pytest
 
 from lab.cli import main
 from lab.errors import AssetError
-from lab.identification import (
-    ModelTables,
+from lab.identification import ModelTables, load_model_tables, save_model_tables
+from lab.training import (
     TableParams,
     build_model_tables,
+    get_database,
     get_model_tables,
     get_tables,
-    load_model_tables,
     load_tables,
-    save_model_tables,
     tables_path,
 )
-from lab.identification import tables as tables_module
-from lab.vision import get_database
+from lab.training import tables as tables_module
 
 NAMES = ("M0", "M1", "M2", "M3")
 ROWS = (0, 18)  # the unique face (+X) and the opposite, shared, face (-X)

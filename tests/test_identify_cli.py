@@ -97,4 +97,4 @@ def test_unknown_mover_and_planner_names_are_refused_clearly():
     ):
         make_mover("teleport", carrier=None)
     with pytest.raises(ConfigError, match="unknown planner 'oracle'; planners: lut, mc, random, circle"):
-        IdentificationAgent(robot=None, planner="oracle")
+        IdentificationAgent(None, [], planner="oracle")

@@ -24,6 +24,7 @@ import pytest
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
+from lab.training import box_model_names, get_database
 from lab.viz.live import LiveView, TeleopPanel, _ellipse_xy, identification_inliers, in_background
 from lab.viz.recorder import read_animation
 
@@ -38,7 +39,7 @@ def _changed(a: np.ndarray, b: np.ndarray) -> bool:
 def test_identify_record_has_one_frame_per_step_and_the_picture_changes(tmp_path):
     """In the background, as a notebook runs it: the recording's view, a chained notebook view at 2 Hz,
     and the teleop panel turning the box from the start of the run."""
-    from lab.identification.run import run_identify
+    from lab.runs.identify import run_identify
 
     seen = {}
 
@@ -127,7 +128,7 @@ def _sim_agent(world):
     models = load_box_models()
     world.add_carrier(models[1], Pose2D(0.0, 0.0, 0.0))
     robot = SimRobot(world, start=Pose2D(-1.0, 0.0, 0.0), seed=0)
-    return IdentificationAgent(robot, tuple(m.name for m in models), planner="circle")
+    return IdentificationAgent(robot, [get_database(m.name) for m in models], planner="circle")
 
 
 def test_view_in_a_widget_on_the_simulator(tmp_path):
@@ -177,7 +178,7 @@ def test_view_works_the_same_on_the_hardware_emulators(tmp_path):
         cfg = load_config(EMULATED_TOML).with_ports(base=emu.base_port, ptu=emu.ptu_port)
         cam = ReplayStereoSource.synthetic(cfg.camera.width, cfg.camera.height)
         with HardwareRobot(cfg, camera_source=cam) as robot:
-            agent = IdentificationAgent(robot, planner="circle")
+            agent = IdentificationAgent(robot, [get_database(n) for n in box_model_names()], planner="circle")
             view = LiveView.for_identification(agent, rate_hz=None)
             w = view.widget
             frames = _run_steps(agent, view, 4)

@@ -16,6 +16,7 @@ import lab.search.agent as agent_mod
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
 from lab.navigation import GridSpec, drive_to
+from lab.runs.search import run_search
 from lab.scene import load_scene
 from lab.search.agent import (
     AgentConfig,
@@ -28,7 +29,6 @@ from lab.search.agent import (
 )
 from lab.search.local_search import LocalSearchResult
 from lab.search.probability_map import ProbabilityMap
-from lab.search.trial import run_search
 
 SPEC = GridSpec.from_bounds(-3, -4, 3, 4, 0.2)
 

@@ -6,6 +6,7 @@ from search_standin import truth_navigator
 
 from lab.navigation import Costmap, GridSpec
 from lab.robot import StereoCamera
+from lab.runs.search import run_search
 from lab.scene import load_scene
 from lab.search.figures import (
     draw_pose,
@@ -15,7 +16,6 @@ from lab.search.figures import (
     panorama,
     write_figures,
 )
-from lab.search.trial import run_search
 
 
 @pytest.fixture(scope="module")

@@ -18,8 +18,8 @@ from lab.search.global_search import (
     window_mean,
 )
 from lab.search.probability_map import ProbabilityMap, map_peaks
-from lab.search.training import search_database
 from lab.sim import RenderSettings, SimRobot, SimWorld
+from lab.training.search import search_database
 
 
 # --- pieces -------------------------------------------------------------------------------------------

@@ -9,11 +9,11 @@ from search_standin import stand_in_front
 
 from lab.geometry import Pose2D
 from lab.robot import PanTiltLimits, StereoCamera
+from lab.runs.search import pose_errors
 from lab.scene import load_scene
 from lab.search.local_search import LocalSearchConfig, aim_at, local_search, local_views, object_roi
-from lab.search.training import search_database
-from lab.search.trial import pose_errors
 from lab.sim import RenderSettings, SimRobot, SimWorld
+from lab.training.search import search_database
 
 SCENE = load_scene("lab_room")
 TEXTURED = ("cereal_box", "book", "toy_block")

@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 from lab.errors import ConfigError
-from lab.scene import load_scene
-from lab.search.placement import (
+from lab.runs.placement import (
     SURFACES,
     check_placement,
     footprint,
@@ -18,6 +17,7 @@ from lab.search.placement import (
     searchable_objects,
     supports,
 )
+from lab.scene import load_scene
 
 SCENE = load_scene("lab_room")
 

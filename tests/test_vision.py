@@ -10,14 +10,9 @@ from lab.errors import AssetError, ConfigError
 from lab.geometry import Pose2D, Ry, se3, se3_inv, transform_points, translation
 from lab.robot import StereoCamera
 from lab.sim import RenderSettings, SimWorld, load_box_models, viewpoint_G_WC
-from lab.vision.database import (
-    Matcher,
-    TrainingParams,
-    get_database,
-    load_database,
-    save_database,
-    train_database,
-)
+from lab.training.databases import TrainingParams, get_database, train_database
+from lab.vision.database import load_database, save_database
+from lab.vision.matching import Matcher
 from lab.vision.rectify import StereoCalibration, StereoRectifier, load_calibration
 from lab.vision.stereo import StereoParams, stereo_features, triangulate
 
@@ -185,7 +180,7 @@ def test_cache_is_versioned_atomic_and_detects_corruption(tmp_path, dbs):
         get_database("M9")
     # a corrupt cache entry is rebuilt, and says so
     folder = tmp_path / "cache"
-    from lab.vision.database import database_path
+    from lab.training.databases import database_path
 
     q = database_path("M3", folder)
     q.parent.mkdir(parents=True)

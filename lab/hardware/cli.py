@@ -226,7 +226,7 @@ def _check_camera(cfg, calib, line) -> None:
             True,
             "camera",
             f"rendered by the simulator (world {cfg.sim.world!r}) in a rehearsal: "
-            f"lab identify --robot {cfg.path or 'CONFIG'} (or lab.hardware.rehearsal.rehearsal())",
+            f"lab identify --robot {cfg.path or 'CONFIG'} (or lab.runs.rehearsal.rehearsal())",
         )
         return
     try:

@@ -100,7 +100,7 @@ class CameraConfig:
 
 @dataclass(frozen=True)
 class SimSceneConfig:
-    """``[sim]``: the world a ``source = "sim"`` camera renders (a rehearsal, :mod:`lab.hardware.rehearsal`).
+    """``[sim]``: the world a ``source = "sim"`` camera renders (a rehearsal, :mod:`lab.runs.rehearsal`).
 
     Poses are ``[x, y, heading_deg]`` in the world frame W: ``robot_start`` is where the base stands when
     the Create emulator's true pose is (0, 0, 0); ``carrier_start`` is where the box's carrier stands.

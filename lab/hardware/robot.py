@@ -105,7 +105,7 @@ def make_camera_source(cfg: HardwareConfig) -> StereoSource:
     if c.source == "sim":
         raise ConfigError(
             '[camera] source = "sim" renders the simulator from the emulators\' true state: run it through '
-            "lab.hardware.rehearsal.rehearsal() (lab identify --robot does), or choose another source"
+            "lab.runs.rehearsal.rehearsal() (lab identify --robot does), or choose another source"
         )
     return ReplayStereoSource.synthetic(c.width, c.height)
 

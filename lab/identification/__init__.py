@@ -15,9 +15,10 @@ The data flow of one step, with the paper's three functions (Sec. IV)::
     information_gain, next_best_action -> u*                        Eqs. (4), (6)       planner.py
     (plan_next_best_view chains the last three)
 
-``lab tables`` builds the lookup tables offline from rendered views (cached like the feature
-databases); :mod:`~lab.identification.synthetic` makes databases and tables of any size without
-rendering.
+``lab tables`` builds the lookup tables offline from rendered views (:mod:`lab.training.tables`,
+cached like the feature databases); :mod:`~lab.identification.synthetic` makes databases and tables
+of any size without rendering. The agent is handed its databases and its evaluator: it never renders,
+trains or reads a cache.
 """
 
 from lab.identification.actions import (
@@ -71,18 +72,7 @@ from lab.identification.probabilities import (
     update_model_probabilities,
 )
 from lab.identification.step import FrameObservation, observe_frame
-from lab.identification.tables import (
-    LookupTables,
-    ModelTables,
-    TableParams,
-    build_model_tables,
-    get_model_tables,
-    get_tables,
-    load_model_tables,
-    load_tables,
-    save_model_tables,
-    tables_path,
-)
+from lab.identification.tables import LookupTables, ModelTables, load_model_tables, save_model_tables
 from lab.identification.viewpoints import nearest_viewpoint
 
 __all__ = [
@@ -106,11 +96,9 @@ __all__ = [
     "PlannerKind",
     "RingBlocked",
     "ScoringConfig",
-    "TableParams",
     "ahead_on_ring",
     "aim_pan_tilt",
     "apply_floor",
-    "build_model_tables",
     "calc_current_entropy",
     "calc_expected_entropy",
     "calc_possible_control_actions",
@@ -119,11 +107,9 @@ __all__ = [
     "cross_correspondences",
     "entropy",
     "eq15_log_likelihood",
-    "get_model_tables",
-    "get_tables",
+    "make_evaluator",
     "information_gain",
     "load_model_tables",
-    "load_tables",
     "nearest_viewpoint",
     "next_best_action",
     "observe_frame",
@@ -141,7 +127,6 @@ __all__ = [
     "symmetry_log_weights",
     "TurnEvidence",
     "turn_between",
-    "tables_path",
     "uniform",
     "update_model_probabilities",
     "z_turns",

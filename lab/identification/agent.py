@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -76,11 +77,11 @@ from lab.identification.hypotheses import (
     z_turns,
 )
 from lab.identification.planner import continue_direction, plan_next_best_view, ring_smoothed
-from lab.identification.probabilities import ModelScorer, ScoringConfig, shared_masks, uniform
+from lab.identification.probabilities import ModelScorer, ScoringConfig, uniform
 from lab.identification.step import observe_frame
 from lab.navigation.follower import PathFollower
 from lab.robot import Robot
-from lab.vision import Matcher, get_database, stereo_features
+from lab.vision import FeatureDatabase, Matcher, stereo_features
 
 __all__ = ["PlannerChoice", "AgentConfig", "StepRecord", "DecisionRecord", "IdentificationAgent"]
 
@@ -225,16 +226,27 @@ class DecisionRecord:
 class IdentificationAgent:
     """The closed loop of the identification paper on any :class:`Robot`.
 
+    The agent is handed everything it uses; its constructor renders nothing, trains nothing and reads
+    no cache (a run loads the databases and tables: :mod:`lab.runs.identify`).
+
     Parameters
     ----------
     robot : Robot
-    model_names : sequence of str
-        The database models (default: the four boxes M0..M3).
+        Every camera-derived quantity (projection, field of view, the clutter density of Eq. (9))
+        comes from ``robot.camera``.
+    databases : sequence of FeatureDatabase
+        The models ``B_i``, in the order of the probabilities (their ``name`` names the models).
+    evaluator : optional
+        The expected-entropy evaluator of the ``lut`` or ``mc`` planner
+        (:func:`~lab.identification.evaluators.make_evaluator`); required by those two, unused by the
+        baselines.
+    config : AgentConfig, optional
     planner : PlannerChoice or str
     seed : int
         Seeds RANSAC and the random planner.
-    evaluator : optional
-        An expected-entropy evaluator to use instead of building one (LUT or MC).
+    scoring : ScoringConfig, optional
+        How frames are scored; its clutter density, when unset, from ``robot.camera``.
+    action_config : ActionConfig, optional
     observer : callable, optional
         ``observer(agent, frame)`` after every step (live views, recordings: :mod:`lab.viz.live`);
         kept as :attr:`on_step`. None (the default) costs nothing.
@@ -242,18 +254,23 @@ class IdentificationAgent:
         A known map (obstacles grown by the robot's radius): only ring goals that A* reaches on it
         from the robot's odometry pose are candidates (:func:`~lab.identification.actions.reachable_on`).
         Without it every goal of the ring is a candidate.
+
+    Raises
+    ------
+    ConfigError
+        An unknown planner, no databases, or the ``lut`` / ``mc`` planner without an evaluator.
     """
 
     def __init__(
         self,
         robot: Robot,
-        model_names=("M0", "M1", "M2", "M3"),
+        databases: Sequence[FeatureDatabase],
+        evaluator=None,
+        config: AgentConfig | None = None,
         planner="lut",
         seed: int = 0,
-        config: AgentConfig | None = None,
         scoring: ScoringConfig | None = None,
         action_config: ActionConfig | None = None,
-        evaluator=None,
         observer=None,
         floor_plan=None,
     ):
@@ -263,13 +280,23 @@ class IdentificationAgent:
             raise ConfigError(
                 f"unknown planner {planner!r}; planners: {', '.join(p.value for p in PlannerChoice)}"
             ) from None
+        self.dbs = list(databases)
+        if not self.dbs or not all(isinstance(db, FeatureDatabase) for db in self.dbs):
+            raise ConfigError(
+                "IdentificationAgent needs a sequence of FeatureDatabase (one per model), got "
+                f"{type(databases).__name__} {databases!r:.60}"
+            )
+        if evaluator is None and self.planner in (PlannerChoice.LUT, PlannerChoice.MC):
+            raise ConfigError(
+                f"the {self.planner.value} planner needs an expected-entropy evaluator: build it with "
+                "lab.identification.make_evaluator (lab.runs.identify.build_agent does it all)"
+            )
         self.robot = robot
-        self.names = tuple(model_names)
+        self.names = tuple(db.name for db in self.dbs)
         self.config = config or AgentConfig()
         self.scoring = scoring or ScoringConfig()
         self.action_config = action_config or ActionConfig()
         self.rng = np.random.default_rng(seed)
-        self.dbs = [get_database(n) for n in self.names]
         self.scorers = [ModelScorer(db, self.scoring) for db in self.dbs]
         # the EKF's correspondences from the scorers' exact search, made once per frame and model
         # (observe_frame): exact, and faster than a FLANN search of a few hundred features
@@ -286,7 +313,7 @@ class IdentificationAgent:
             goal_tolerance_xy=self.config.arrive_xy * 0.6,
             goal_tolerance_theta=math.radians(self.config.arrive_theta_deg * 0.6),
         )
-        self.evaluator = evaluator if evaluator is not None else self._make_evaluator()
+        self.evaluator = evaluator
         self.P = uniform(len(self.dbs))
         self.steps: list[StepRecord] = []
         self.decisions: list[DecisionRecord] = []
@@ -312,24 +339,6 @@ class IdentificationAgent:
         # per model: (log-likelihood lead, turn of its filter) of the frame that favoured it most
         self._decisive: list[tuple[float, int] | None] = [None] * len(self.dbs)
         self._direction = 0  # the last drive's direction round the ring (+1 ccw, -1 cw, 0 none yet)
-
-    # --- set-up -----------------------------------------------------------------------------------
-    def _make_evaluator(self):
-        if self.planner is PlannerChoice.LUT:
-            from lab.identification.lut import LookupTableEvaluator
-            from lab.identification.tables import get_tables
-
-            tables = get_tables(self.names, dbs=self.dbs)
-            return LookupTableEvaluator(
-                tables, self.robot.camera, self.scoring, shared=shared_masks(self.scorers)
-            )
-        if self.planner is PlannerChoice.MC:
-            from lab.identification.montecarlo import MonteCarloEvaluator
-
-            return MonteCarloEvaluator(
-                self.dbs, self.robot.camera, self.scoring, shared=shared_masks(self.scorers)
-            )
-        return None
 
     # --- one step ---------------------------------------------------------------------------------
     def _perceive(self, frame):

@@ -6,10 +6,11 @@ The data flow, one module per stage::
     global_search    pan-tilt scan -> colour back-projection -> N_hist clusters -> sparse stereo -> M_p
     local_search     9 pan-tilt views -> SIFT + EKF (RANSAC start, ROI, gate) -> 6D pose or a miss
     agent            the closed loop (paper / lawnmower / frontier), navigation injected, time budget
-    trial            run_search: world, placement, agent, scoring against truth -> the `lab search` JSON
-    placement        valid spots on the floor, tables and shelf; searchable object names
-    training         the search's object databases (three training rings)
-    figures          the paper's Figs. 2, 5 and 6 (matplotlib; the algorithms never plot)
+
+Around it, in the layers above: the search's object databases are trained in
+:mod:`lab.training.search`; a trial (world, placement, agent, scoring against truth -> the ``lab
+search`` JSON) is :mod:`lab.runs.search`, with object placement in :mod:`lab.runs.placement`; the
+paper's Figs. 2, 5 and 6 are drawn in :mod:`lab.viz` (the algorithms never plot).
 """
 
 from lab.search.agent import (
@@ -25,7 +26,6 @@ from lab.search.agent import (
 )
 from lab.search.global_search import ColourPeak, GlobalSearchConfig, GlobalSearchResult, global_search
 from lab.search.local_search import LocalSearchConfig, LocalSearchResult, local_search
-from lab.search.placement import check_placement, random_placement, searchable_objects
 from lab.search.probability_map import (
     DetectionModel,
     ProbabilityMap,
@@ -39,11 +39,8 @@ from lab.search.probability_map import (
     update,
     update_global,
 )
-from lab.search.training import SEARCH_TRAINING, search_database
-from lab.search.trial import SearchResult, SearchTrace, run_search
 
 __all__ = [
-    "SEARCH_TRAINING",
     "AgentConfig",
     "AgentResult",
     "BudgetedRobot",
@@ -59,22 +56,15 @@ __all__ = [
     "SearchAgent",
     "SearchBudgetExceeded",
     "SearchEvent",
-    "SearchResult",
-    "SearchTrace",
     "Strategy",
     "bayes_update",
-    "check_placement",
     "constant_beta_field",
     "detection_likelihood",
     "global_search",
     "growing_beta_field",
     "local_search",
     "map_peaks",
-    "random_placement",
     "region_prior",
-    "run_search",
-    "search_database",
-    "searchable_objects",
     "uniform_prior",
     "update",
     "update_global",

@@ -156,7 +156,7 @@ def fig2_global_search(result: GlobalSearchResult, spec, db=None, view: int | No
 
 
 def fig5_trial(result, costmap_state: np.ndarray | None = None, costmap_spec=None):
-    """The paper's Fig. 5 for one trial (a :class:`~lab.search.trial.SearchResult`).
+    """The paper's Fig. 5 for one trial (a :class:`~lab.runs.search.SearchResult`).
 
     Parameters
     ----------
@@ -202,7 +202,7 @@ def fig5_trial(result, costmap_state: np.ndarray | None = None, costmap_spec=Non
     # the pose on the image
     loc = agent.local
     if loc is not None and loc.found and loc.frame is not None:
-        from lab.search.training import search_database
+        from lab.training.search import search_database
 
         ext = search_database(result.object).extent
         ax[0, 2].imshow(draw_pose(loc.frame.left, loc.estimate.G_CO, ext, loc.frame.camera))
@@ -281,7 +281,7 @@ def _save(fig, path) -> None:
 
 
 def write_figures(result, out, costmap_state: np.ndarray | None = None, costmap_spec=None) -> list:
-    """Write the figures of one trial (a :class:`~lab.search.trial.SearchResult`) into the folder ``out``.
+    """Write the figures of one trial (a :class:`~lab.runs.search.SearchResult`) into the folder ``out``.
 
     Files: ``fig2_global_search.png`` (the first global search, when there was one),
     ``fig5_trial.png`` (map with the first planned path; costmap, when given, with the trajectory; the
@@ -305,7 +305,7 @@ def write_figures(result, out, costmap_state: np.ndarray | None = None, costmap_
         written.append(out / name)
 
     if agent.globals_:
-        from lab.search.training import search_database
+        from lab.training.search import search_database
 
         db = search_database(result.object)
         save(fig2_global_search(agent.globals_[0], spec, db=db), "fig2_global_search.png")

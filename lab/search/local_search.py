@@ -41,7 +41,8 @@ from lab.errors import ConfigError
 from lab.estimation import EKFConfig, OrientationChart, PoseEKF, PoseEstimate, ProcessNoise
 from lab.geometry import relative_pose2d, transform_points, wrap_angle
 from lab.robot import Robot, StereoCamera, StereoFrame
-from lab.vision.database import FeatureDatabase, Matcher
+from lab.vision.database import FeatureDatabase
+from lab.vision.matching import Matcher
 from lab.vision.stereo import sift, stereo_features
 
 __all__ = [

@@ -155,3 +155,51 @@ def fig7(runs, names=None):
     fig.suptitle("Model probabilities for different true models (identification paper, Fig. 7)")
     fig.tight_layout()
     return fig
+
+
+def save_episode_figures(out, agent, true_poses, true_model: int) -> None:
+    """Write an identification episode's Figs. 5-7 into ``out`` (``lab identify --out``).
+
+    Parameters
+    ----------
+    out : Path
+    agent : IdentificationAgent
+        After its run: its steps and decisions are drawn.
+    true_poses : sequence of ndarray, shape (4, 4)
+        The box's true pose in W at each step's frame (scoring only).
+    true_model : int
+    """
+    from pathlib import Path
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    steps = agent.steps
+    t = np.array([s.t for s in steps])
+    P = np.array([s.posterior for s in steps])
+    modes = [s.head_mode for s in steps]
+    est = np.array(
+        [
+            [
+                *s.estimates_W[true_model][:3, 3],
+                math.atan2(s.estimates_W[true_model][1, 0], s.estimates_W[true_model][0, 0]),
+            ]
+            for s in steps
+        ]
+    )
+    true = np.array([[*G[:3, 3], math.atan2(G[1, 0], G[0, 0])] for G in true_poses])
+    names = list(agent.names)
+    decisions = [d.t for d in agent.decisions]
+    fig5(t, est, true, P, modes, decisions, names, true_model).savefig(
+        out / "fig5_pose_and_probabilities.png", dpi=90
+    )
+    if agent.decisions:
+        d = agent.decisions[-1]
+        odom = np.array([s.odom for s in steps])
+        gains = d.gains if np.isfinite(d.gains).any() else np.zeros(len(d.candidates))
+        fig6(d.candidates, gains, d.chosen, odom[-1], d.centre_W[:2], path_xy=odom[:, :2]).savefig(
+            out / "fig6_information_gain_ring.png", dpi=90
+        )
+    fig7(
+        [{"t": t, "posteriors": P, "modes": modes, "decisions": decisions, "true_model": true_model}], names
+    ).savefig(out / "fig7_probabilities.png", dpi=90)
+    plt.close("all")

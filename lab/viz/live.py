@@ -24,7 +24,7 @@ far); the left camera image with the frame's SIFT features, the most probable mo
 The whole episode of ``lab identify`` with the box driven by hand (``attach`` is called once the agent
 and the carrier exist, before the run)::
 
-    from lab.identification.run import run_identify
+    from lab.runs.identify import run_identify
     from lab.viz.live import LiveView, TeleopPanel
 
     def attach(agent, carrier):

@@ -16,11 +16,12 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.geometry import R_to_euler_zyx, se3_inv
+from lab.navigation.astar import astar_to_region
 from lab.navigation.grid import GridSpec
+from lab.navigation.navigator import Navigator
+from lab.navigation.navigator import NavOutcome as _Outcome
 from lab.robot import Robot
-from lab.scene import BodySpec, Scene, load_scene
-from lab.search.agent import AgentConfig, AgentResult, BudgetedRobot, SearchAgent, SearchEvent, Strategy
-from lab.search.placement import (
+from lab.runs.placement import (
     check_placement,
     circle_polygon,
     footprint,
@@ -30,10 +31,29 @@ from lab.search.placement import (
     searchable_objects,
     supports,
 )
+from lab.runs.robots import make_robot
+from lab.scene import BodySpec, Scene, load_scene
+from lab.search.agent import (
+    AgentConfig,
+    AgentResult,
+    BudgetedRobot,
+    NavOutcome,
+    SearchAgent,
+    SearchEvent,
+    Strategy,
+)
 from lab.search.probability_map import ProbabilityMap
-from lab.search.training import search_database
+from lab.training.search import search_database
 
-__all__ = ["SearchResult", "SearchTrace", "map_spec", "path_obstacles", "pose_errors", "run_search"]
+__all__ = [
+    "SearchResult",
+    "SearchTrace",
+    "map_spec",
+    "navigator_factory",
+    "path_obstacles",
+    "pose_errors",
+    "run_search",
+]
 
 #: Success, as the acceptance counts it: found, within 5 cm and 10 degrees of the truth.
 SUCCESS_POSITION_M = 0.05
@@ -244,7 +264,7 @@ def run_search(
     Parameters
     ----------
     object : str
-        A searchable object (:func:`lab.search.placement.searchable_objects`).
+        A searchable object (:func:`lab.runs.placement.searchable_objects`).
     seed : int
         Seeds the placement (when ``place`` is None), the obstacles, the odometry noise and RANSAC.
     place : (x, y, z_underside, yaw_deg), optional
@@ -280,39 +300,24 @@ def run_search(
     -------
     SearchResult
     """
-    from lab.sim import RenderSettings, SimRobot, SimWorld
-
     wall0 = time.perf_counter()
     strategy = Strategy.parse(strategy)
     scene = world if isinstance(world, Scene) else load_scene(world)
-    names = searchable_objects(scene)
-    if object not in names:
-        raise ConfigError(f"unknown object {object!r}; searchable objects: {', '.join(names)}")
-    if navigate is None:
-        raise ConfigError(
-            "run_search needs a navigator: navigate=lambda robot, spec: <callable(target_xy, min_d, max_d)>"
-        )
-    if not (isinstance(max_time, (int, float)) and math.isfinite(max_time) and max_time > 0):
-        raise ConfigError(f"max_time must be a finite number of seconds > 0, got {max_time!r}")
+    _check_trial(scene, object, navigate, max_time)
     recorder = None
     if record is not None:  # a bad path is refused before anything is built
         from lab.viz.recorder import Recorder
 
         recorder = Recorder(record)
     rng = np.random.default_rng(seed)
-    if place is None:
-        place = random_placement(scene, object, rng)
-    surface = check_placement(scene, object, place).kind
-    place = tuple(float(v) for v in place)
-    scene = scene.with_pose(object, place)
-    obstacle_poses: list = []
-    if obstacles:
-        scene, obstacle_poses = path_obstacles(scene, object, place, rng)
+    scene, place, surface, obstacle_poses = _place_object(scene, object, place, obstacles, rng)
     db = search_database(object, progress=progress)
     cfg = replace(config or AgentConfig(), strategy=strategy)
     spec = map_spec(scene)
-    with SimWorld(scene, RenderSettings(supersample=supersample)) as w:
-        robot = SimRobot(w, seed=seed)
+    from lab.sim import RenderSettings, SimWorld
+
+    with SimWorld(scene, RenderSettings(supersample=supersample)) as w, make_robot(world=w, seed=seed) as run:
+        robot = run.robot
         robot.enable()
         budget = BudgetedRobot(robot, max_time, max_wall_time)
         nav = navigate(budget, spec)
@@ -324,34 +329,28 @@ def run_search(
         if attach is not None:
             attach(agent)
         out = agent.run()
-        G_true = w.truth.G_W(object)
-        G_WC_true = w.truth.G_WC()  # the head has not moved since the last frame of a found track
-        true_pose = w.truth.robot_pose()
-        odom = robot.odometry()
-        collisions = int(w.truth.collisions)
-        sim_time = robot.now()
-        trajectory = np.array(budget.trajectory)
-        path_length = budget.path_length_m
-    pe = oe = None
-    cam_err = None
-    if out.found:
-        pe, oe = pose_errors(out.G_WO, G_true)
-        # the same pose in the camera frame: the perception error alone, without the odometry's drift
-        cpe, coe = pose_errors(out.local.estimate.G_CO, se3_inv(G_WC_true) @ G_true)
-        cam_err = {"position_m": round(cpe, 5), "orientation_deg": round(coe, 3)}
-    odometry_error = math.hypot(odom.x - true_pose.x, odom.y - true_pose.y)
+        truth = _TrialTruth(
+            G_WO=w.truth.G_W(object),
+            G_WC=w.truth.G_WC(),  # the head has not moved since the last frame of a found track
+            robot_pose=w.truth.robot_pose(),
+            collisions=int(w.truth.collisions),
+        )
+        odom, sim_time = robot.odometry(), robot.now()
+        trajectory, path_length = np.array(budget.trajectory), budget.path_length_m
+    errors = _pose_errors_of(out, truth)
+    pe, oe = errors["position"], errors["orientation"]
     success = bool(out.found and pe <= SUCCESS_POSITION_M and oe <= SUCCESS_ORIENTATION_DEG)
     return SearchResult(
         object=object,
         found=out.found,
-        true_pose=_pose_dict(G_true),
+        true_pose=_pose_dict(truth.G_WO),
         estimated_pose=None if out.G_WO is None else _pose_dict(out.G_WO),
         position_error_m=None if pe is None else round(pe, 5),
         orientation_error_deg=None if oe is None else round(oe, 3),
         path_length_m=path_length,
         global_searches=out.global_searches,
         local_searches=out.local_searches,
-        collisions=collisions,
+        collisions=truth.collisions,
         sim_time_s=sim_time,
         wall_time_s=time.perf_counter() - wall0,
         seed=int(seed),
@@ -361,9 +360,87 @@ def run_search(
         place=place,
         surface=surface,
         obstacles=tuple(obstacle_poses),
-        camera_frame_error=cam_err,
-        odometry_error_m=odometry_error,
+        camera_frame_error=errors["camera_frame"],
+        odometry_error_m=math.hypot(odom.x - truth.robot_pose.x, odom.y - truth.robot_pose.y),
         events=out.events,
         trace=SearchTrace(out, spec, trajectory, scene),
         recording=None if recorder is None or (p := recorder.close()) is None else str(p),
     )
+
+
+@dataclass(frozen=True)
+class _TrialTruth:
+    """The simulator's truth at the end of a trial: for scoring only."""
+
+    G_WO: np.ndarray  # the object in W
+    G_WC: np.ndarray  # the camera in W at the last frame
+    robot_pose: object  # Pose2D of the base
+    collisions: int
+
+
+def _check_trial(scene: Scene, object: str, navigate, max_time) -> None:
+    """One clear error for an unknown object, a missing navigator or a bad time budget."""
+    names = searchable_objects(scene)
+    if object not in names:
+        raise ConfigError(f"unknown object {object!r}; searchable objects: {', '.join(names)}")
+    if navigate is None:
+        raise ConfigError(
+            "run_search needs a navigator: navigate=lambda robot, spec: <callable(target_xy, min_d, max_d)>"
+        )
+    if not (isinstance(max_time, (int, float)) and math.isfinite(max_time) and max_time > 0):
+        raise ConfigError(f"max_time must be a finite number of seconds > 0, got {max_time!r}")
+
+
+def _place_object(scene: Scene, object: str, place, obstacles: bool, rng: np.random.Generator):
+    """Put the object at ``place`` (checked) or at a seeded random valid spot, and the path's obstacles:
+    returns the scene, the placement, its surface and the obstacles' poses."""
+    if place is None:
+        place = random_placement(scene, object, rng)
+    surface = check_placement(scene, object, place).kind
+    place = tuple(float(v) for v in place)
+    scene = scene.with_pose(object, place)
+    obstacle_poses: list = []
+    if obstacles:
+        scene, obstacle_poses = path_obstacles(scene, object, place, rng)
+    return scene, place, surface, obstacle_poses
+
+
+def _pose_errors_of(out: AgentResult, truth: _TrialTruth) -> dict:
+    """The found pose against the truth, in W and in the camera frame C (the perception error alone,
+    without the odometry's drift); None when nothing was found."""
+    if not out.found:
+        return {"position": None, "orientation": None, "camera_frame": None}
+    pe, oe = pose_errors(out.G_WO, truth.G_WO)
+    cpe, coe = pose_errors(out.local.estimate.G_CO, se3_inv(truth.G_WC) @ truth.G_WO)
+    return {
+        "position": pe,
+        "orientation": oe,
+        "camera_frame": {"position_m": round(cpe, 5), "orientation_deg": round(coe, 3)},
+    }
+
+
+# --- the navigation the search drives with -----------------------------------------------------------
+
+
+def navigator_factory(robot, spec, timeout_s: float = 120.0):
+    """``navigate`` for :func:`lab.runs.search.run_search`: scan once, then ``go_near`` each target.
+
+    The returned callable keeps its :class:`~lab.navigation.Navigator` as ``navigate.navigator`` (its
+    costmap is what ``lab search --out`` draws under the trajectory). Each outcome carries the path A*
+    plans first on the current costmap (``path_xy``, for the figures; the navigator replans on the way).
+    """
+    nav = Navigator(robot)
+    state = {"scanned": False}
+
+    def navigate(target_xy, min_distance: float, max_distance: float) -> NavOutcome:
+        if not state["scanned"]:
+            nav.scan()
+            state["scanned"] = True
+        first = astar_to_region(nav.planning_grid(), robot.odometry(), target_xy, max_distance, min_distance)
+        r = nav.go_near(target_xy, min_distance, max_distance, timeout=timeout_s)
+        arrived = r.outcome is _Outcome.ARRIVED
+        path = first.points_xy if first.found else None
+        return NavOutcome(arrived, r.reason or r.outcome.name, r.pose, path)
+
+    navigate.navigator = nav
+    return navigate

@@ -1,7 +1,7 @@
 """The search's object databases: the training phase of the search paper (Sec. III) for the lab room's
 objects, with the viewpoints the search will see them from.
 
-The default training ring (``lab.vision.TrainingParams``) looks at an object from 12 degrees above,
+The default training ring (:class:`lab.training.TrainingParams`) looks at an object from 12 degrees above,
 1 m away, as the identification robot sees its boxes. The search robot's camera (the lab room's
 ``[robot] mast_height``, 1.1 m) sees an object on the floor from about 50-60 degrees above at
 local-search range (0.6-0.9 m), one on a table (0.75 m) from 10-30 degrees above and one on the shelf
@@ -20,9 +20,11 @@ These databases live in their own cache folder (``<cache>/search-databases``), s
 
 from __future__ import annotations
 
+from lab.errors import ConfigError
 from lab.paths import cache_dir
-from lab.search.placement import searchable_objects
-from lab.vision.database import FeatureDatabase, TrainingParams, get_database
+from lab.scene import load_scene
+from lab.training.databases import TrainingParams, get_database
+from lab.vision.database import FeatureDatabase
 
 __all__ = ["SEARCH_TRAINING", "search_database"]
 
@@ -34,9 +36,7 @@ SEARCH_TRAINING = TrainingParams(radius=0.8, elevations_deg=(-35.0, 12.0, 35.0, 
 def search_database(name: str, progress: bool = False) -> FeatureDatabase:
     """The database (features and colour model) of the searchable object ``name``, trained with
     :data:`SEARCH_TRAINING` and cached; raises ConfigError for an unknown name (listing the names)."""
-    from lab.errors import ConfigError
-
-    names = searchable_objects()
+    names = load_scene("lab_room").names("object")
     if name not in names:
         raise ConfigError(f"unknown object {name!r}; searchable objects: {', '.join(names)}")
     return get_database(name, cache_dir() / "search-databases", SEARCH_TRAINING, progress=progress)

@@ -31,8 +31,8 @@ FIGURES = (
 
 def tables_missing(folder: Path | None = None) -> list[str]:
     """The box models whose lookup tables (or feature databases) are not in the cache yet."""
-    from lab.identification.tables import box_model_names, tables_path
-    from lab.vision.database import database_path
+    from lab.training.databases import database_path
+    from lab.training.tables import box_model_names, tables_path
 
     return [
         n
@@ -120,7 +120,7 @@ def run_demo(
     say : callable
         Where progress lines go (the terminal).
     """
-    from lab.identification.tables import box_model_names
+    from lab.training.tables import box_model_names
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -136,39 +136,28 @@ def run_demo(
             "(several minutes, once; `lab tables` builds them ahead)"
         )
     t0 = time.perf_counter()
+    from lab.runs.identify import run_identify
+
     if robot is not None:
-        from lab.hardware.run import identify_on_robot
-
         say(f"lab demo: identifying the box with the robot of {robot} ({planner} planner) ...")
-        res = identify_on_robot(
-            robot,
-            planner=planner,
-            seed=seed,
-            max_actions=max_actions,
-            max_time_s=max_time_s,
-            true_model=true_model,
-            mover=mover,
-            progress=say,
-            record=record,
-        )
     else:
-        from lab.identification.run import run_identify
-
         say(
             f"lab demo: identifying the box on the carrier ({names[true_model]}, {mover} mover, "
             f"{planner} planner, up to {max_actions} actions, {max_time_s:g} s simulated) ..."
         )
-        res = run_identify(
-            true_model,
-            seed,
-            mover,
-            planner,
-            max_actions,
-            out=out,
-            json_path=out / "identify.json",
-            max_time_s=max_time_s,
-            record=record,
-        )
+    res = run_identify(
+        true_model,
+        seed,
+        mover,
+        planner,
+        max_actions,
+        out=out,
+        json_path=out / "identify.json" if robot is None else None,
+        max_time_s=max_time_s,
+        record=record,
+        robot_config=robot,
+        progress=say if robot is not None else None,
+    )
     figures = [(f, c) for f, c in FIGURES if (out / f).is_file()]
     res["demo_wall_time_s"] = time.perf_counter() - t0
     write_json_atomic(out / "identify.json", res)

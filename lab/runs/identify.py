@@ -1,0 +1,316 @@
+"""One identification episode, set up, run and scored: what ``lab identify`` and ``lab demo`` call.
+
+In the simulator (no robot config) the scene is the identification paper's: the observing robot in the
+open ``arena``, the box to identify (``true_model``) on a carrier 1.2 m in front of it, turned so that the
+robot first faces a *shared* face (the unique face points away), and moved by a mover (static, scripted,
+random, evasive, teleop). With a robot config (``--robot``) the same agent runs on
+:class:`~lab.hardware.robot.HardwareRobot`: in a rehearsal (``[camera] source = "sim"``) on the device
+emulators with the box rendered from their state, or on the real robot, where there is no truth and
+``true_model``, ``success`` and the pose error are None. :func:`~lab.runs.robots.make_robot` is the switch.
+
+Ground truth is used only to score the run (pose error) and by the mover, never by the agent. The
+databases and lookup tables come from :mod:`lab.training` (built on first use, and said so); the
+agent is handed them (:func:`build_agent`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from lab.errors import ConfigError
+from lab.geometry import Pose2D, se3_inv
+from lab.identification.agent import AgentConfig, IdentificationAgent, PlannerChoice
+from lab.identification.evaluators import make_evaluator
+from lab.io import write_json_atomic
+from lab.robot import Robot
+from lab.runs.robots import RobotKind, RobotSession, make_robot
+from lab.training import box_model_names, get_database, get_tables
+
+__all__ = ["build_agent", "floor_plan", "pose_error", "run_identify"]
+
+
+def pose_error(G_est: np.ndarray, G_true: np.ndarray) -> dict:
+    """Translation [m] and rotation [deg] between an estimated and the true pose (4 x 4 each)."""
+    R = G_est[:3, :3].T @ G_true[:3, :3]
+    return {
+        "translation_m": float(np.linalg.norm(G_est[:3, 3] - G_true[:3, 3])),
+        "rotation_deg": math.degrees(math.acos(float(np.clip((np.trace(R) - 1) / 2, -1, 1)))),
+    }
+
+
+def floor_plan(room_size_m: tuple[float, float], robot_radius_m: float, resolution_m: float = 0.1):
+    """The known floor plan of a rectangular room centred on the origin, as A*'s cost grid: the walls
+    grown by the robot's radius (a map the operator gives the robot, not the simulator's state).
+
+    Parameters
+    ----------
+    room_size_m : (float, float) [m]
+        The room's x and y extent.
+    robot_radius_m : float [m]
+        The robot's footprint radius.
+    """
+    from lab.navigation import Costmap, GridSpec
+
+    sx, sy = (float(v) for v in room_size_m)
+    if not (sx > 0 and sy > 0):
+        raise ConfigError(f"room size must be positive, got {room_size_m}")
+    spec = GridSpec.from_bounds(-sx / 2, -sy / 2, sx / 2, sy / 2, resolution_m)
+    wall = np.zeros(spec.shape, dtype=bool)
+    wall[0, :] = wall[-1, :] = wall[:, 0] = wall[:, -1] = True
+    return Costmap.from_occupancy(spec, wall).inflated(robot_radius_m + resolution_m)
+
+
+def build_agent(
+    robot: Robot,
+    planner: str = "lut",
+    seed: int = 0,
+    config: AgentConfig | None = None,
+    names: Sequence[str] | None = None,
+    floor_plan=None,
+) -> IdentificationAgent:
+    """The identification agent on ``robot`` with its parts: the models' feature databases, and the
+    ``lut`` planner's lookup tables or the ``mc`` planner's databases, from the training cache (built
+    first when missing, and said so on stderr)."""
+    try:
+        choice = PlannerChoice(planner)
+    except ValueError:
+        raise ConfigError(
+            f"unknown planner {planner!r}; planners: {', '.join(p.value for p in PlannerChoice)}"
+        ) from None
+    names = tuple(names or box_model_names())
+    dbs = [get_database(n) for n in names]
+    agent = IdentificationAgent(robot, dbs, planner=choice, seed=seed, config=config, floor_plan=floor_plan)
+    if choice in (PlannerChoice.LUT, PlannerChoice.MC):
+        tables = get_tables(names, dbs=dbs) if choice is PlannerChoice.LUT else None
+        agent.evaluator = make_evaluator(choice, dbs, robot.camera, agent.scoring, tables)
+    return agent
+
+
+def run_identify(
+    true_model: int,
+    seed: int = 0,
+    mover: str = "evasive",
+    planner: str = "lut",
+    max_actions: int = 8,
+    out: Path | None = None,
+    json_path: Path | None = None,
+    max_time_s: float = 240.0,
+    figures: bool = True,
+    record: Path | None = None,
+    attach=None,
+    keep_direction: float | None = None,
+    robot_config=None,
+    progress=None,
+) -> dict:
+    """Run one episode and return the ``lab identify`` JSON (also written to ``json_path``).
+
+    Parameters
+    ----------
+    true_model : int
+        Index of the box on the carrier (0..3); on the real robot, ignored (no truth).
+    seed : int
+        Seeds the start poses' jitter, the odometry noise, RANSAC and the random movers/planners.
+    mover : str
+        static, scripted, random, evasive or teleop (simulator and rehearsal).
+    planner : str
+        lut, mc, random or circle.
+    record : Path, optional
+        Write an animation of the run there: the live view (:mod:`lab.viz.live`) at every step.
+    keep_direction : float, optional
+        :attr:`AgentConfig.keep_direction <lab.identification.agent.AgentConfig>` (default 0.5; 1.0 is
+        the plain argmax of Eq. (6)).
+    attach : callable, optional
+        ``attach(agent, carrier)`` once the agent is built, before it runs: a notebook's live view
+        and teleoperation panel, e.g. ``display(LiveView.for_identification(agent).widget)`` and
+        ``display(TeleopPanel(carrier.mover).widget)`` (with ``mover="teleop"``).
+    robot_config : path or HardwareConfig, optional
+        Run on the robot it describes (:func:`~lab.runs.robots.make_robot`); None: the simulator.
+    progress : callable(str), optional
+        One line per decision (the robot's console).
+    """
+    from lab.sim import box_model
+
+    box_model(true_model)  # a clear error before anything starts
+    config = AgentConfig(max_actions=max_actions, max_time_s=max_time_s)
+    if keep_direction is not None:
+        config = dataclasses.replace(config, keep_direction=keep_direction)
+    t_wall, t_cpu = time.perf_counter(), time.process_time()  # CPU: the episode's cost whatever the load
+    with contextlib.ExitStack() as stack:
+        session = _start(stack, robot_config, true_model, mover, seed)
+        world = session.world
+        plan = None
+        if session.kind is RobotKind.SIM and world.scene.room is not None:
+            plan = floor_plan(world.scene.room.size, session.robot.base_limits.radius)
+        agent = build_agent(session.robot, planner, seed, config, floor_plan=plan)
+        recorder = _watch(agent, record, progress)
+        if attach is not None:
+            attach(agent, session.carrier)
+        truth = _record_truth(agent, session)
+        t0 = 0.0 if session.kind is RobotKind.SIM else session.robot.now()
+        sim_t0, loop_wall0, loop_cpu0 = session.robot.now(), time.perf_counter(), time.process_time()
+        identified = agent.run()
+        loop = {  # the loop alone: no start-up (databases, tables, scene), no figures
+            "sim": session.robot.now() - sim_t0,
+            "wall": time.perf_counter() - loop_wall0,
+            "cpu": time.process_time() - loop_cpu0,
+        }
+        error = _final_pose_error(agent, session, truth, true_model)
+        elapsed = session.robot.now() - t0
+        extra = _robot_fields(session)
+    wall, cpu = time.perf_counter() - t_wall, time.process_time() - t_cpu
+    result = _episode_json(agent, session, true_model, identified, planner, seed, mover, t0)
+    result.update(sim_time_s=elapsed, wall_time_s=wall, pose_error=error, **extra)
+    if session.kind is RobotKind.SIM:
+        result.update(_speed_fields(elapsed, wall, cpu, loop))
+    _finish_recording(recorder, result, progress)
+    if json_path is not None:
+        write_json_atomic(Path(json_path), result)
+    if out is not None and figures and agent.steps and session.kind is RobotKind.SIM:
+        from lab.viz.identification import save_episode_figures
+
+        save_episode_figures(Path(out), agent, [G_WO for _, G_WO in truth], true_model)
+        write_json_atomic(Path(out) / "identify.json", result)
+    return result
+
+
+def _start(stack: contextlib.ExitStack, robot_config, true_model: int, mover: str, seed: int) -> RobotSession:
+    """The robot of the episode, with the box in front of it (in the simulator: the arena, the box on
+    a carrier 1.2 m ahead, its unique face (+X) pointing away so that the robot sees shared faces first)."""
+    if robot_config is not None:
+        return stack.enter_context(make_robot(robot_config, true_model=true_model, mover=mover, seed=seed))
+    from lab.sim import SimWorld, load_box_models
+    from lab.sim.movers import make_mover
+
+    models = load_box_models()
+    rng = np.random.default_rng(seed)
+    world = stack.enter_context(SimWorld("arena"))
+    yaw = float(rng.uniform(-0.3, 0.3))
+    carrier = world.add_carrier(models[true_model], Pose2D(0.0, 0.0, 0.0), box_yaw=yaw)
+    start = Pose2D(-1.2, float(rng.uniform(-0.1, 0.1)), 0.0)
+    session = stack.enter_context(make_robot(None, world=world, start=start, seed=seed))
+    carrier.mover = make_mover(mover, carrier, observer_pose=world.truth.robot_pose, seed=seed)
+    session.carrier = carrier
+    return session
+
+
+def _watch(agent: IdentificationAgent, record: Path | None, progress):
+    """Hook the console's decision lines and the recording's live view onto the agent; the recorder."""
+    if progress is not None:
+        seen = [0]
+        t0 = [None]
+
+        def on_step(a, frame):
+            t0[0] = frame.t if t0[0] is None else t0[0]
+            if len(a.decisions) > seen[0]:
+                seen[0] = len(a.decisions)
+                progress(f"decision {seen[0]} at t={frame.t - t0[0]:.1f} s: P = {np.round(a.P, 3).tolist()}")
+
+        agent.on_step = on_step
+    if record is None:
+        return None
+    from lab.viz.live import LiveView
+    from lab.viz.recorder import Recorder
+
+    recorder = Recorder(record)  # the live view drawn at every step: one frame per step
+    LiveView.for_identification(agent, rate_hz=None, recorder=recorder, widget=False)
+    return recorder
+
+
+def _record_truth(agent: IdentificationAgent, session: RobotSession) -> list:
+    """In the simulator, (G_WC, G_WO) true at each frame's capture (scoring and figures only)."""
+    truth: list = []
+    if session.kind is not RobotKind.SIM:
+        return truth
+    world, carrier, agent_step = session.world, session.carrier, agent.step
+
+    def step_with_truth():
+        truth.append((world.truth.G_WC(), carrier.G_WO.copy()))
+        return agent_step()
+
+    agent.step = step_with_truth
+    return truth
+
+
+def _final_pose_error(agent: IdentificationAgent, session: RobotSession, truth: list, true_model: int):
+    """The true model's estimate against the truth behind the last frame (None without a truth)."""
+    est = agent.bank.estimates[true_model]
+    if session.kind is RobotKind.SIM:
+        last = truth[-1] if truth else None
+    else:
+        t = session.rehearsal.truth() if session.rehearsal is not None else None
+        last = (t.G_WC, t.G_WO) if t is not None and t.G_WO is not None else None
+    if est is None or last is None:
+        return {"translation_m": None, "rotation_deg": None}
+    G_WC_true, G_WO_true = last
+    return pose_error(est.G_CO, se3_inv(G_WC_true) @ G_WO_true)
+
+
+def _robot_fields(session: RobotSession) -> dict:
+    """What only one kind of robot reports: the simulator's collisions, the hardware's watchdog."""
+    if session.kind is RobotKind.SIM:
+        return {"collisions": session.world.truth.collisions}
+    return {
+        "robot": session.name,
+        "rehearsal": session.kind is RobotKind.REHEARSAL,
+        "watchdog_stops": session.robot.watchdog_stops,
+    }
+
+
+def _episode_json(agent, session, true_model, identified, planner, seed, mover, t0) -> dict:
+    """The contract's fields of the ``lab identify`` JSON (history and decisions from ``t0``)."""
+    has_truth = session.kind is not RobotKind.HARDWARE
+    return {
+        "true_model": true_model if has_truth else None,
+        "identified_model": identified,
+        "success": (identified == true_model) if has_truth else None,
+        "actions": agent.n_actions,
+        "final_posterior": [float(p) for p in (agent.P / agent.P.sum())],
+        "history": [
+            {
+                "t": s.t - t0,
+                "posterior": [float(p) for p in s.posterior],
+                "ptu_state": s.head_mode,
+                "base_state": s.base_mode,
+                "action": s.action,
+            }
+            for s in agent.steps
+        ],
+        "planner": planner,
+        "seed": seed,
+        "mover": mover if has_truth else None,
+        "keep_direction": agent.config.keep_direction,
+        "decisions": [d.to_json(t0) for d in agent.decisions],
+        "filter_reseats": agent.n_reseats,
+        "ring_blocked": agent.n_blocked,
+        "track_lost": agent.n_lost,
+    }
+
+
+def _speed_fields(sim_time: float, wall: float, cpu: float, loop: dict) -> dict:
+    """Real-time factors: of the whole process, and of the loop alone per wall and per CPU second."""
+    return {
+        "real_time_factor": sim_time / wall if wall > 0 else None,
+        "cpu_time_s": cpu,
+        "real_time_factor_cpu": sim_time / cpu if cpu > 0 else None,  # on one free core
+        "loop_sim_time_s": loop["sim"],
+        "loop_wall_time_s": loop["wall"],
+        "loop_cpu_time_s": loop["cpu"],
+        "real_time_factor_wall": loop["sim"] / loop["wall"] if loop["wall"] > 0 else None,
+        "real_time_factor_loop_cpu": loop["sim"] / loop["cpu"] if loop["cpu"] > 0 else None,
+    }
+
+
+def _finish_recording(recorder, result: dict, progress) -> None:
+    if recorder is None:
+        return
+    p = recorder.close()
+    result["recording"] = None if p is None else str(p)
+    if progress is not None:
+        progress(f"recording: {p}")

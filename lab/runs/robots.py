@@ -1,0 +1,136 @@
+"""One switch from simulator to robot: :func:`make_robot` gives the :class:`~lab.robot.Robot` an experiment
+runs on, from a robot config or none.
+
+============================  =========================================  ==================================
+``config``                    robot                                      truth (scoring only)
+============================  =========================================  ==================================
+None                          :class:`~lab.sim.SimRobot` in ``world``    ``world.truth``
+TOML, ``[camera] source =     :class:`~lab.hardware.HardwareRobot` on    the rendered world behind each
+"sim"`` (a rehearsal)         the device emulators, camera rendered by   frame (:mod:`lab.runs.rehearsal`)
+                              the simulator
+TOML, any other source        :class:`~lab.hardware.HardwareRobot` on    none
+                              the real devices
+============================  =========================================  ==================================
+
+The agents see only the :class:`~lab.robot.Robot`; the session's ``world`` and ``carrier`` are for the
+run to set up and score the scene.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+
+from lab.errors import ConfigError
+from lab.geometry import Pose2D
+from lab.hardware.config import HardwareConfig, load_config
+from lab.robot import Robot
+
+__all__ = ["RobotKind", "RobotSession", "make_robot", "robot_kind"]
+
+
+class RobotKind(Enum):
+    """Which implementation of the Robot interface a run drives."""
+
+    SIM = "sim"  # the simulator
+    REHEARSAL = "rehearsal"  # the hardware adapter on the device emulators, the camera rendered
+    HARDWARE = "hardware"  # the real robot
+
+
+@dataclass
+class RobotSession:
+    """What :func:`make_robot` yields.
+
+    Attributes
+    ----------
+    kind : RobotKind
+    robot : Robot
+        The only thing an agent is given.
+    world : lab.sim.SimWorld or None
+        The simulated world (the simulator's, or the one a rehearsal renders); None on the real robot.
+    carrier : lab.sim.Carrier or None
+        A rehearsal's box carrier (in the simulator the run adds its own).
+    config : HardwareConfig or None
+        The robot config (with a rehearsal's emulator ports).
+    rehearsal : lab.runs.rehearsal.Rehearsal or None
+        A rehearsal's emulators and truth.
+    """
+
+    kind: RobotKind
+    robot: Robot
+    world: object = None
+    carrier: object = None
+    config: HardwareConfig | None = None
+    rehearsal: object = None
+
+    @property
+    def name(self) -> str:
+        """The robot config's path or name; ``"sim"`` in the simulator."""
+        if self.config is None:
+            return "sim"
+        return str(self.config.path) if self.config.path is not None else self.config.robot.name
+
+
+def _load(config: str | Path | HardwareConfig) -> HardwareConfig:
+    return config if isinstance(config, HardwareConfig) else load_config(config)
+
+
+def robot_kind(config: str | Path | HardwareConfig | None) -> RobotKind:
+    """The kind of robot ``config`` describes (None: the simulator)."""
+    if config is None:
+        return RobotKind.SIM
+    return RobotKind.REHEARSAL if _load(config).camera.source == "sim" else RobotKind.HARDWARE
+
+
+@contextlib.contextmanager
+def make_robot(
+    config: str | Path | HardwareConfig | None = None,
+    *,
+    world=None,
+    start: Pose2D | None = None,
+    seed: int = 0,
+    true_model: int = 1,
+    mover: str = "static",
+) -> Iterator[RobotSession]:
+    """The robot a run drives, closed (devices stopped, emulators ended) on exit.
+
+    Parameters
+    ----------
+    config : path or HardwareConfig, optional
+        A robot config (``hardware/*.toml``); None: the simulator.
+    world : lab.sim.SimWorld
+        The simulator's world (required without ``config``; the run owns it).
+    start : Pose2D, optional
+        The simulated robot's start in the world (default: the scene's ``[robot] start``).
+    seed : int
+        Seeds the simulated odometry noise, or a rehearsal's box yaw and mover.
+    true_model, mover :
+        A rehearsal's box (index into the box models) and what moves its carrier.
+
+    Raises
+    ------
+    ConfigError
+        No world for the simulator, or a bad robot config (the config loader's message).
+    """
+    if config is None:
+        if world is None:
+            raise ConfigError("make_robot needs a world for the simulator (or a robot config)")
+        from lab.sim import SimRobot
+
+        robot = SimRobot(world, start=start, seed=seed)
+        yield RobotSession(RobotKind.SIM, robot, world)
+        return
+    cfg = _load(config)
+    if cfg.camera.source == "sim":
+        from lab.runs.rehearsal import rehearsal
+
+        with rehearsal(cfg, true_model=true_model, mover=mover, seed=seed) as r:
+            yield RobotSession(RobotKind.REHEARSAL, r.robot, r.world, r.carrier, r.config, r)
+        return
+    from lab.hardware.robot import HardwareRobot
+
+    with HardwareRobot(cfg) as robot:
+        yield RobotSession(RobotKind.HARDWARE, robot, config=cfg)

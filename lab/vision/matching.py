@@ -1,0 +1,190 @@
+"""Matching a measured feature set against a database: the correspondence vector ``J_i``.
+
+:class:`Matcher` finds it with Lowe's Best-Bin-First search (a FLANN KD-tree, or an exact matrix
+product) and an alias-aware ratio test; :class:`Correspondences` holds the candidates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from lab.errors import ConfigError
+from lab.vision.database import FeatureDatabase
+from lab.vision.stereo import Features3D
+
+__all__ = ["Correspondences", "Matcher"]
+
+
+@dataclass(frozen=True)
+class Correspondences:
+    """Matches of a measured feature set D against a database B: measured ``idx_meas[k]`` may be
+    database feature ``idx_db[k]``.
+
+    A measured feature can have several candidates: the database *aliases*, look-alike features such as
+    the same printed page on three faces of a box. Geometry (RANSAC, the EKF's gate) decides which one
+    it is; ``primary`` marks the nearest descriptor of each measured feature.
+
+    Attributes
+    ----------
+    idx_meas : ndarray, shape (m,), int
+    idx_db : ndarray, shape (m,), int
+    distance : ndarray, shape (m,)
+        Descriptor distance of each candidate.
+    primary : ndarray, shape (m,), bool
+    """
+
+    idx_meas: np.ndarray
+    idx_db: np.ndarray
+    distance: np.ndarray
+    primary: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.idx_meas)
+
+    @property
+    def n_matched(self) -> int:
+        """Number of distinct measured features with at least one candidate."""
+        return int(len(np.unique(self.idx_meas)))
+
+    def best(self) -> Correspondences:
+        """Only the nearest candidate of each measured feature (the plain correspondence vector J)."""
+        return Correspondences(
+            self.idx_meas[self.primary],
+            self.idx_db[self.primary],
+            self.distance[self.primary],
+            self.primary[self.primary],
+        )
+
+    @classmethod
+    def empty(cls) -> Correspondences:
+        return cls(np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros(0, bool))
+
+    def pairs(self, features: Features3D, db: FeatureDatabase) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The EKF's inputs for these matches: ``d_C`` (m, 3), ``b_O`` (m, 3) and ``Sigma_d`` (m, 3, 3).
+
+        One row per candidate, so a measured feature with aliases appears once per alias; RANSAC and
+        the EKF's feasibility gate keep the geometrically consistent one.
+        """
+        return (
+            features.points_C[self.idx_meas],
+            db.points_O[self.idx_db],
+            features.covariances[self.idx_meas],
+        )
+
+
+class Matcher:
+    """Lowe's Best-Bin-First matching of measured features against one database (FLANN KD-tree).
+
+    The ratio test is alias-aware: the nearest database descriptor must beat the nearest *different*
+    one by ``ratio``. Two database features are aliases (not different) when
+
+    * their descriptors lie within ``alias_distance`` of each other: a page printed on three faces
+      would otherwise fail the plain ratio test everywhere, since its three copies are each other's
+      second-nearest neighbours; or
+    * (with ``alias_radius`` > 0) they lie within ``alias_radius`` [m] of each other in the object
+      frame: one physical point seen from training views far apart (another ring, another side)
+      gives descriptors too different to merge into one database feature, and each is then the
+      other's second-nearest neighbour -- the ratio test would reject the very point that matched
+      best. The search's databases, trained from several rings, need this (measured: an object on
+      the floor found in 5 of 6 fixed views with it, 3 of 6 without).
+
+    All aliases of the nearest are returned as candidates.
+
+    The index is built once per database. ``method="brute"`` gives exact nearest neighbours by one
+    matrix product (an independent check, and as fast for databases of a few thousand features).
+    FLANN's KD-trees are randomised; the seed is fixed, so runs repeat exactly.
+    """
+
+    def __init__(
+        self,
+        db: FeatureDatabase,
+        ratio: float = 0.75,
+        method: str = "flann",
+        trees: int = 4,
+        checks: int = 64,
+        k: int = 8,
+        alias_distance: float = 120.0,
+        alias_radius: float = 0.0,
+    ):
+        if method not in ("flann", "brute"):
+            raise ConfigError(f"method must be 'flann' or 'brute', got {method!r}")
+        if not 0 < ratio <= 1:
+            raise ConfigError(f"ratio must be within (0, 1], got {ratio}")
+        if not alias_radius >= 0:
+            raise ConfigError(f"alias_radius must be >= 0 m, got {alias_radius}")
+        self.db, self.ratio, self.method, self.alias_distance = db, ratio, method, alias_distance
+        self.alias_radius = float(alias_radius)
+        self.k = min(k, len(db))
+        self._D = np.ascontiguousarray(db.descriptors, dtype=np.float32)
+        self._checks = checks
+        if method == "flann" and len(db) < 64:  # FLANN asserts on tiny indexes; exact search is as fast there
+            self.method = method = "brute"
+        if method == "flann" and len(db) >= 2:
+            cv2.setRNGSeed(0)
+            self._index = cv2.flann_Index(self._D, {"algorithm": 1, "trees": trees})
+        else:
+            self._D_sq = np.einsum("ij,ij->i", self._D, self._D)
+
+    def neighbours(self, descriptors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The k nearest database features of each descriptor: indices (n, k) and L2 distances (n, k)."""
+        q = np.ascontiguousarray(descriptors, dtype=np.float32)
+        if self.method == "flann":
+            idx, d2 = self._index.knnSearch(q, self.k, params={"checks": self._checks})
+            return idx.astype(int), np.sqrt(np.maximum(d2, 0.0))
+        d2 = np.einsum("ij,ij->i", q, q)[:, None] + self._D_sq[None, :] - 2.0 * q @ self._D.T
+        idx = (
+            np.argpartition(d2, self.k - 1, axis=1)[:, : self.k]
+            if self.k < len(self._D)
+            else np.tile(np.arange(len(self._D)), (len(q), 1))
+        )
+        part = np.take_along_axis(d2, idx, axis=1)
+        order = np.argsort(part, axis=1, kind="stable")
+        idx = np.take_along_axis(idx, order, axis=1)
+        return idx, np.sqrt(np.maximum(np.take_along_axis(part, order, axis=1), 0.0))
+
+    def match(
+        self, features: Features3D, neighbours: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> Correspondences:
+        """Candidates of every measured feature that passes the alias-aware ratio test.
+
+        Parameters
+        ----------
+        features : Features3D
+        neighbours : (ndarray (n, k) int, ndarray (n, k)), optional
+            The k nearest database features of each measured descriptor and their L2 distances, in
+            increasing distance, as :meth:`neighbours` returns them: a search already made for this
+            frame (the model probabilities make the same exact search) is reused instead of repeated.
+            With the exact neighbours the result is that of ``method="brute"``.
+        """
+        if len(features) == 0 or len(self.db) < 2:
+            return Correspondences.empty()
+        if neighbours is None:
+            idx, dist = self.neighbours(features.descriptors)
+        else:
+            idx, dist = (np.asarray(a) for a in neighbours)
+            if idx.shape != (len(features), self.k) or dist.shape != idx.shape:
+                raise ConfigError(
+                    f"neighbours must be two ({len(features)}, {self.k}) arrays (one row per measured "
+                    f"feature, this matcher's k = {self.k}), got {idx.shape} and {dist.shape}"
+                )
+        n, k = idx.shape
+        # aliases: neighbours whose database descriptor is close to the nearest one's
+        alias = np.linalg.norm(self._D[idx] - self._D[idx[:, :1]], axis=2) < self.alias_distance
+        if self.alias_radius > 0:  # the same physical point, seen from far-apart training views
+            P = self.db.points_O
+            alias |= np.linalg.norm(P[idx] - P[idx[:, :1]], axis=2) < self.alias_radius
+        has_other = ~alias.all(axis=1)
+        first_other = np.argmax(~alias, axis=1)  # column of the nearest non-alias (when there is one)
+        d_other = dist[np.arange(n), first_other]
+        passed = np.where(has_other, dist[:, 0] < self.ratio * d_other, True)
+        # candidates: aliases nearer than the first non-alias
+        cols = np.arange(k)[None, :]
+        cand = alias & passed[:, None] & np.where(has_other[:, None], cols < first_other[:, None], True)
+        rows, c = np.nonzero(cand)
+        if len(rows) == 0:
+            return Correspondences.empty()
+        return Correspondences(rows, idx[rows, c], dist[rows, c], c == 0)
+
