@@ -367,4 +367,3 @@ def load_model_tables(path: Path, true_model: str | None = None) -> ModelTables:
     if true_model is not None and t.true_model != true_model:
         raise AssetError(f"lookup tables {path} hold {t.true_model!r}, expected {true_model!r}")
     return t
-

@@ -170,14 +170,19 @@ def run_identify(
     if session.kind is RobotKind.SIM:
         result.update(_speed_fields(elapsed, wall, cpu, loop))
     _finish_recording(recorder, result, progress)
+    _write(result, json_path, out if figures else None, agent, session, [G_WO for _, G_WO in truth])
+    return result
+
+
+def _write(result: dict, json_path, out, agent, session: RobotSession, true_poses: list) -> None:
+    """The JSON to ``json_path``; in the simulator, Figs. 5-7 and ``identify.json`` into ``out``."""
     if json_path is not None:
         write_json_atomic(Path(json_path), result)
-    if out is not None and figures and agent.steps and session.kind is RobotKind.SIM:
+    if out is not None and agent.steps and session.kind is RobotKind.SIM:
         from lab.viz.identification import save_episode_figures
 
-        save_episode_figures(Path(out), agent, [G_WO for _, G_WO in truth], true_model)
+        save_episode_figures(Path(out), agent, true_poses, result["true_model"])
         write_json_atomic(Path(out) / "identify.json", result)
-    return result
 
 
 def _start(stack: contextlib.ExitStack, robot_config, true_model: int, mover: str, seed: int) -> RobotSession:

@@ -259,7 +259,7 @@ def run_search(
     record=None,
     attach: Callable | None = None,
 ) -> SearchResult:
-    """Run one search trial in the simulator and score it.
+    """Run one search trial in the simulator and score it: the :class:`SearchResult`.
 
     Parameters
     ----------
@@ -272,8 +272,8 @@ def run_search(
         clear of other bodies and of the robot). Default: a seeded random valid placement on a random
         surface.
     strategy : {"paper", "lawnmower", "frontier"}
-    max_time : float [s]
-        Simulated-time budget; the run ends "not found" when it is used up.
+    max_time, max_wall_time : float [s]
+        Simulated-time budget (the run ends "not found" when it is used up); and, optionally, wall time.
     navigate : callable ``(robot, spec) -> navigate``
         Builds the navigation callable (see :mod:`lab.search.agent`) for the robot the search drives
         (a :class:`~lab.search.agent.BudgetedRobot`) and the map's grid. Required.
@@ -283,32 +283,19 @@ def run_search(
     config : AgentConfig, optional
         Its ``strategy`` is replaced by ``strategy``.
     supersample : int
-        Render supersampling (2: the local search matches about twice as many SIFT features on the
-        small objects as at 1; see ``tests/test_search_local.py``).
-    max_wall_time : float [s], optional
-        Also stop after this much wall-clock time.
+        Render supersampling (2: twice the SIFT matches on the small objects as 1; test_search_local).
     progress : bool
         Say on stderr when a database is being built.
     record : str or Path, optional
-        Write an animation of the run there (``.gif``, or ``.mp4`` with ffmpeg): the live view
-        (:mod:`lab.viz.live`) drawn at every event, stamped with the sim time.
+        Write an animation of the live view (:mod:`lab.viz.live`) there, one frame per event.
     attach : callable, optional
         ``attach(agent)`` once the agent is built, before it runs: e.g. a notebook's live view,
         ``attach=lambda agent: display(LiveView.for_search(agent).widget)``.
-
-    Returns
-    -------
-    SearchResult
     """
     wall0 = time.perf_counter()
     strategy = Strategy.parse(strategy)
     scene = world if isinstance(world, Scene) else load_scene(world)
-    _check_trial(scene, object, navigate, max_time)
-    recorder = None
-    if record is not None:  # a bad path is refused before anything is built
-        from lab.viz.recorder import Recorder
-
-        recorder = Recorder(record)
+    recorder = _check_trial(scene, object, navigate, max_time, record)
     rng = np.random.default_rng(seed)
     scene, place, surface, obstacle_poses = _place_object(scene, object, place, obstacles, rng)
     db = search_database(object, progress=progress)
@@ -317,55 +304,72 @@ def run_search(
     from lab.sim import RenderSettings, SimWorld
 
     with SimWorld(scene, RenderSettings(supersample=supersample)) as w, make_robot(world=w, seed=seed) as run:
-        robot = run.robot
-        robot.enable()
-        budget = BudgetedRobot(robot, max_time, max_wall_time)
-        nav = navigate(budget, spec)
-        agent = SearchAgent(budget, db, nav, ProbabilityMap(spec), cfg, rng=np.random.default_rng([seed, 1]))
-        if recorder is not None:
-            from lab.viz.live import LiveView
-
-            LiveView.for_search(agent, rate_hz=None, recorder=recorder, widget=False)
-        if attach is not None:
-            attach(agent)
-        out = agent.run()
-        truth = _TrialTruth(
-            G_WO=w.truth.G_W(object),
-            G_WC=w.truth.G_WC(),  # the head has not moved since the last frame of a found track
-            robot_pose=w.truth.robot_pose(),
-            collisions=int(w.truth.collisions),
-        )
-        odom, sim_time = robot.odometry(), robot.now()
-        trajectory, path_length = np.array(budget.trajectory), budget.path_length_m
-    errors = _pose_errors_of(out, truth)
-    pe, oe = errors["position"], errors["orientation"]
-    success = bool(out.found and pe <= SUCCESS_POSITION_M and oe <= SUCCESS_ORIENTATION_DEG)
+        parts = (db, navigate, spec, cfg, seed, recorder, attach, (max_time, max_wall_time))
+        out, truth, budget, odom = _search(run.robot, w, object, *parts)
     return SearchResult(
-        object=object,
-        found=out.found,
-        true_pose=_pose_dict(truth.G_WO),
-        estimated_pose=None if out.G_WO is None else _pose_dict(out.G_WO),
-        position_error_m=None if pe is None else round(pe, 5),
-        orientation_error_deg=None if oe is None else round(oe, 3),
-        path_length_m=path_length,
+        **_scored(object, out, truth, odom),
+        path_length_m=budget.path_length_m,
         global_searches=out.global_searches,
         local_searches=out.local_searches,
-        collisions=truth.collisions,
-        sim_time_s=sim_time,
+        sim_time_s=truth.sim_time_s,
         wall_time_s=time.perf_counter() - wall0,
         seed=int(seed),
         strategy=strategy.value,
-        success=success,
-        reason=out.reason,
         place=place,
         surface=surface,
         obstacles=tuple(obstacle_poses),
-        camera_frame_error=errors["camera_frame"],
-        odometry_error_m=math.hypot(odom.x - truth.robot_pose.x, odom.y - truth.robot_pose.y),
         events=out.events,
-        trace=SearchTrace(out, spec, trajectory, scene),
+        trace=SearchTrace(out, spec, np.array(budget.trajectory), scene),
         recording=None if recorder is None or (p := recorder.close()) is None else str(p),
     )
+
+
+def _search(robot, w, object, db, navigate, spec, cfg, seed, recorder, attach, budgets):
+    """The agent's run on the enabled robot within the time budgets (sim, wall), with the truth behind
+    it read once it has ended: returns the agent's result, the truth, the budgeted robot and its
+    odometry at the end."""
+    robot.enable()
+    budget = BudgetedRobot(robot, *budgets)
+    nav = navigate(budget, spec)
+    agent = SearchAgent(budget, db, nav, ProbabilityMap(spec), cfg, rng=np.random.default_rng([seed, 1]))
+    if recorder is not None:
+        from lab.viz.live import LiveView
+
+        LiveView.for_search(agent, rate_hz=None, recorder=recorder, widget=False)
+    if attach is not None:
+        attach(agent)
+    out = agent.run()
+    truth = _TrialTruth(
+        G_WO=w.truth.G_W(object),
+        G_WC=w.truth.G_WC(),  # the head has not moved since the last frame of a found track
+        robot_pose=w.truth.robot_pose(),
+        collisions=int(w.truth.collisions),
+        sim_time_s=robot.now(),
+    )
+    return out, truth, budget, robot.odometry()
+
+
+def _scored(object: str, out: AgentResult, truth: _TrialTruth, odom) -> dict:
+    """The result's fields that compare the run with the truth: pose errors in W and in the camera
+    frame C (the perception error alone, without the odometry's drift), success, odometry error."""
+    pe = oe = cam = None
+    if out.found:
+        pe, oe = pose_errors(out.G_WO, truth.G_WO)
+        cpe, coe = pose_errors(out.local.estimate.G_CO, se3_inv(truth.G_WC) @ truth.G_WO)
+        cam = {"position_m": round(cpe, 5), "orientation_deg": round(coe, 3)}
+    return {
+        "object": object,
+        "found": out.found,
+        "true_pose": _pose_dict(truth.G_WO),
+        "estimated_pose": None if out.G_WO is None else _pose_dict(out.G_WO),
+        "position_error_m": None if pe is None else round(pe, 5),
+        "orientation_error_deg": None if oe is None else round(oe, 3),
+        "collisions": truth.collisions,
+        "success": bool(out.found and pe <= SUCCESS_POSITION_M and oe <= SUCCESS_ORIENTATION_DEG),
+        "reason": out.reason,
+        "camera_frame_error": cam,
+        "odometry_error_m": math.hypot(odom.x - truth.robot_pose.x, odom.y - truth.robot_pose.y),
+    }
 
 
 @dataclass(frozen=True)
@@ -376,10 +380,12 @@ class _TrialTruth:
     G_WC: np.ndarray  # the camera in W at the last frame
     robot_pose: object  # Pose2D of the base
     collisions: int
+    sim_time_s: float
 
 
-def _check_trial(scene: Scene, object: str, navigate, max_time) -> None:
-    """One clear error for an unknown object, a missing navigator or a bad time budget."""
+def _check_trial(scene: Scene, object: str, navigate, max_time, record):
+    """One clear error for an unknown object, a missing navigator, a bad time budget or a bad recording
+    path, before anything is built; returns the recorder (None without ``record``)."""
     names = searchable_objects(scene)
     if object not in names:
         raise ConfigError(f"unknown object {object!r}; searchable objects: {', '.join(names)}")
@@ -389,6 +395,11 @@ def _check_trial(scene: Scene, object: str, navigate, max_time) -> None:
         )
     if not (isinstance(max_time, (int, float)) and math.isfinite(max_time) and max_time > 0):
         raise ConfigError(f"max_time must be a finite number of seconds > 0, got {max_time!r}")
+    if record is None:
+        return None
+    from lab.viz.recorder import Recorder
+
+    return Recorder(record)
 
 
 def _place_object(scene: Scene, object: str, place, obstacles: bool, rng: np.random.Generator):
@@ -403,20 +414,6 @@ def _place_object(scene: Scene, object: str, place, obstacles: bool, rng: np.ran
     if obstacles:
         scene, obstacle_poses = path_obstacles(scene, object, place, rng)
     return scene, place, surface, obstacle_poses
-
-
-def _pose_errors_of(out: AgentResult, truth: _TrialTruth) -> dict:
-    """The found pose against the truth, in W and in the camera frame C (the perception error alone,
-    without the odometry's drift); None when nothing was found."""
-    if not out.found:
-        return {"position": None, "orientation": None, "camera_frame": None}
-    pe, oe = pose_errors(out.G_WO, truth.G_WO)
-    cpe, coe = pose_errors(out.local.estimate.G_CO, se3_inv(truth.G_WC) @ truth.G_WO)
-    return {
-        "position": pe,
-        "orientation": oe,
-        "camera_frame": {"position_m": round(cpe, 5), "orientation_deg": round(coe, 3)},
-    }
 
 
 # --- the navigation the search drives with -----------------------------------------------------------

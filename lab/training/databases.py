@@ -303,13 +303,11 @@ def _merge(points, descs, seen, counts, p_O, d, view, params: TrainingParams) ->
             counts.append(1)
 
 
-
 # --- the cache -------------------------------------------------------------------------------------
 
 
 def database_path(name: str, folder: Path | None = None) -> Path:
     return Path(folder or cache_dir() / "databases") / f"v{FORMAT_VERSION}" / f"{name}.npz"
-
 
 
 def get_database(
@@ -342,4 +340,3 @@ def get_database(
     db = train_database(name, params, progress=progress)
     save_database(db, path)
     return db
-

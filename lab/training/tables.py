@@ -122,7 +122,6 @@ class TableParams:
         return np.diag([self.position_std_m**2] * 3 + [math.radians(self.rotation_std_deg) ** 2] * 3)
 
 
-
 # --- building ----------------------------------------------------------------------------------------
 
 
@@ -149,6 +148,31 @@ def _key(
             "dist_max_m": scoring.dist_max_m,
         },
     }
+
+
+def _training_rows(true_model: str, names: list[str], dbs, viewpoint_indices):
+    """The true model's ring viewpoints (V, 2) [rad] and the rows to build; ConfigError when the true
+    model is not among the databases or not trainable, or a row is outside the ring."""
+    if true_model not in names:
+        raise ConfigError(f"true model {true_model!r} is not among the databases {', '.join(names)}")
+    objects = trainable_objects()
+    if true_model not in objects:
+        raise ConfigError(f"unknown object {true_model!r}; trainable objects: {', '.join(objects)}")
+    views = np.asarray(dbs[names.index(true_model)].viewpoints, dtype=float)
+    V = len(views)
+    rows = range(V) if viewpoint_indices is None else [int(v) for v in viewpoint_indices]
+    if any(not 0 <= v < V for v in rows):
+        raise ConfigError(f"viewpoint indices must be within 0..{V - 1}")
+    return views, rows
+
+
+def _progress(jobs: list, desc: str, show: bool):
+    """``jobs``, with a progress bar on stderr when ``show``."""
+    if not show:
+        return jobs
+    from tqdm import tqdm
+
+    return tqdm(jobs, desc=desc, unit="render", leave=False, file=sys.stderr, disable=None)
 
 
 def build_model_tables(
@@ -184,17 +208,8 @@ def build_model_tables(
     params = params or TableParams()
     scoring = scoring or ScoringConfig()
     names = [db.name for db in dbs]
-    if true_model not in names:
-        raise ConfigError(f"true model {true_model!r} is not among the databases {', '.join(names)}")
-    objects = trainable_objects()
-    if true_model not in objects:
-        raise ConfigError(f"unknown object {true_model!r}; trainable objects: {', '.join(objects)}")
-    db_i = dbs[names.index(true_model)]
-    views = np.asarray(db_i.viewpoints, dtype=float)
+    views, rows = _training_rows(true_model, names, dbs, viewpoint_indices)
     V = len(views)
-    rows = range(V) if viewpoint_indices is None else [int(v) for v in viewpoint_indices]
-    if any(not 0 <= v < V for v in rows):
-        raise ConfigError(f"viewpoint indices must be within 0..{V - 1}")
     cam = params.camera
     scorers = [ModelScorer(db, scoring) for db in dbs]
     hits = [np.zeros((V, len(db)), np.int32) for db in dbs]
@@ -202,16 +217,9 @@ def build_model_tables(
     det = sift(StereoParams().n_features, StereoParams().contrast_threshold)
     Sigma_gate = params.gate_covariance()
     name_seed = zlib.crc32(true_model.encode())
-    world, G_WO = _object_world(objects[true_model], params.supersample)
+    world, G_WO = _object_world(trainable_objects()[true_model], params.supersample)
     centre = G_WO[:3, 3]
-    jobs = [(v, t) for v in rows for t in range(params.repeats)]
-    it = jobs
-    if progress:
-        from tqdm import tqdm
-
-        it = tqdm(
-            jobs, desc=f"tables {true_model}", unit="render", leave=False, file=sys.stderr, disable=None
-        )
+    it = _progress([(v, t) for v in rows for t in range(params.repeats)], f"tables {true_model}", progress)
 
     def eye(az, el, r):
         return centre + r * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
@@ -245,7 +253,6 @@ def build_model_tables(
 def tables_path(true_model: str, folder: Path | None = None) -> Path:
     """``<cache>/tables/v<FORMAT>/<true_model>.npz`` (``folder`` replaces ``<cache>/tables``)."""
     return Path(folder or cache_dir() / "tables") / f"v{TABLE_FORMAT_VERSION}" / f"{true_model}.npz"
-
 
 
 def _stale_reason(t: ModelTables, key: dict) -> str | None:
@@ -353,4 +360,3 @@ def get_tables(
     dbs = _databases(names, dbs)
     out = [get_model_tables(n, dbs, folder, params, scoring, rebuild, progress) for n in names]
     return LookupTables.from_model_tables(out, n_levels, shared_features(dbs, scoring))
-

@@ -119,4 +119,3 @@ def load_database(path: Path, name: str | None = None) -> FeatureDatabase:
     if name is not None and db.name != name:
         raise AssetError(f"feature database {path} holds {db.name!r}, expected {name!r}")
     return db
-

@@ -187,4 +187,3 @@ class Matcher:
         if len(rows) == 0:
             return Correspondences.empty()
         return Correspondences(rows, idx[rows, c], dist[rows, c], c == 0)
-
