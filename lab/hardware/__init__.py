@@ -3,7 +3,8 @@
 * :mod:`lab.hardware.ptu`: PTU-D46 pan-tilt unit (ASCII protocol);
 * :mod:`lab.hardware.create2`: iRobot Create 2 base (Open Interface, binary stream);
 * :mod:`lab.hardware.camera`: stereo capture, calibration files, rectification, replay, calibration tool;
-* :mod:`lab.hardware.emulators`: both devices on pseudo-terminals, with fault switches;
+* :mod:`lab.hardware.emulators`: both devices on pseudo-terminals, with fault switches (the pty base,
+  one module per device, and the pair);
 * :mod:`lab.hardware.config`: the strict TOML loader (``hardware/robot.toml``, ``hardware/emulated.toml``);
 * :mod:`lab.hardware.robot`: :class:`HardwareRobot`, the :class:`lab.robot.Robot` implementation;
 * :mod:`lab.hardware.cli`: ``emulate()`` and ``check()`` for ``lab hardware ...``.
