@@ -1,7 +1,8 @@
 """lab.hardware: the real robot's devices, their emulators, and the Robot adapter over them.
 
 * :mod:`lab.hardware.ptu`: PTU-D46 pan-tilt unit (ASCII protocol);
-* :mod:`lab.hardware.create2`: iRobot Create 2 base (Open Interface, binary stream);
+* :mod:`lab.hardware.create2`: iRobot Create 2 base driver, over :mod:`lab.hardware.open_interface` (the
+  Open Interface codec: opcodes, packets, stream parser) and :mod:`lab.hardware.odometry` (encoders, pose);
 * :mod:`lab.hardware.camera`: stereo capture, calibration files, rectification, replay, calibration tool;
 * :mod:`lab.hardware.emulators`: both devices on pseudo-terminals, with fault switches (the pty base,
   one module per device, and the pair);

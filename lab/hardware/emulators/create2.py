@@ -14,8 +14,8 @@ import math
 import struct
 from dataclasses import dataclass
 
-from lab.hardware.create2 import PACKETS, OIMode, Op, encode_stream_frame
 from lab.hardware.emulators.pty_device import PtyDevice
+from lab.hardware.open_interface import PACKETS, OIMode, Op, encode_stream_frame
 
 __all__ = ["Create2Emulator", "DriveRecord"]
 
