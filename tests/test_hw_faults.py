@@ -463,7 +463,9 @@ def test_missing_or_mismatched_calibration_opens_no_port(tmp_path):
         with pytest.raises(ConfigError, match=r"calibration file .*x.yml not found"):
             HardwareRobot(missing)
         other = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, width=640, height=480))
-        with pytest.raises(ConfigError, match="is for 320x240 images but the camera delivers 640x480"):
+        with pytest.raises(
+            ConfigError, match=r"width/height say 640x480 but the calibration file .* is for 320x240"
+        ):
             HardwareRobot(other)
         with pytest.raises(ConfigError, match="camera source delivers 64x48 images"):
             HardwareRobot(cfg, camera_source=ReplayStereoSource.synthetic(64, 48))
@@ -553,7 +555,7 @@ def _emulated_toml(tmp_path, links, **replace):
         (
             {"width = 320\nheight = 240": "width = 640\nheight = 480"},
             "calibration",
-            "is for 320x240 images but the camera delivers 640x480",
+            "[camera] width/height say 640x480 but the calibration file",
             "calibrate (hardware/README.md step 6) or fix [camera] calibration",
         ),
         (

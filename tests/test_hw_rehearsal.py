@@ -19,9 +19,10 @@ from hw_helpers import REPO
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
+from lab.hardware.camera import make_camera_source
 from lab.hardware.config import load_config
 from lab.hardware.rehearsal import rehearsal
-from lab.hardware.robot import _pan_tilt_at, _pose_at, make_camera_source
+from lab.hardware.robot import _pan_tilt_at, _pose_at
 from lab.robot import PanTiltState
 from lab.vision.rectify import StereoCalibration
 

@@ -24,6 +24,7 @@ import serial
 
 from lab.errors import ConnectionLost, DeviceTimeout, NotEnabled, SafetyStop
 from lab.geometry import Pose2D
+from lab.hardware.config import BaseConfig, HardwareConfig
 from lab.hardware.odometry import DiffDriveOdometry, EncoderUnwrapper
 from lab.hardware.open_interface import (
     DEFAULT_STREAM,
@@ -152,6 +153,34 @@ class Create2:
         self._stop_reader = threading.Event()
         self._last_sent = (0, 0)
         self.counters = {"stale_events": 0, "stream_requests": 0, "drive_commands": 0, "bytes_received": 0}
+
+    @classmethod
+    def from_config(
+        cls, config: BaseConfig | HardwareConfig, *, on_event: EventCallback | None = None
+    ) -> Create2:
+        """The driver a ``[base]`` section describes: the one place that maps its keys onto parameters.
+
+        Parameters
+        ----------
+        config : BaseConfig or HardwareConfig
+            The ``[base]`` section, or a whole config (its ``base`` is used).
+        on_event : callable(kind, message), optional
+            As for the constructor.
+        """
+        b = config.base if isinstance(config, HardwareConfig) else config
+        return cls(
+            b.port,
+            baudrate=b.baudrate,
+            mode=b.mode,
+            stale_timeout_s=b.stale_timeout_s,
+            first_frame_timeout_s=b.first_frame_timeout_s,
+            connect_attempts=b.connect_attempts,
+            max_wheel_speed=b.max_speed,
+            ticks_per_rev=b.ticks_per_rev,
+            wheel_diameter=b.wheel_diameter,
+            wheel_base=b.wheel_base,
+            on_event=on_event,
+        )
 
     # --- lifecycle ------------------------------------------------------------------------------
     @property

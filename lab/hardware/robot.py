@@ -47,20 +47,13 @@ from lab.errors import (
     SafetyStop,
 )
 from lab.geometry import Pose2D
-from lab.hardware.camera import (
-    ReplayStereoSource,
-    SideBySideCamera,
-    StereoRectifier,
-    StereoSource,
-    TwoDeviceCamera,
-    load_calibration,
-)
+from lab.hardware.camera import StereoRectifier, StereoSource, load_camera_calibration, make_camera_source
 from lab.hardware.config import HardwareConfig, load_config
 from lab.hardware.create2 import BaseSensors, Create2
 from lab.hardware.ptu import PTUD46
 from lab.robot import BaseLimits, PanTiltLimits, PanTiltState, Robot, StereoCamera, StereoFrame, check_finite
 
-__all__ = ["HardwareRobot", "HardwareState", "RobotEvent", "make_camera_source"]
+__all__ = ["HardwareRobot", "HardwareState", "RobotEvent"]
 
 
 @dataclass(frozen=True)
@@ -89,25 +82,6 @@ class HardwareState:
     safety_trip: str | None
     faults: frozenset[str] = frozenset()
     counters: dict = field(default_factory=dict)
-
-
-def make_camera_source(cfg: HardwareConfig) -> StereoSource:
-    """The stereo source a config describes (``[camera] source``)."""
-    c = cfg.camera
-    if c.source == "side_by_side":
-        return SideBySideCamera(
-            c.device, c.width, c.height, swap_lr=c.swap_lr, fourcc=c.fourcc, flush_grabs=c.flush_grabs
-        )
-    if c.source == "two_devices":
-        return TwoDeviceCamera(c.devices[0], c.devices[1], c.width, c.height, flush_grabs=c.flush_grabs)
-    if c.source == "replay":
-        return ReplayStereoSource.from_folder(c.folder)
-    if c.source == "sim":
-        raise ConfigError(
-            '[camera] source = "sim" renders the simulator from the emulators\' true state: run it through '
-            "lab.hardware.rehearsal.rehearsal() (lab identify --robot does), or choose another source"
-        )
-    return ReplayStereoSource.synthetic(c.width, c.height)
 
 
 def _fraction(t: float, t0: float, t1: float) -> float:
@@ -216,7 +190,7 @@ class HardwareRobot(Robot):
         self.events: collections.deque[RobotEvent] = collections.deque(maxlen=1000)
         c = cfg.camera
         size = (c.width, c.height)
-        calib = load_calibration(c.calibration, expected_size=size)
+        calib = load_camera_calibration(cfg)
         if camera_source is not None and tuple(camera_source.image_size) != size:
             raise ConfigError(
                 f"camera source delivers {camera_source.image_size[0]}x{camera_source.image_size[1]} images "
@@ -231,33 +205,8 @@ class HardwareRobot(Robot):
         self._base_limits = BaseLimits(
             b.max_speed, b.max_turn_rate, b.max_accel, b.max_turn_accel, b.wheel_base, b.radius
         )
-        self.base = Create2(
-            b.port,
-            baudrate=b.baudrate,
-            mode=b.mode,
-            stale_timeout_s=b.stale_timeout_s,
-            first_frame_timeout_s=b.first_frame_timeout_s,
-            connect_attempts=b.connect_attempts,
-            max_wheel_speed=b.max_speed,
-            ticks_per_rev=b.ticks_per_rev,
-            wheel_diameter=b.wheel_diameter,
-            wheel_base=b.wheel_base,
-            on_event=self._device_event,
-        )
-        p = cfg.ptu
-        self.ptu = PTUD46(
-            p.port,
-            baudrate=p.baudrate,
-            timeout_s=p.timeout_s,
-            banner_wait_s=p.banner_wait_s,
-            pan_sign=p.pan_sign,
-            tilt_sign=p.tilt_sign,
-            pan_zero_offset=math.radians(p.pan_zero_offset_deg),
-            tilt_zero_offset=math.radians(p.tilt_zero_offset_deg),
-            default_speed=math.radians(p.speed_deg_s),
-            move_margin_s=p.move_margin_s,
-            on_event=self._device_event,
-        )
+        self.base = Create2.from_config(b, on_event=self._device_event)
+        self.ptu = PTUD46.from_config(cfg.ptu, on_event=self._device_event)
         self._pt_limits: PanTiltLimits | None = None
         self._lock = threading.RLock()
         self._wake = threading.Event()
