@@ -27,7 +27,7 @@ from lab.errors import (
     NotEnabled,
     SafetyStop,
 )
-from lab.hardware import robot as robot_module
+from lab.hardware import stop_hooks
 from lab.hardware.camera import ReplayStereoSource
 from lab.hardware.cli import check, emulate
 from lab.hardware.config import load_config
@@ -359,7 +359,7 @@ def test_sigint_stops_the_base(rig, record_property):
     t = create.now()
     # A shell starts background jobs with SIGINT ignored; the hook then only stops (it keeps the ignore:
     # no KeyboardInterrupt). Otherwise the previous handler's KeyboardInterrupt comes through.
-    ignored = robot_module._HOOKS["sigint_prev"] == signal.SIG_IGN
+    ignored = stop_hooks._HOOKS["sigint_prev"] == signal.SIG_IGN
     interrupted = False
     try:
         # to the main thread itself: its handler runs before pthread_kill returns
@@ -383,7 +383,7 @@ def test_exit_and_exception_paths_stop_the_base(rig):
     robot.drive(0.2, 0.0)
     assert wait_until(lambda: create.wheel_speeds() != (0, 0), 2.0)
     t = create.now()
-    robot_module._close_all_at_exit()  # what atexit runs
+    stop_hooks.close_all_at_exit()  # what atexit runs
     assert create.opcode_names(since=t)[-3:] == ["DRIVE_DIRECT", "START", "STOP"]
     assert create.wheel_speeds() == (0, 0) and create.mode == 0
     with pytest.raises(NotEnabled):

@@ -7,7 +7,9 @@
 * :mod:`lab.hardware.emulators`: both devices on pseudo-terminals, with fault switches (the pty base,
   one module per device, and the pair);
 * :mod:`lab.hardware.config`: the strict TOML loader (``hardware/robot.toml``, ``hardware/emulated.toml``);
-* :mod:`lab.hardware.robot`: :class:`HardwareRobot`, the :class:`lab.robot.Robot` implementation;
+* :mod:`lab.hardware.robot`: :class:`HardwareRobot`, the :class:`lab.robot.Robot` implementation, with
+  :mod:`lab.hardware.frame_time` (head and odometry at a frame's time) and :mod:`lab.hardware.stop_hooks`
+  (every live robot stopped at exit and on Ctrl-C);
 * :mod:`lab.hardware.cli`: ``emulate()`` and ``check()`` for ``lab hardware ...``.
 
 This package imports :mod:`lab`; nothing in :mod:`lab` imports it.
