@@ -18,8 +18,8 @@ from pathlib import Path
 from lab.errors import ConnectionLost, SafetyStop
 from lab.hardware.camera import ReplayStereoSource
 from lab.hardware.config import load_config
-from lab.hardware.create2 import DEFAULT_STREAM, StreamParser, encode_stream_frame
 from lab.hardware.emulators import start_emulators
+from lab.hardware.open_interface import DEFAULT_STREAM, StreamParser, encode_stream_frame
 from lab.hardware.robot import HardwareRobot
 
 CFG = Path(__file__).resolve().parents[1] / "hardware" / "emulated.toml"

@@ -12,17 +12,15 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from lab.errors import ProtocolError
-from lab.hardware.create2 import (
+from lab.hardware.odometry import DiffDriveOdometry, EncoderUnwrapper, unwrap_delta
+from lab.hardware.open_interface import (
     DEFAULT_STREAM,
     PACKETS,
-    DiffDriveOdometry,
-    EncoderUnwrapper,
     StreamParser,
     clamp_mm_s,
     drive_direct_bytes,
     encode_stream_frame,
     stream_request_bytes,
-    unwrap_delta,
 )
 from lab.hardware.ptu import parse_number, parse_reply
 

@@ -11,8 +11,8 @@ import pytest
 import serial
 from hw_helpers import wait_until
 
-from lab.hardware.create2 import StreamParser
 from lab.hardware.emulators import Create2Emulator, PTUEmulator, start_emulators
+from lab.hardware.open_interface import StreamParser
 
 
 def _ask(s, cmd: bytes) -> bytes:

@@ -27,7 +27,7 @@ from lab.errors import (
     NotEnabled,
     SafetyStop,
 )
-from lab.hardware import robot as robot_module
+from lab.hardware import stop_hooks
 from lab.hardware.camera import ReplayStereoSource
 from lab.hardware.cli import check, emulate
 from lab.hardware.config import load_config
@@ -359,7 +359,7 @@ def test_sigint_stops_the_base(rig, record_property):
     t = create.now()
     # A shell starts background jobs with SIGINT ignored; the hook then only stops (it keeps the ignore:
     # no KeyboardInterrupt). Otherwise the previous handler's KeyboardInterrupt comes through.
-    ignored = robot_module._HOOKS["sigint_prev"] == signal.SIG_IGN
+    ignored = stop_hooks._HOOKS["sigint_prev"] == signal.SIG_IGN
     interrupted = False
     try:
         # to the main thread itself: its handler runs before pthread_kill returns
@@ -383,7 +383,7 @@ def test_exit_and_exception_paths_stop_the_base(rig):
     robot.drive(0.2, 0.0)
     assert wait_until(lambda: create.wheel_speeds() != (0, 0), 2.0)
     t = create.now()
-    robot_module._close_all_at_exit()  # what atexit runs
+    stop_hooks.close_all_at_exit()  # what atexit runs
     assert create.opcode_names(since=t)[-3:] == ["DRIVE_DIRECT", "START", "STOP"]
     assert create.wheel_speeds() == (0, 0) and create.mode == 0
     with pytest.raises(NotEnabled):
@@ -463,7 +463,9 @@ def test_missing_or_mismatched_calibration_opens_no_port(tmp_path):
         with pytest.raises(ConfigError, match=r"calibration file .*x.yml not found"):
             HardwareRobot(missing)
         other = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, width=640, height=480))
-        with pytest.raises(ConfigError, match="is for 320x240 images but the camera delivers 640x480"):
+        with pytest.raises(
+            ConfigError, match=r"width/height say 640x480 but the calibration file .* is for 320x240"
+        ):
             HardwareRobot(other)
         with pytest.raises(ConfigError, match="camera source delivers 64x48 images"):
             HardwareRobot(cfg, camera_source=ReplayStereoSource.synthetic(64, 48))
@@ -553,7 +555,7 @@ def _emulated_toml(tmp_path, links, **replace):
         (
             {"width = 320\nheight = 240": "width = 640\nheight = 480"},
             "calibration",
-            "is for 320x240 images but the camera delivers 640x480",
+            "[camera] width/height say 640x480 but the calibration file",
             "calibrate (hardware/README.md step 6) or fix [camera] calibration",
         ),
         (

@@ -1,5 +1,5 @@
 """The rehearsal: HardwareRobot on the device emulators with a camera that renders the simulator's world
-from the emulators' true state (lab/hardware/rehearsal.py), and the identification agent on it.
+from the emulators' true state (lab/runs/rehearsal.py), and the identification agent on it.
 
 Peers: the simulator's own rendering of the ideal rectified pair at the true camera pose (what the adapter's
 rectification of the raw pair must reproduce, measured with OpenCV's phase correlation), and the emulators'
@@ -19,8 +19,9 @@ from hw_helpers import REPO
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
+from lab.hardware.camera import make_camera_source
 from lab.hardware.config import load_config
-from lab.hardware.robot import _pan_tilt_at, _pose_at, make_camera_source
+from lab.hardware.frame_time import pan_tilt_at, pose_at
 from lab.robot import PanTiltState
 from lab.runs.rehearsal import rehearsal
 from lab.vision.rectify import StereoCalibration
@@ -122,13 +123,13 @@ def test_raw_pair_of_a_real_calibration_is_rectified_to_the_simulators_view(tmp_
 def test_head_and_odometry_are_read_at_the_frames_time():
     a = PanTiltState(0.0, 0.1, t=10.0, pan_target=1.0, tilt_target=0.1, moving=True)
     b = PanTiltState(0.4, 0.1, t=10.2, pan_target=1.0, tilt_target=0.1, moving=True)
-    s = _pan_tilt_at(10.05, a, b)
+    s = pan_tilt_at(10.05, a, b)
     assert s.pan == pytest.approx(0.1) and s.tilt == pytest.approx(0.1) and s.t == 10.05 and s.moving
-    assert _pan_tilt_at(9.0, a, b).pan == 0.0 and _pan_tilt_at(11.0, a, b).pan == 0.4  # clamped
-    p = _pose_at(1.5, (1.0, Pose2D(0.0, 0.0, 3.0)), (2.0, Pose2D(0.2, -0.2, -3.0)))
+    assert pan_tilt_at(9.0, a, b).pan == 0.0 and pan_tilt_at(11.0, a, b).pan == 0.4  # clamped
+    p = pose_at(1.5, (1.0, Pose2D(0.0, 0.0, 3.0)), (2.0, Pose2D(0.2, -0.2, -3.0)))
     assert (p.x, p.y) == pytest.approx((0.1, -0.1))
     assert abs(abs(p.theta) - math.pi) < 1e-9  # across the +-pi seam, the short way
-    q = _pose_at(5.0, (1.0, Pose2D(1, 2, 0.1)), (1.0, Pose2D(3, 4, 0.2)))  # no interval: the first reading
+    q = pose_at(5.0, (1.0, Pose2D(1, 2, 0.1)), (1.0, Pose2D(3, 4, 0.2)))  # no interval: the first reading
     assert (q.x, q.y, q.theta) == pytest.approx((1, 2, 0.1))
 
 

@@ -8,6 +8,9 @@
 * :class:`ReplayStereoSource`: image pairs from a folder or from arrays (tests, the emulated robot).
 * :class:`StereoCalibration`, :func:`load_calibration`, :class:`StereoRectifier` live in
   :mod:`lab.vision.rectify` (re-exported here): the calibration file and the rectification of raw pairs.
+* :func:`make_camera_source` and :func:`load_camera_calibration`: the source and the calibration a
+  config's ``[camera]`` section describes (the one place that reads those keys; the calibration is
+  checked against the section's image size).
 * :func:`calibrate_stereo`: chessboard pairs -> calibration (``calibrateCamera`` per camera, then
   ``stereoCalibrate`` with ``CALIB_FIX_INTRINSIC`` and ``stereoRectify``).
 
@@ -28,6 +31,7 @@ import cv2
 import numpy as np
 
 from lab.errors import ConfigError, ConnectionLost, DeviceTimeout
+from lab.hardware.config import HardwareConfig
 from lab.vision.rectify import StereoCalibration, StereoRectifier, load_calibration
 
 __all__ = [
@@ -42,6 +46,8 @@ __all__ = [
     "calibrate_stereo",
     "find_chessboard",
     "load_calibration",
+    "load_camera_calibration",
+    "make_camera_source",
     "render_chessboard_view",
 ]
 
@@ -307,6 +313,50 @@ class ReplayStereoSource(StereoSource):
         l, r = self._pairs[self._k]
         self._k += 1
         return RawStereo(self.clock(), l.copy(), r.copy())
+
+
+# --- from the config --------------------------------------------------------------------------------
+def load_camera_calibration(cfg: HardwareConfig) -> StereoCalibration:
+    """The calibration file ``[camera] calibration`` names, checked against the ``[camera]`` section.
+
+    Both say the image size: ``[camera] width``/``height`` and the file's ``image_width``/``image_height``.
+
+    Raises
+    ------
+    ConfigError
+        The file is missing or unreadable; or the two sizes disagree: one line naming both sizes, the
+        config file and its section, and the calibration file.
+    """
+    c = cfg.camera
+    calib = load_calibration(c.calibration)
+    w, h = (int(x) for x in calib.image_size)
+    if (w, h) != (c.width, c.height):
+        where = f"{cfg.path}: " if cfg.path is not None else ""
+        raise ConfigError(
+            f"{where}[camera] width/height say {c.width}x{c.height} but the calibration file "
+            f"{c.calibration} (image_width/image_height) is for {w}x{h}; recalibrate at "
+            f"{c.width}x{c.height} or set [camera] width = {w}, height = {h}"
+        )
+    return calib
+
+
+def make_camera_source(cfg: HardwareConfig) -> StereoSource:
+    """The stereo source a config describes (``[camera] source``)."""
+    c = cfg.camera
+    if c.source == "side_by_side":
+        return SideBySideCamera(
+            c.device, c.width, c.height, swap_lr=c.swap_lr, fourcc=c.fourcc, flush_grabs=c.flush_grabs
+        )
+    if c.source == "two_devices":
+        return TwoDeviceCamera(c.devices[0], c.devices[1], c.width, c.height, flush_grabs=c.flush_grabs)
+    if c.source == "replay":
+        return ReplayStereoSource.from_folder(c.folder)
+    if c.source == "sim":
+        raise ConfigError(
+            '[camera] source = "sim" renders the simulator from the emulators\' true state: run it through '
+            "lab.runs.rehearsal.rehearsal() (lab identify --robot does), or choose another source"
+        )
+    return ReplayStereoSource.synthetic(c.width, c.height)
 
 
 # --- calibration tool --------------------------------------------------------------------------------

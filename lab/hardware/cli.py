@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import sys
@@ -21,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from lab.errors import LabError
-from lab.hardware.camera import StereoRectifier, load_calibration
+from lab.hardware.camera import StereoRectifier, load_camera_calibration, make_camera_source
 from lab.hardware.config import load_config
 from lab.hardware.create2 import Create2
 from lab.hardware.emulators import start_emulators
@@ -89,7 +90,7 @@ def check(
         c = cfg.camera
         calib = None
         try:
-            calib = load_calibration(c.calibration, expected_size=(c.width, c.height))
+            calib = load_camera_calibration(cfg)
             line(
                 True,
                 "calibration",
@@ -131,16 +132,7 @@ def check(
 
 
 def _check_ptu(cfg, line) -> None:
-    p = cfg.ptu
-    ptu = PTUD46(
-        p.port,
-        baudrate=p.baudrate,
-        timeout_s=p.timeout_s,
-        banner_wait_s=p.banner_wait_s,
-        pan_sign=p.pan_sign,
-        tilt_sign=p.tilt_sign,
-        default_speed=math.radians(p.speed_deg_s),
-    )
+    ptu = PTUD46.from_config(cfg)
     try:
         ptu.connect()
     except LabError as e:
@@ -176,12 +168,8 @@ def _check_base(cfg, line, in_process: bool = False) -> None:
     the check: on a loaded machine it arrives late, which says nothing about a cable; only a stream at
     under a third of its rate fails then.
     """
-    b = cfg.base
-    base = Create2(
-        b.port,
-        baudrate=b.baudrate,
-        connect_attempts=min(b.connect_attempts, 4),
-        first_frame_timeout_s=b.first_frame_timeout_s,
+    base = Create2.from_config(
+        dataclasses.replace(cfg.base, connect_attempts=min(cfg.base.connect_attempts, 4))
     )
     try:
         base.connect()
@@ -219,8 +207,6 @@ def _check_base(cfg, line, in_process: bool = False) -> None:
 
 
 def _check_camera(cfg, calib, line) -> None:
-    from lab.hardware.robot import make_camera_source
-
     if cfg.camera.source == "sim":  # rendered from the emulators' state: only a rehearsal can make it
         line(
             True,

@@ -1,13 +1,7 @@
-"""iRobot Create 2 driver: the Open Interface (OI), binary, 115200 8N1.
+"""iRobot Create 2 driver: the Open Interface over a serial port, with a reader thread, odometry and safety.
 
-The protocol (see ``/work/shared/reference/hardware-protocols.md`` section 2 and the Create 2 OI spec):
-
-* mode opcodes Start 128 (-> Passive), Safe 131, Full 132, Stop 173; leave >= 20 ms between them;
-* Drive Direct 145: ``[145][right hi][right lo][left hi][left lo]``, big-endian int16 mm/s, **right wheel
-  first**, +-500 mm/s (we clamp *before* packing, so an out-of-range float can never overflow int16);
-* Stream 148 ``[148][n][id]...``: every 15 ms the robot sends ``[19][n][id][data]...[checksum]`` where the
-  sum of all bytes, checksum included, is 0 mod 256;
-* packets 43/44 are the left/right encoder counts, 16 bits, wrapping at 65535 <-> 0.
+The bytes on the wire are :mod:`lab.hardware.open_interface`'s (opcodes, Drive Direct, the sensor
+stream and its resynchronising parser); the pose comes from :mod:`lab.hardware.odometry`.
 
 Threads: one background reader owns every read from the port; commands are write-only and take a write
 lock (the reader also writes: a stop when the stream goes stale or a safety trip is seen).
@@ -21,289 +15,32 @@ and never re-enters Safe on its own: the user calls :meth:`Create2.enable` again
 from __future__ import annotations
 
 import math
-import struct
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from enum import IntEnum
 
 import serial
 
 from lab.errors import ConnectionLost, DeviceTimeout, NotEnabled, SafetyStop
-from lab.geometry import Pose2D, wrap_angle
+from lab.geometry import Pose2D
+from lab.hardware.config import BaseConfig, HardwareConfig
+from lab.hardware.odometry import DiffDriveOdometry, EncoderUnwrapper
+from lab.hardware.open_interface import (
+    DEFAULT_STREAM,
+    MODE_GAP_S,
+    OIMode,
+    Op,
+    StreamParser,
+    clamp_mm_s,
+    drive_direct_bytes,
+    stream_request_bytes,
+)
 from lab.hardware.serial_port import lost, open_port
 
-__all__ = [
-    "DEFAULT_STREAM",
-    "HEADER",
-    "PACKETS",
-    "BaseSensors",
-    "Create2",
-    "DiffDriveOdometry",
-    "EncoderUnwrapper",
-    "OIMode",
-    "Op",
-    "StreamParser",
-    "clamp_mm_s",
-    "decode_frames",
-    "drive_direct_bytes",
-    "encode_stream_frame",
-    "frame_checksum",
-    "stream_request_bytes",
-    "unwrap_delta",
-]
+__all__ = ["BaseSensors", "Create2"]
 
 
-class Op(IntEnum):
-    """OI opcodes used here."""
-
-    RESET = 7
-    START = 128
-    BAUD = 129
-    SAFE = 131
-    FULL = 132
-    DRIVE = 137
-    SENSORS = 142
-    DRIVE_DIRECT = 145
-    DRIVE_PWM = 146
-    STREAM = 148
-    QUERY_LIST = 149
-    PAUSE_RESUME_STREAM = 150
-    STOP = 173
-
-
-class OIMode(IntEnum):
-    """Packet 35. The firmware sometimes reports 32 after a Safe-mode trip (treated as Passive)."""
-
-    OFF = 0
-    PASSIVE = 1
-    SAFE = 2
-    FULL = 3
-
-
-HEADER = 19  # first byte of every stream frame
-MAX_MM_S = 500  # Drive Direct range
-MODE_GAP_S = 0.02  # minimum time between mode-change commands (Hacking Roomba p.45)
-
-#: packet id -> (name, data bytes, signed). Sizes and signedness from the OI spec / libcreate types.h.
-PACKETS: dict[int, tuple[str, int, bool]] = {
-    7: ("bumps_wheeldrops", 1, False),
-    8: ("wall", 1, False),
-    9: ("cliff_left", 1, False),
-    10: ("cliff_front_left", 1, False),
-    11: ("cliff_front_right", 1, False),
-    12: ("cliff_right", 1, False),
-    13: ("virtual_wall", 1, False),
-    14: ("overcurrents", 1, False),
-    15: ("dirt_detect", 1, False),
-    17: ("ir_omni", 1, False),
-    18: ("buttons", 1, False),
-    19: ("distance", 2, True),
-    20: ("angle", 2, True),
-    21: ("charging_state", 1, False),
-    22: ("voltage", 2, False),
-    23: ("current", 2, True),
-    24: ("temperature", 1, True),
-    25: ("battery_charge", 2, False),
-    26: ("battery_capacity", 2, False),
-    27: ("wall_signal", 2, False),
-    28: ("cliff_left_signal", 2, False),
-    29: ("cliff_front_left_signal", 2, False),
-    30: ("cliff_front_right_signal", 2, False),
-    31: ("cliff_right_signal", 2, False),
-    34: ("charging_sources", 1, False),
-    35: ("oi_mode", 1, False),
-    39: ("requested_velocity", 2, True),
-    40: ("requested_radius", 2, True),
-    41: ("requested_right_velocity", 2, True),
-    42: ("requested_left_velocity", 2, True),
-    43: ("left_encoder_counts", 2, False),
-    44: ("right_encoder_counts", 2, False),
-    45: ("light_bumper", 1, False),
-}
-
-#: what the driver streams: bumps/wheel drops, 4 cliffs, charging sources, battery, OI mode, encoders
-DEFAULT_STREAM: tuple[int, ...] = (7, 9, 10, 11, 12, 25, 26, 34, 35, 43, 44)
-
-
-# --- codec ------------------------------------------------------------------------------------------
-def clamp_mm_s(v: float) -> int:
-    """Round a wheel speed [mm/s] to an int within the Drive Direct range +-500 (NaN is refused)."""
-    if not math.isfinite(v):
-        raise ValueError(f"wheel speed must be finite, got {v!r}")
-    return int(max(-MAX_MM_S, min(MAX_MM_S, round(v))))
-
-
-def drive_direct_bytes(right_mm_s: float, left_mm_s: float) -> bytes:
-    """``[145][R hi][R lo][L hi][L lo]``: right wheel first, big-endian int16, clamped to +-500 mm/s."""
-    return struct.pack(">Bhh", Op.DRIVE_DIRECT, clamp_mm_s(right_mm_s), clamp_mm_s(left_mm_s))
-
-
-def stream_request_bytes(ids: Sequence[int]) -> bytes:
-    """``[148][n][id]...``: ask for a stream frame every 15 ms."""
-    for i in ids:
-        if i not in PACKETS:
-            raise ValueError(f"unsupported sensor packet {i}; supported: {sorted(PACKETS)}")
-    return bytes([Op.STREAM, len(ids), *ids])
-
-
-def frame_checksum(frame_without_checksum: bytes) -> int:
-    """The byte that makes the sum of the whole frame (header to checksum) 0 mod 256."""
-    return (-sum(frame_without_checksum)) & 0xFF
-
-
-def encode_stream_frame(values: dict[int, int], ids: Sequence[int] | None = None) -> bytes:
-    """A stream frame ``[19][n][id][data]...[checksum]`` of packet values (for the emulator and tests)."""
-    ids = list(values) if ids is None else list(ids)
-    body = bytearray()
-    for i in ids:
-        _, size, signed = PACKETS[i]
-        fmt = (">b" if signed else ">B") if size == 1 else (">h" if signed else ">H")
-        body += bytes([i]) + struct.pack(fmt, int(values[i]))
-    head = bytes([HEADER, len(body)]) + bytes(body)
-    return head + bytes([frame_checksum(head)])
-
-
-def _decode_body(body: bytes) -> dict[int, int] | None:
-    """Packet values of a frame body ``[id][data]...``, or None when its structure is not valid."""
-    out: dict[int, int] = {}
-    k = 0
-    while k < len(body):
-        pid = body[k]
-        spec = PACKETS.get(pid)
-        if spec is None or k + 1 + spec[1] > len(body):
-            return None
-        _, size, signed = spec
-        raw = body[k + 1 : k + 1 + size]
-        if size == 1:
-            out[pid] = struct.unpack(">b" if signed else ">B", raw)[0]
-        else:
-            out[pid] = struct.unpack(">h" if signed else ">H", raw)[0]
-        k += 1 + size
-    return out
-
-
-class StreamParser:
-    """Resynchronising parser of the OI stream: header 19 -> length -> body -> checksum.
-
-    A candidate frame is accepted when its bytes sum to 0 mod 256, its body walks cleanly through known
-    packet ids and sizes, and (when ``ids`` is given) it carries exactly the requested packets. Otherwise
-    ``corrupt_frames`` is incremented, only the candidate's header byte is dropped, and the search resumes
-    at the next 19: a real frame hidden behind garbage is never skipped.
-
-    Parameters
-    ----------
-    ids : sequence of int, optional
-        The requested packet ids, in order (a stronger check than the checksum alone).
-    """
-
-    def __init__(self, ids: Sequence[int] | None = None):
-        self.ids = None if ids is None else tuple(ids)
-        self._n = None if ids is None else sum(1 + PACKETS[i][1] for i in ids)
-        self._buf = bytearray()
-        self.frames = 0
-        self.corrupt_frames = 0
-        self.discarded_bytes = 0
-
-    def reset(self) -> None:
-        self._buf.clear()
-
-    def feed(self, data: bytes) -> list[dict[int, int]]:
-        """Add received bytes; return the packet values of every complete valid frame, in order."""
-        self._buf += data
-        out: list[dict[int, int]] = []
-        buf = self._buf
-        while True:
-            start = buf.find(HEADER)
-            if start < 0:
-                self.discarded_bytes += len(buf)
-                buf.clear()
-                break
-            if start:
-                self.discarded_bytes += start
-                del buf[:start]
-            if len(buf) < 2:
-                break
-            n = buf[1]
-            if n == 0 or (self._n is not None and n != self._n):
-                self._reject(buf)
-                continue
-            if len(buf) < n + 3:
-                break  # wait for the rest of the frame
-            frame = bytes(buf[: n + 3])
-            values = _decode_body(frame[2:-1]) if sum(frame) & 0xFF == 0 else None
-            if values is None or (self.ids is not None and tuple(values) != self.ids):
-                self._reject(buf)
-                continue
-            del buf[: n + 3]
-            self.frames += 1
-            out.append(values)
-        return out
-
-    def _reject(self, buf: bytearray) -> None:
-        self.corrupt_frames += 1
-        self.discarded_bytes += 1
-        del buf[:1]
-
-
-def unwrap_delta(old: int, new: int) -> int:
-    """Signed change between two 16-bit encoder readings: ``((new - old + 32768) % 65536) - 32768``."""
-    return ((int(new) - int(old) + 32768) % 65536) - 32768
-
-
-class EncoderUnwrapper:
-    """Turns a wrapping 16-bit count into an unbounded (Python int / int64) tick count."""
-
-    def __init__(self):
-        self._raw: int | None = None
-        self.total = 0
-
-    def rebase(self) -> None:
-        """Forget the last raw reading (after a reconnect): the next one moves nothing."""
-        self._raw = None
-
-    def update(self, raw: int) -> int:
-        """Feed a raw reading; return the change in ticks since the previous one."""
-        d = 0 if self._raw is None else unwrap_delta(self._raw, raw)
-        self._raw = int(raw) & 0xFFFF
-        self.total += d
-        return d
-
-
-class DiffDriveOdometry:
-    """Differential-drive dead reckoning from encoder ticks, exact for each constant-curvature step.
-
-    ``ds = (dl + dr) / 2``, ``dtheta = (dr - dl) / wheel_base``, ``dl = ticks_l * pi * d / ticks_per_rev``;
-    the robot moves the chord ``ds * sin(dtheta/2) / (dtheta/2)`` along the heading ``theta + dtheta/2``.
-    Create 2: 508.8 ticks per revolution, 72 mm wheels, 235 mm axle.
-    """
-
-    def __init__(
-        self, ticks_per_rev: float = 508.8, wheel_diameter: float = 0.072, wheel_base: float = 0.235
-    ):
-        self.m_per_tick = math.pi * wheel_diameter / ticks_per_rev
-        self.wheel_base = wheel_base
-        self.x = self.y = self.theta = 0.0
-
-    def update(self, d_left_ticks: int, d_right_ticks: int) -> None:
-        dl = d_left_ticks * self.m_per_tick
-        dr = d_right_ticks * self.m_per_tick
-        ds = 0.5 * (dl + dr)
-        dth = (dr - dl) / self.wheel_base
-        # exact for a constant-curvature step: the chord 2 R sin(dth/2) along the midpoint heading
-        chord = ds if abs(dth) < 1e-9 else ds * math.sin(0.5 * dth) / (0.5 * dth)
-        th_mid = self.theta + 0.5 * dth
-        self.x += chord * math.cos(th_mid)
-        self.y += chord * math.sin(th_mid)
-        self.theta = wrap_angle(self.theta + dth)
-
-    @property
-    def pose(self) -> Pose2D:
-        return Pose2D(self.x, self.y, self.theta)
-
-
-# --- driver -----------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class BaseSensors:
     """One decoded stream frame.
@@ -416,6 +153,34 @@ class Create2:
         self._stop_reader = threading.Event()
         self._last_sent = (0, 0)
         self.counters = {"stale_events": 0, "stream_requests": 0, "drive_commands": 0, "bytes_received": 0}
+
+    @classmethod
+    def from_config(
+        cls, config: BaseConfig | HardwareConfig, *, on_event: EventCallback | None = None
+    ) -> Create2:
+        """The driver a ``[base]`` section describes: the one place that maps its keys onto parameters.
+
+        Parameters
+        ----------
+        config : BaseConfig or HardwareConfig
+            The ``[base]`` section, or a whole config (its ``base`` is used).
+        on_event : callable(kind, message), optional
+            As for the constructor.
+        """
+        b = config.base if isinstance(config, HardwareConfig) else config
+        return cls(
+            b.port,
+            baudrate=b.baudrate,
+            mode=b.mode,
+            stale_timeout_s=b.stale_timeout_s,
+            first_frame_timeout_s=b.first_frame_timeout_s,
+            connect_attempts=b.connect_attempts,
+            max_wheel_speed=b.max_speed,
+            ticks_per_rev=b.ticks_per_rev,
+            wheel_diameter=b.wheel_diameter,
+            wheel_base=b.wheel_base,
+            on_event=on_event,
+        )
 
     # --- lifecycle ------------------------------------------------------------------------------
     @property
@@ -570,7 +335,7 @@ class Create2:
         if self._stale:
             raise DeviceTimeout(f"no sensor stream from the Create 2 on {self.port}: base stopped")
         r, l = clamp_mm_s(right_mm_s), clamp_mm_s(left_mm_s)
-        self._write(struct.pack(">Bhh", Op.DRIVE_DIRECT, r, l))
+        self._write(drive_direct_bytes(r, l))
         self._last_sent = (r, l)
         self.counters["drive_commands"] += 1
         return r, l
@@ -762,8 +527,3 @@ class Create2:
                 except (ConnectionLost, DeviceTimeout):
                     pass
                 self._emit("safety_stop", reason)
-
-
-def decode_frames(data: bytes, ids: Iterable[int] | None = None) -> list[dict[int, int]]:
-    """Decode every valid frame in a byte string (convenience for tests and traces)."""
-    return StreamParser(None if ids is None else tuple(ids)).feed(data)

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import serial
 
 from lab.errors import CommandRejected, ConnectionLost, DeviceTimeout, LimitError, ProtocolError
+from lab.hardware.config import HardwareConfig, PTUConfig
 from lab.hardware.serial_port import lost, open_port
 from lab.robot import PanTiltLimits, check_finite
 
@@ -165,6 +166,37 @@ class PTUD46:
         self.limit_hits = 0
         self.needs_home = False
         self.counters = {"protocol_errors": 0, "timeouts": 0, "retries": 0, "rejected": 0, "stray_bytes": 0}
+
+    @classmethod
+    def from_config(
+        cls, config: PTUConfig | HardwareConfig, *, on_event: EventCallback | None = None
+    ) -> PTUD46:
+        """The driver a ``[ptu]`` section describes: the one place that maps its keys onto parameters.
+
+        The section's degrees (``pan_zero_offset_deg``, ``tilt_zero_offset_deg``, ``speed_deg_s``) become
+        the driver's radians here.
+
+        Parameters
+        ----------
+        config : PTUConfig or HardwareConfig
+            The ``[ptu]`` section, or a whole config (its ``ptu`` is used).
+        on_event : callable(kind, message), optional
+            As for the constructor.
+        """
+        p = config.ptu if isinstance(config, HardwareConfig) else config
+        return cls(
+            p.port,
+            baudrate=p.baudrate,
+            timeout_s=p.timeout_s,
+            banner_wait_s=p.banner_wait_s,
+            pan_sign=p.pan_sign,
+            tilt_sign=p.tilt_sign,
+            pan_zero_offset=math.radians(p.pan_zero_offset_deg),
+            tilt_zero_offset=math.radians(p.tilt_zero_offset_deg),
+            default_speed=math.radians(p.speed_deg_s),
+            move_margin_s=p.move_margin_s,
+            on_event=on_event,
+        )
 
     # --- lifecycle ------------------------------------------------------------------------------
     @property

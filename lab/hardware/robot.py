@@ -23,13 +23,10 @@ asks the servo thread to send zero, then lets the KeyboardInterrupt through), an
 
 from __future__ import annotations
 
-import atexit
 import collections
 import math
-import signal
 import threading
 import time
-import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,20 +44,15 @@ from lab.errors import (
     SafetyStop,
 )
 from lab.geometry import Pose2D
-from lab.hardware.camera import (
-    ReplayStereoSource,
-    SideBySideCamera,
-    StereoRectifier,
-    StereoSource,
-    TwoDeviceCamera,
-    load_calibration,
-)
+from lab.hardware import stop_hooks
+from lab.hardware.camera import StereoRectifier, StereoSource, load_camera_calibration, make_camera_source
 from lab.hardware.config import HardwareConfig, load_config
 from lab.hardware.create2 import BaseSensors, Create2
+from lab.hardware.frame_time import pan_tilt_at, pose_at
 from lab.hardware.ptu import PTUD46
 from lab.robot import BaseLimits, PanTiltLimits, PanTiltState, Robot, StereoCamera, StereoFrame, check_finite
 
-__all__ = ["HardwareRobot", "HardwareState", "RobotEvent", "make_camera_source"]
+__all__ = ["HardwareRobot", "HardwareState", "RobotEvent"]
 
 
 @dataclass(frozen=True)
@@ -89,92 +81,6 @@ class HardwareState:
     safety_trip: str | None
     faults: frozenset[str] = frozenset()
     counters: dict = field(default_factory=dict)
-
-
-def make_camera_source(cfg: HardwareConfig) -> StereoSource:
-    """The stereo source a config describes (``[camera] source``)."""
-    c = cfg.camera
-    if c.source == "side_by_side":
-        return SideBySideCamera(
-            c.device, c.width, c.height, swap_lr=c.swap_lr, fourcc=c.fourcc, flush_grabs=c.flush_grabs
-        )
-    if c.source == "two_devices":
-        return TwoDeviceCamera(c.devices[0], c.devices[1], c.width, c.height, flush_grabs=c.flush_grabs)
-    if c.source == "replay":
-        return ReplayStereoSource.from_folder(c.folder)
-    if c.source == "sim":
-        raise ConfigError(
-            '[camera] source = "sim" renders the simulator from the emulators\' true state: run it through '
-            "lab.runs.rehearsal.rehearsal() (lab identify --robot does), or choose another source"
-        )
-    return ReplayStereoSource.synthetic(c.width, c.height)
-
-
-def _fraction(t: float, t0: float, t1: float) -> float:
-    """Where ``t`` lies between ``t0`` and ``t1``, clamped to [0, 1]."""
-    return 0.0 if t1 <= t0 else min(1.0, max(0.0, (t - t0) / (t1 - t0)))
-
-
-def _pan_tilt_at(t: float, a: PanTiltState, b: PanTiltState) -> PanTiltState:
-    """The head's state at ``t`` [s], linearly between readings ``a`` (before the frame) and ``b`` (after).
-
-    A camera delivers a frame some time after it was exposed (a rendered one: after the render); reading
-    the head only afterwards would pair the image with a later head angle.
-    """
-    s = _fraction(t, a.t, b.t)
-    return PanTiltState(
-        a.pan + s * (b.pan - a.pan),
-        a.tilt + s * (b.tilt - a.tilt),
-        t,
-        b.pan_target,
-        b.tilt_target,
-        a.moving or b.moving,
-    )
-
-
-def _pose_at(t: float, a: tuple[float, Pose2D], b: tuple[float, Pose2D]) -> Pose2D:
-    """The odometry pose at ``t`` [s], linearly between ``(t_a, pose_a)`` and ``(t_b, pose_b)``."""
-    (ta, pa), (tb, pb) = a, b
-    s = _fraction(t, ta, tb)
-    dth = math.atan2(math.sin(pb.theta - pa.theta), math.cos(pb.theta - pa.theta))
-    th = pa.theta + s * dth
-    return Pose2D(pa.x + s * (pb.x - pa.x), pa.y + s * (pb.y - pa.y), math.atan2(math.sin(th), math.cos(th)))
-
-
-_LIVE: weakref.WeakSet[HardwareRobot] = weakref.WeakSet()
-_HOOKS: dict = {"atexit": False, "sigint": False, "sigint_prev": None}
-
-
-def _close_all_at_exit() -> None:
-    for r in list(_LIVE):
-        try:
-            r.close()
-        except Exception:
-            pass
-
-
-def _install_hooks(sigint: bool) -> None:
-    if not _HOOKS["atexit"]:
-        atexit.register(_close_all_at_exit)
-        _HOOKS["atexit"] = True
-    if sigint and not _HOOKS["sigint"] and threading.current_thread() is threading.main_thread():
-        prev = signal.getsignal(signal.SIGINT)
-
-        def _on_sigint(signum, frame):
-            # never write to a port here: the interrupted code may hold its lock; the servo thread sends zero
-            for r in list(_LIVE):
-                r._request_stop()
-            if callable(prev):
-                prev(signum, frame)
-            elif prev != signal.SIG_IGN:
-                raise KeyboardInterrupt
-
-        try:
-            signal.signal(signal.SIGINT, _on_sigint)
-            _HOOKS["sigint"] = True
-            _HOOKS["sigint_prev"] = prev  # SIG_IGN in a background job: then Ctrl-C only stops, never raises
-        except ValueError:  # not the main thread of the main interpreter
-            pass
 
 
 class HardwareRobot(Robot):
@@ -216,7 +122,7 @@ class HardwareRobot(Robot):
         self.events: collections.deque[RobotEvent] = collections.deque(maxlen=1000)
         c = cfg.camera
         size = (c.width, c.height)
-        calib = load_calibration(c.calibration, expected_size=size)
+        calib = load_camera_calibration(cfg)
         if camera_source is not None and tuple(camera_source.image_size) != size:
             raise ConfigError(
                 f"camera source delivers {camera_source.image_size[0]}x{camera_source.image_size[1]} images "
@@ -231,33 +137,8 @@ class HardwareRobot(Robot):
         self._base_limits = BaseLimits(
             b.max_speed, b.max_turn_rate, b.max_accel, b.max_turn_accel, b.wheel_base, b.radius
         )
-        self.base = Create2(
-            b.port,
-            baudrate=b.baudrate,
-            mode=b.mode,
-            stale_timeout_s=b.stale_timeout_s,
-            first_frame_timeout_s=b.first_frame_timeout_s,
-            connect_attempts=b.connect_attempts,
-            max_wheel_speed=b.max_speed,
-            ticks_per_rev=b.ticks_per_rev,
-            wheel_diameter=b.wheel_diameter,
-            wheel_base=b.wheel_base,
-            on_event=self._device_event,
-        )
-        p = cfg.ptu
-        self.ptu = PTUD46(
-            p.port,
-            baudrate=p.baudrate,
-            timeout_s=p.timeout_s,
-            banner_wait_s=p.banner_wait_s,
-            pan_sign=p.pan_sign,
-            tilt_sign=p.tilt_sign,
-            pan_zero_offset=math.radians(p.pan_zero_offset_deg),
-            tilt_zero_offset=math.radians(p.tilt_zero_offset_deg),
-            default_speed=math.radians(p.speed_deg_s),
-            move_margin_s=p.move_margin_s,
-            on_event=self._device_event,
-        )
+        self.base = Create2.from_config(b, on_event=self._device_event)
+        self.ptu = PTUD46.from_config(cfg.ptu, on_event=self._device_event)
         self._pt_limits: PanTiltLimits | None = None
         self._lock = threading.RLock()
         self._wake = threading.Event()
@@ -274,8 +155,7 @@ class HardwareRobot(Robot):
         self._last_cmd_t = -math.inf
         self._stop_requested = False
         self.watchdog_stops = 0
-        _LIVE.add(self)
-        _install_hooks(cfg.robot.install_sigint_handler)
+        stop_hooks.register(self, sigint=cfg.robot.install_sigint_handler)
         if connect:
             self.connect()
 
@@ -333,7 +213,7 @@ class HardwareRobot(Robot):
         self._stop_servo()
         self._release_devices(send=True)
         self._connected = False
-        _LIVE.discard(self)
+        stop_hooks.unregister(self)
 
     def _stop_servo(self) -> None:
         self._servo_stop.set()
@@ -579,7 +459,7 @@ class HardwareRobot(Robot):
         pt1, odom1 = self.pan_tilt(), (time.monotonic(), self.odometry())
         left, right = self._rectifier.rectify(raw.left, raw.right)
         return StereoFrame(
-            raw.t, left, right, self._camera, _pan_tilt_at(raw.t, pt0, pt1), _pose_at(raw.t, odom0, odom1)
+            raw.t, left, right, self._camera, pan_tilt_at(raw.t, pt0, pt1), pose_at(raw.t, odom0, odom1)
         )
 
     def odometry(self) -> Pose2D:

@@ -54,11 +54,11 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D, se3, se3_inv
-from lab.hardware.camera import RawStereo, StereoSource, _wait_until_after
+from lab.hardware.camera import RawStereo, StereoSource, _wait_until_after, load_camera_calibration
 from lab.hardware.config import HardwareConfig, load_config
 from lab.hardware.emulators import Create2Emulator, EmulatorSet, PTUEmulator, start_emulators
 from lab.robot import StereoCamera
-from lab.vision.rectify import StereoCalibration, load_calibration
+from lab.vision.rectify import StereoCalibration
 
 __all__ = ["Rehearsal", "RehearsalTruth", "SimRenderedStereoSource", "rehearsal"]
 
@@ -284,7 +284,7 @@ def rehearsal(
 
     cfg = config if isinstance(config, HardwareConfig) else load_config(config)
     c = cfg.camera
-    calib = load_calibration(c.calibration, expected_size=(c.width, c.height))
+    calib = load_camera_calibration(cfg)  # checked against the [camera] section
     tmp = None
     if link_dir is None:
         tmp = link_dir = tempfile.mkdtemp(prefix="lab-rehearsal-")
