@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from lab.errors import LabError
+from lab.robot import SIM_CAMERA
 
 __all__ = ["main", "build_parser"]
 
@@ -124,10 +125,20 @@ def build_parser() -> argparse.ArgumentParser:
         default=180.0,
         help="yaw of the carried box in degrees (default 180: unique face towards -x)",
     )
+    cam = SIM_CAMERA
     r.add_argument(
-        "--size", type=_size, default=(320, 240), metavar="WxH", help="image size (default 320x240)"
+        "--size",
+        type=_size,
+        default=(cam.width, cam.height),
+        metavar="WxH",
+        help=f"image size (default {cam.width}x{cam.height})",
     )
-    r.add_argument("--fov", type=float, default=60.0, help="vertical field of view in degrees (default 60)")
+    r.add_argument(
+        "--fov",
+        type=float,
+        default=cam.fov_y_deg,
+        help=f"vertical field of view in degrees (default {cam.fov_y_deg:g})",
+    )
     r.add_argument("--supersample", type=int, default=1, choices=(1, 2), help="render at 2x and downsample")
     r.add_argument("--out", type=Path, default=Path("out/render"), help="output folder (default: out/render)")
 
@@ -312,13 +323,14 @@ def _cmd_render(args) -> int:
     import math
 
     from lab.geometry import Pose2D
-    from lab.robot import StereoCamera
+    from lab.robot import CameraSpec
     from lab.sim import RenderSettings, SimRobot, SimWorld, load_box_models
     from lab.viz import disparity_picture, save_rgb
 
     w, h = args.size
     with SimWorld(args.world, RenderSettings(supersample=args.supersample)) as world:
-        cam = StereoCamera.from_fov(w, h, args.fov, 0.12, mount_R=(0.0, 0.0, world.scene.robot_mast_height))
+        spec = CameraSpec(w, h, args.fov, SIM_CAMERA.baseline)
+        cam = spec.camera(mount_R=(0.0, 0.0, world.scene.robot_mast_height))
         if args.model:
             models = {m.name: m for m in load_box_models()}
             if args.model not in models:

@@ -62,6 +62,36 @@ def check_finite(**values) -> None:
 
 
 @dataclass(frozen=True)
+class CameraSpec:
+    """A stereo camera as a renderer takes it: image size, vertical field of view and baseline.
+
+    ``CameraSpec()`` is the simulated robot's camera (a BumbleBee2-like rig at the papers' 320 x 240):
+    the one place the simulator, the training rings and the command line take it from. A real camera
+    is described by its calibration file instead (:mod:`lab.vision.rectify`). Code that uses the camera
+    takes it from the robot (:attr:`Robot.camera`), never from here.
+
+    Attributes
+    ----------
+    width, height : int [px]
+    fov_y_deg : float [deg]
+    baseline : float [m]
+    """
+
+    width: int = 320
+    height: int = 240
+    fov_y_deg: float = 60.0
+    baseline: float = 0.12
+
+    def camera(self, mount_R=(0.0, 0.0, 0.8)) -> StereoCamera:
+        """The rectified pinhole pair these render (:meth:`StereoCamera.from_fov`), mounted at ``mount_R``."""
+        return StereoCamera.from_fov(self.width, self.height, self.fov_y_deg, self.baseline, mount_R=mount_R)
+
+
+#: The simulated robot's camera.
+SIM_CAMERA = CameraSpec()
+
+
+@dataclass(frozen=True)
 class StereoCamera:
     """A rectified stereo pair on a pan-tilt head: pinhole intrinsics, baseline and mounting.
 
@@ -99,14 +129,16 @@ class StereoCamera:
     @classmethod
     def from_fov(
         cls,
-        width: int = 320,
-        height: int = 240,
-        fov_y_deg: float = 60.0,
-        baseline: float = 0.12,
+        width: int = SIM_CAMERA.width,
+        height: int = SIM_CAMERA.height,
+        fov_y_deg: float = SIM_CAMERA.fov_y_deg,
+        baseline: float = SIM_CAMERA.baseline,
         mount_R=(0.0, 0.0, 0.8),
         camera_offset_P=(0.05, 0.06, 0.0),
     ) -> StereoCamera:
-        """Intrinsics that match a rendered image: ``f = (H/2)/tan(fov_y/2)``, ``c = size/2 - 0.5``."""
+        """Intrinsics that match a rendered image: ``f = (H/2)/tan(fov_y/2)``, ``c = size/2 - 0.5``.
+
+        The defaults are :data:`SIM_CAMERA`'s."""
         if not 5.0 <= fov_y_deg <= 150.0:
             raise ConfigError(f"fov_y_deg must be within [5, 150] degrees, got {fov_y_deg}")
         f = (height / 2.0) / math.tan(math.radians(fov_y_deg) / 2.0)

@@ -23,6 +23,7 @@ import numpy as np
 from lab.errors import ConfigError, EStopActive, NotEnabled, SafetyStop
 from lab.geometry import Pose2D, R_to_quat_xyzw, Rz, wrap_angle
 from lab.robot import (
+    SIM_CAMERA,
     BaseLimits,
     PanTiltLimits,
     PanTiltState,
@@ -66,7 +67,8 @@ class SimRobot(Robot):
     ----------
     world : SimWorld
     camera : StereoCamera, optional
-        Default: 320 x 240, 60 degree vertical field of view, 0.12 m baseline, the pan-tilt axes at the
+        Default: :data:`lab.robot.SIM_CAMERA` (320 x 240, 60 degree vertical field of view, 0.12 m
+        baseline), the pan-tilt axes at the
         scene's ``[robot] mast_height`` (0.7 m unless the scene says otherwise; the lab room's robot
         has a 1.1 m mast to see over a table and onto the 1.2 m shelf).
     start : Pose2D, optional
@@ -97,9 +99,7 @@ class SimRobot(Robot):
         if world.robot is not None:
             raise ConfigError("this world already has a robot")
         self.world = world
-        self._camera = camera or StereoCamera.from_fov(
-            320, 240, 60.0, 0.12, mount_R=(0.0, 0.0, world.scene.robot_mast_height)
-        )
+        self._camera = camera or SIM_CAMERA.camera(mount_R=(0.0, 0.0, world.scene.robot_mast_height))
         self._base_limits = base_limits or BaseLimits()
         self._pt_limits = pan_tilt_limits or PanTiltLimits()
         self._pt_limits.check_speed(pan_tilt_speed)

@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 from lab.errors import AssetError, ConfigError
 from lab.geometry import se3, se3_inv, transform_points
 from lab.paths import cache_dir
-from lab.robot import StereoCamera
+from lab.robot import SIM_CAMERA, StereoCamera
 from lab.scene import BodySpec, load_scene
 from lab.vision.colour import colour_histogram
 from lab.vision.database import FORMAT_VERSION, FeatureDatabase, load_database, save_database
@@ -85,10 +85,10 @@ class TrainingParams:
     edge_px: int = 4
     colour_space: str = "rg"
     hist_bins: int = 32
-    width: int = 320
-    height: int = 240
-    fov_y_deg: float = 60.0
-    baseline: float = 0.12
+    width: int = SIM_CAMERA.width
+    height: int = SIM_CAMERA.height
+    fov_y_deg: float = SIM_CAMERA.fov_y_deg
+    baseline: float = SIM_CAMERA.baseline
 
     def __post_init__(self):
         if not 0 < self.step_deg <= 180 or (360.0 / self.step_deg) % 1 > 1e-9:

@@ -41,7 +41,7 @@ from lab.identification.tables import (
     save_model_tables,
 )
 from lab.paths import cache_dir
-from lab.robot import StereoCamera
+from lab.robot import SIM_CAMERA, StereoCamera
 from lab.scene import load_scene
 from lab.training.databases import _object_world, get_database, trainable_objects
 from lab.vision import FeatureDatabase
@@ -89,10 +89,10 @@ class TableParams:
     position_std_m: float = 0.01
     rotation_std_deg: float = 1.0
     seed: int = 0
-    width: int = 320
-    height: int = 240
-    fov_y_deg: float = 60.0
-    baseline: float = 0.12
+    width: int = SIM_CAMERA.width
+    height: int = SIM_CAMERA.height
+    fov_y_deg: float = SIM_CAMERA.fov_y_deg
+    baseline: float = SIM_CAMERA.baseline
     supersample: int = 1
 
     def __post_init__(self):
