@@ -1,5 +1,8 @@
 """A PyBullet world built from a scene file: bodies by name, stereo rendering, carriers, ground truth.
 
+The carriers are :mod:`lab.sim.carrier`, the ground truth :mod:`lab.sim.truth`, and the quiet import
+of pybullet :mod:`lab.sim.client`.
+
 This module (with the rest of ``lab.sim``) is the only code that imports pybullet. Every world has its
 own physics client (``p.DIRECT``: headless TinyRenderer by default), so several can live side by side.
 All bodies are kinematic: robots and carriers are moved by integrating their velocity commands and
@@ -15,51 +18,29 @@ from __future__ import annotations
 import math
 import os
 import pkgutil
-import sys
-from contextlib import contextmanager
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from lab.errors import ConfigError
-from lab.geometry import Pose2D, R_to_quat_xyzw, Rz, compose, planar_G, quat_xyzw_to_R, se3, translation
+from lab.geometry import Pose2D, R_to_quat_xyzw, Rz, planar_G, se3, translation
 from lab.scene import BodySpec, ModelSpec, Scene, load_scene
 from lab.sim.assets import box_mesh
+from lab.sim.carrier import Carrier
+from lab.sim.client import BulletClient, pybullet, quiet_stdout
+from lab.sim.truth import Truth
 
-__all__ = ["RenderSettings", "SimWorld", "Carrier", "Truth", "load_box_models", "pybullet"]
-
-
-@contextmanager
-def _quiet_stdout():
-    """Silence C-level stdout and stderr (pybullet prints a build banner and plugin chatter from C)."""
-    fds = []
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            fds.append(stream.fileno())
-        except (AttributeError, ValueError, OSError):  # notebooks: no real fd
-            pass
-    if not fds:
-        yield
-        return
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = [os.dup(fd) for fd in fds]
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        for fd in fds:
-            os.dup2(devnull, fd)
-        yield
-    finally:
-        for fd, sv in zip(fds, saved, strict=True):
-            os.dup2(sv, fd)
-            os.close(sv)
-        os.close(devnull)
-
-
-with _quiet_stdout():
-    import pybullet  # noqa: E402
-    from pybullet_utils.bullet_client import BulletClient  # noqa: E402
+__all__ = [
+    "Carrier",
+    "RenderSettings",
+    "SimWorld",
+    "Truth",
+    "box_model",
+    "load_box_models",
+    "pybullet",
+    "viewpoint_G_WC",
+]
 
 
 @dataclass(frozen=True)
@@ -117,179 +98,6 @@ def box_model(index, scene: str = "box_database") -> ModelSpec:
     return models[index]
 
 
-class Carrier:
-    """A second differential-drive robot that carries a box: the moving object of the identification paper.
-
-    Drive it with :meth:`set_velocity`; the world integrates it at every :meth:`SimWorld.step`. The box
-    sits on top with its own yaw offset relative to the carrier's heading.
-    """
-
-    RADIUS = 0.18
-    HEIGHT = 0.35
-
-    def __init__(self, world: SimWorld, name: str, model: ModelSpec, pose: Pose2D, box_yaw: float = 0.0):
-        self.world, self.name, self.model = world, name, model
-        self.pose = pose
-        self.box_yaw = float(box_yaw)
-        self.v = 0.0
-        self.omega = 0.0
-        self.mover = None  # a lab.sim.movers.Mover, set by the caller
-        self._placed_box_yaw = self.box_yaw
-        pb = world.p
-        base_col = pb.createCollisionShape(pybullet.GEOM_CYLINDER, radius=self.RADIUS, height=self.HEIGHT)
-        base_vis = pb.createVisualShape(
-            pybullet.GEOM_CYLINDER, radius=self.RADIUS, length=self.HEIGHT, rgbaColor=(0.15, 0.15, 0.18, 1)
-        )
-        self.base_id = pb.createMultiBody(0, base_col, base_vis, (pose.x, pose.y, self.HEIGHT / 2))
-        self.box_id = world._textured_box(model.size, model.atlas, "atlas")
-        world._register(f"{name}/base", self.base_id)
-        world._register(name, self.box_id)
-        self._place()
-
-    def set_velocity(self, v: float, omega: float) -> None:
-        """Forward speed [m/s] and turn rate [rad/s] of the carrier until changed."""
-        self.v, self.omega = float(v), float(omega)
-
-    def set_pose(self, pose: Pose2D, box_yaw: float | None = None) -> None:
-        self.pose = pose
-        if box_yaw is not None:
-            self.box_yaw = float(box_yaw)
-        self._place()
-
-    @property
-    def G_WO(self) -> np.ndarray:
-        """True pose of the carried box (object frame O at the box centre) in the world."""
-        return compose(
-            self.pose.G(), translation(0, 0, self.HEIGHT + self.model.size[2] / 2), se3(Rz(self.box_yaw))
-        )
-
-    def _place(self):
-        pb = self.world.p
-        q = R_to_quat_xyzw(Rz(self.pose.theta))
-        pb.resetBasePositionAndOrientation(self.base_id, (self.pose.x, self.pose.y, self.HEIGHT / 2), q)
-        G = self.G_WO
-        pb.resetBasePositionAndOrientation(self.box_id, G[:3, 3], R_to_quat_xyzw(G[:3, :3]))
-        self._placed_box_yaw = self.box_yaw
-
-    def advance(self, dt: float) -> None:
-        """Move by the current velocity for ``dt`` [s] (after the mover, if any, has set it)."""
-        if self.mover is not None:
-            self.mover.step(self.world.t, dt)
-        if self.v == 0.0 and self.omega == 0.0:
-            if self.box_yaw != self._placed_box_yaw:
-                self._place()
-            return
-        x, y, th = self.pose.x, self.pose.y, self.pose.theta
-        th_mid = th + 0.5 * self.omega * dt
-        self.pose = Pose2D(
-            x + self.v * dt * math.cos(th_mid),
-            y + self.v * dt * math.sin(th_mid),
-            math.atan2(math.sin(th + self.omega * dt), math.cos(th + self.omega * dt)),
-        )
-        self._place()
-
-
-class Truth:
-    """Ground truth of a :class:`SimWorld`, for tests and evaluation only (never for the algorithms)."""
-
-    def __init__(self, world: SimWorld):
-        self._w = world
-
-    def G_W(self, name: str) -> np.ndarray:
-        """World pose (4x4) of a body's frame by name (its centre for scene bodies and boxes)."""
-        pos, q = self._w.p.getBasePositionAndOrientation(self._w.body_id(name))
-        return se3(quat_xyzw_to_R(q), pos)
-
-    def robot_pose(self) -> Pose2D:
-        r = self._w.robot
-        if r is None:
-            raise ConfigError("this world has no robot")
-        return r._true_pose
-
-    def G_WC(self) -> np.ndarray:
-        """True pose of the robot's left camera frame C in the world."""
-        r = self._w.robot
-        s = r.pan_tilt()
-        return r._true_pose.G() @ r.camera.G_RC(s.pan, s.tilt)
-
-    @property
-    def collisions(self) -> int:
-        r = self._w.robot
-        return 0 if r is None else r._collisions
-
-    def occupancy(self, spec, z_min: float, z_max: float, exclude=("floor", "robot")) -> np.ndarray:
-        """True occupancy of a floor grid: cells that a body's footprint overlaps within a height band.
-
-        A cell is occupied when the footprint (the vertical projection) of a body whose vertical extent
-        overlaps ``[z_min, z_max]`` overlaps the cell's square by more than a micrometre (bodies that
-        merely touch a cell's edge do not occupy it). Bodies are read from PyBullet's collision shapes
-        at their current poses, so moved bodies, added boxes, walls, each table's top and legs and the
-        carriers all count. Boxes must stand upright (rotated about z only); cylinders are upright.
-
-        Parameters
-        ----------
-        spec : lab.navigation.GridSpec
-            Or anything with ``origin_xy``, ``resolution`` and ``shape`` (see ``docs/conventions.md``).
-        z_min, z_max : float [m]
-            The height band, e.g. ``CostmapConfig.obstacle_min_height`` and ``obstacle_max_height``.
-        exclude : iterable of str
-            Body names left out (the floor, the robot).
-
-        Returns
-        -------
-        ndarray, shape spec.shape, bool
-        """
-        w = self._w
-        (ox, oy), r, (nx, ny) = spec.origin_xy, float(spec.resolution), spec.shape
-        X, Y = np.meshgrid(ox + (np.arange(nx) + 0.5) * r, oy + (np.arange(ny) + 0.5) * r, indexing="ij")
-        h = 0.5 * r
-        eps = 1e-6
-        occ = np.zeros((nx, ny), dtype=bool)
-        skip = {w._ids[n] for n in exclude if n in w._ids}
-        for body in sorted(set(w._ids.values()) - skip):
-            pos, q = w.p.getBasePositionAndOrientation(body)
-            R = quat_xyzw_to_R(q)
-            for shape in w.p.getCollisionShapeData(body, -1):
-                geom, dims, local_pos = shape[2], shape[3], shape[5]
-                c = np.asarray(pos) + R @ np.asarray(local_pos)
-                if geom == pybullet.GEOM_BOX:
-                    if abs(R[2, 2] - 1.0) > 1e-6:
-                        raise ConfigError(f"body {w.body_name(body)!r} is not upright")
-                    a, b, hz = 0.5 * dims[0], 0.5 * dims[1], 0.5 * dims[2]
-                    if c[2] + hz < z_min or c[2] - hz > z_max:
-                        continue
-                    cs, sn = R[0, 0], R[1, 0]
-                    dx, dy = X - c[0], Y - c[1]
-                    # separating axes: the cell's x and y axes and the box's own axes u, v
-                    sep = np.abs(dx) >= h + a * abs(cs) + b * abs(sn) - eps
-                    sep |= np.abs(dy) >= h + a * abs(sn) + b * abs(cs) - eps
-                    proj = h * (abs(cs) + abs(sn))
-                    sep |= np.abs(dx * cs + dy * sn) >= a + proj - eps
-                    sep |= np.abs(-dx * sn + dy * cs) >= b + proj - eps
-                    occ |= ~sep
-                elif geom == pybullet.GEOM_CYLINDER:
-                    height, radius = dims[0], dims[1]
-                    if c[2] + height / 2 < z_min or c[2] - height / 2 > z_max:
-                        continue
-                    # distance from the circle's centre to the nearest point of each cell's square
-                    ddx = np.maximum(np.abs(X - c[0]) - h, 0.0)
-                    ddy = np.maximum(np.abs(Y - c[1]) - h, 0.0)
-                    occ |= np.hypot(ddx, ddy) < radius - eps
-                else:
-                    raise ConfigError(f"body {w.body_name(body)!r}: collision shape {geom} is not supported")
-        return occ
-
-    def depth(self, G_WC: np.ndarray, camera) -> np.ndarray:
-        """Metric depth along the optical axis (H, W) [m] seen from ``G_WC`` (rendered at 1x)."""
-        _, depth, _ = self._w.render(G_WC, camera, want_depth=True, supersample=1)
-        return depth
-
-    def segmentation(self, G_WC: np.ndarray, camera) -> np.ndarray:
-        """Body id per pixel (H, W) seen from ``G_WC`` (rendered at 1x); -1 for background."""
-        _, _, seg = self._w.render(G_WC, camera, want_seg=True, supersample=1)
-        return seg
-
-
 class SimWorld:
     """A scene loaded into its own PyBullet client.
 
@@ -310,7 +118,7 @@ class SimWorld:
         self.settings = render or RenderSettings()
         if gui and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
             raise ConfigError("gui=True needs a display (DISPLAY is not set); run headless with gui=False")
-        with _quiet_stdout():
+        with quiet_stdout():
             self.p = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
             if self.settings.renderer == "egl":
                 egl = pkgutil.get_loader("eglRenderer")
