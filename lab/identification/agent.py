@@ -66,6 +66,7 @@ from lab.errors import ConfigError
 from lab.estimation import EKFBank, EKFConfig, OrientationChart, UpdateOutcome
 from lab.geometry import G_to_pose6, Pose2D, relative_pose2d, wrap_angle
 from lab.identification.actions import ActionConfig, RingBlocked
+from lab.identification.bayes import uniform
 from lab.identification.head import HeadController, HeadMode
 from lab.identification.hypotheses import (
     ModelHypotheses,
@@ -76,7 +77,8 @@ from lab.identification.hypotheses import (
     z_turns,
 )
 from lab.identification.planner import continue_direction, plan_next_best_view, ring_smoothed
-from lab.identification.probabilities import ModelScorer, ScoringConfig, shared_masks, uniform
+from lab.identification.scoring import ModelScorer, ScoringConfig
+from lab.identification.shared import shared_masks
 from lab.identification.step import observe_frame
 from lab.navigation.follower import PathFollower
 from lab.robot import Robot

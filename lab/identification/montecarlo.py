@@ -17,13 +17,13 @@ For a candidate action ``u+`` and an assumed truth, a pose hypothesis ``h`` of m
    ``b_l``'s (the cross-model correspondence structure, computed once from the databases: on a shared
    face every model has the twin of ``b_l``, on a unique face no other model has), among which the
    geometric gate picks the nearest, exactly as the real scoring does
-   (:class:`~lab.identification.probabilities.ModelScorer`). ``M_j`` is placed at the true pose ``h``
+   (:class:`~lab.identification.scoring.ModelScorer`). ``M_j`` is placed at the true pose ``h``
    (the real scoring shares the bank's poses, and the truth is among them) or, without pose sharing,
    at its own hypotheses. Each explained feature contributes
    ``N(d~_m; mu^j_m, C_m Sigma+ C_m^T + Sigma_m)`` (Eq. (12): independent features), each other one
    the clutter density. Where the model probabilities pool shared evidence (the default), a sampled
    feature that some model explains with one of its shared features counts for every model with the
-   best of their densities (:func:`~lab.identification.probabilities.pool_shared_evidence`).
+   best of their densities (:func:`~lab.identification.shared.pool_shared_evidence`).
 4. **Posterior and entropy** of every sample (Eq. (7), the same evidence weight and floor as the real
    update), averaged and weighted by the hypothesis's probability:
 
@@ -48,14 +48,10 @@ import numpy as np
 from lab.errors import ConfigError
 from lab.estimation.fit import chi2_quantile
 from lab.identification.actions import CandidateAction
+from lab.identification.bayes import entropy, posterior
 from lab.identification.hypotheses import ModelHypotheses
-from lab.identification.probabilities import (
-    ScoringConfig,
-    entropy,
-    pools_shared_evidence,
-    posterior,
-    shared_features,
-)
+from lab.identification.scoring import ScoringConfig
+from lab.identification.shared import pools_shared_evidence, shared_features
 from lab.identification.viewpoints import direction_std, viewpoint_directions, viewpoint_weights
 from lab.robot import StereoCamera
 from lab.vision import FeatureDatabase, Matcher

@@ -17,7 +17,7 @@ from a pose perturbed within the viewpoint's bin: the azimuth within half a ring
 looks up the *nearest* row, so a row must stand for its whole bin), the elevation and the distance
 within the ranges the robot's camera sees the object from. Every render's stereo features are matched
 against each database ``M_j`` exactly as the model probabilities do it
-(:meth:`~lab.identification.probabilities.ModelScorer.explain`: descriptor distance and the geometric
+(:meth:`~lab.identification.scoring.ModelScorer.explain`: descriptor distance and the geometric
 gate, at the true relative pose with a small tracking uncertainty), and each feature of ``M_j`` that
 explains a measured feature counts one match. The perturbations come from a generator seeded by
 ``(seed, model, viewpoint, repetition)``, so a build is deterministic and its rows independent.
@@ -56,7 +56,8 @@ import numpy as np
 
 from lab.errors import AssetError, ConfigError
 from lab.geometry import G_to_pose6, se3_inv
-from lab.identification.probabilities import ModelScorer, ScoringConfig, pose_estimate_rv, shared_features
+from lab.identification.scoring import ModelScorer, ScoringConfig, pose_estimate_rv
+from lab.identification.shared import shared_features
 from lab.paths import cache_dir
 from lab.robot import StereoCamera
 from lab.vision import FeatureDatabase
@@ -285,7 +286,7 @@ class LookupTables:
         ``S``, the stratified quantile levels of :attr:`W_quantiles`.
     shared : sequence of ndarray (N_j,) bool, optional
         The shared features of the databases the tables were built from
-        (:func:`~lab.identification.probabilities.shared_features`): what the lookup-table evaluator
+        (:func:`~lab.identification.shared.shared_features`): what the lookup-table evaluator
         leaves out of ``W`` where the scoring pools shared evidence. :func:`get_tables` fills it in.
 
     Attributes
@@ -357,7 +358,7 @@ class LookupTables:
         ----------
         masks : sequence of ndarray, shape (N_j,), bool, length L
             Per model ``M_j``: the features to leave out of ``W_ij`` for every true model ``i`` (the
-            shared features, :func:`~lab.identification.probabilities.shared_features`, when the model
+            shared features, :func:`~lab.identification.shared.shared_features`, when the model
             probabilities pool shared evidence: they explain a frame equally for every model, so only
             the other features' count tells the models apart).
 
