@@ -268,7 +268,7 @@ class IdentificationAgent:
         self.robot = robot
         self.names = tuple(model_names)
         self.config = config or AgentConfig()
-        self.scoring = scoring or ScoringConfig()
+        self.scoring = (scoring or ScoringConfig()).for_camera(robot.camera)  # clutter density: this camera's
         self.action_config = action_config or ActionConfig()
         self.rng = np.random.default_rng(seed)
         self.dbs = [get_database(n) for n in self.names]

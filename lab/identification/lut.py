@@ -148,7 +148,8 @@ class LookupTableEvaluator:
     camera : StereoCamera
         The robot's camera (for ``Sigma_o``).
     scoring : ScoringConfig, optional
-        Evidence weight, floor and clutter density: the same as the model probabilities'.
+        Evidence weight, floor and clutter density: the same as the model probabilities'. A clutter
+        density left None is ``camera``'s (:meth:`ScoringConfig.for_camera`).
     n_frames : int
         Frames the robot observes at the goal; their evidence adds up.
     constants : Eq15Constants, optional
@@ -176,7 +177,7 @@ class LookupTableEvaluator:
             raise ConfigError(f"n_frames must be a positive integer, got {n_frames}")
         self.tables = tables
         self.camera = camera
-        self.scoring = scoring or ScoringConfig()
+        self.scoring = (scoring or ScoringConfig()).for_camera(camera)  # camera's clutter unless set
         self.n_frames = int(n_frames)
         self.constants = constants or Eq15Constants()
         self.pooled = pools_shared_evidence(self.scoring, tables.n_models)

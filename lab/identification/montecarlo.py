@@ -113,7 +113,8 @@ class MonteCarloEvaluator:
     camera : StereoCamera
         The robot's camera (image bounds, stereo error model).
     scoring : ScoringConfig, optional
-        Association rule, clutter density, evidence weight and floor: the model probabilities'.
+        Association rule, clutter density, evidence weight and floor: the model probabilities'. A clutter
+        density left None is ``camera``'s (:meth:`ScoringConfig.for_camera` with ``stereo``).
     n_frames : int
         Frames the robot observes at the goal; their evidence adds up.
     config : MonteCarloConfig, optional
@@ -143,10 +144,11 @@ class MonteCarloEvaluator:
             raise ConfigError("the Monte Carlo evaluator needs at least one database")
         self.dbs = tuple(dbs)
         self.camera = camera
-        self.scoring = scoring or ScoringConfig()
         self.n_frames = int(n_frames)
         self.config = config or MonteCarloConfig()
         self.stereo = stereo or StereoParams()
+        # the clutter density of the camera the measurements are sampled for, unless set explicitly
+        self.scoring = (scoring or ScoringConfig()).for_camera(camera, self.stereo)
         fB = camera.fx * camera.baseline
         self._z_range = (fB / self.stereo.max_disparity, fB / self.stereo.min_disparity)
         self._gate_m2 = chi2_quantile(self.scoring.gate_prob, 3)

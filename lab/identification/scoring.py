@@ -55,7 +55,7 @@ image frustum between the nearest depth (largest disparity) and ``max_depth_m`` 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import Enum
 
 import numpy as np
@@ -124,7 +124,6 @@ def clutter_log_density(
 
 
 _LOG_2PI = math.log(2.0 * math.pi)
-_DEFAULT_LOG_CLUTTER = clutter_log_density(StereoCamera.from_fov(320, 240, 60.0, 0.12))
 
 
 class LikelihoodForm(Enum):
@@ -155,9 +154,10 @@ class ScoringConfig:
         Chi-square(3) probability of the geometric gate (0.999 -> 16.27), as the EKF's.
     dist_max_m : float [m]
         Euclidean gate on the residual, as the EKF's.
-    log_clutter_density : float [log 1/m^3]
-        ``log c`` of an unexplained feature (default: :func:`clutter_log_density` of the default
-        camera, -4.3).
+    log_clutter_density : float or None [log 1/m^3]
+        ``log c`` of an unexplained feature. None (the default): from the robot's camera, filled in by
+        :meth:`for_camera` (:func:`clutter_log_density`; -4.3 for the 320 x 240, 60 degree, 0.12 m
+        camera). A scorer needs it resolved (:meth:`require_clutter_density`).
     evidence_weight : float
         ``kappa`` in (0, 1]: each frame's log-likelihood is multiplied by it
         (:mod:`~lab.identification.bayes`).
@@ -188,7 +188,7 @@ class ScoringConfig:
     k_neighbours: int = 8
     gate_prob: float = 0.999
     dist_max_m: float = 0.15
-    log_clutter_density: float = _DEFAULT_LOG_CLUTTER
+    log_clutter_density: float | None = None
     evidence_weight: float = 0.008
     floor: float = 1e-3
     likelihood: LikelihoodForm = LikelihoodForm.PER_FEATURE
@@ -209,7 +209,7 @@ class ScoringConfig:
             raise ConfigError(f"gate_prob must be within (0, 1), got {self.gate_prob}")
         if not self.dist_max_m > 0:
             raise ConfigError(f"dist_max_m must be > 0 m, got {self.dist_max_m}")
-        if not math.isfinite(self.log_clutter_density):
+        if self.log_clutter_density is not None and not math.isfinite(self.log_clutter_density):
             raise ConfigError(f"log_clutter_density must be finite, got {self.log_clutter_density}")
         if not 0.0 < self.evidence_weight <= 1.0:
             raise ConfigError(f"evidence_weight must be within (0, 1], got {self.evidence_weight}")
@@ -226,6 +226,36 @@ class ScoringConfig:
             raise ConfigError(
                 f"shared_region_fraction must be within (0, 1], got {self.shared_region_fraction}"
             )
+
+    def for_camera(self, camera: StereoCamera, stereo: StereoParams | None = None) -> ScoringConfig:
+        """This config with the clutter density of ``camera`` filled in where it is None.
+
+        Parameters
+        ----------
+        camera : StereoCamera
+            The robot's camera (``robot.camera``): its image size, focal lengths and baseline bound the
+            volume :func:`clutter_log_density` spreads a clutter feature over.
+        stereo : StereoParams, optional
+            The stereo matcher's disparity range (default: :class:`~lab.vision.StereoParams`).
+
+        Returns
+        -------
+        ScoringConfig
+            ``self`` when it already has an explicit ``log_clutter_density``; else a copy with
+            ``clutter_log_density(camera, stereo)``.
+        """
+        if self.log_clutter_density is not None:
+            return self
+        return replace(self, log_clutter_density=clutter_log_density(camera, stereo))
+
+    def require_clutter_density(self) -> float:
+        """``log_clutter_density``, or a :class:`~lab.errors.ConfigError` where it was never resolved."""
+        if self.log_clutter_density is None:
+            raise ConfigError(
+                "the ScoringConfig has no clutter density (log_clutter_density is None): build it from "
+                "the robot's camera with ScoringConfig(...).for_camera(robot.camera)"
+            )
+        return self.log_clutter_density
 
 
 @dataclass(frozen=True)
@@ -310,12 +340,15 @@ class ModelScorer:
     Parameters
     ----------
     db : FeatureDatabase
-    config : ScoringConfig, optional
+    config : ScoringConfig
+        With its clutter density resolved (:meth:`ScoringConfig.for_camera`); else
+        :class:`~lab.errors.ConfigError`.
     """
 
-    def __init__(self, db: FeatureDatabase, config: ScoringConfig | None = None):
+    def __init__(self, db: FeatureDatabase, config: ScoringConfig):
+        config.require_clutter_density()
         self.db = db
-        self.config = config or ScoringConfig()
+        self.config = config
         self._matcher = Matcher(db, method="brute", k=self.config.k_neighbours)
         self._gate_m2 = chi2_quantile(self.config.gate_prob, 3)
         self._nn_cache: tuple | None = None  # (features, idx, dist) of the last feature set

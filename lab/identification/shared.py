@@ -150,6 +150,7 @@ def pool_shared_evidence(
     shared : sequence of ndarray (N_i,) bool
         :func:`shared_features` of the models' databases.
     config : ScoringConfig
+        With its clutter density resolved (:meth:`ScoringConfig.for_camera`).
 
     Returns
     -------
@@ -158,6 +159,7 @@ def pool_shared_evidence(
         any model explains with a shared database feature counts for every model with the best of
         their densities; the others as before.
     """
+    log_c = config.require_clutter_density()
     E = np.array([sc.explanation.explained for sc in scores])  # (L, n)
     if E.size == 0:
         return list(scores)
@@ -177,6 +179,6 @@ def pool_shared_evidence(
         own = E[i] & ~S
         ll_expl = float(np.sum(pooled[S]) + np.sum(ld[i, own]))
         n_expl = int(np.count_nonzero(S) + np.count_nonzero(own))
-        ll = ll_expl + (n - n_expl) * config.log_clutter_density
+        ll = ll_expl + (n - n_expl) * log_c
         out.append(ModelScore(ll, ll_expl, n_expl, n, sc.explanation))
     return out

@@ -471,7 +471,7 @@ def build_model_tables(
     from lab.vision.stereo import StereoParams, sift, stereo_features
 
     params = params or TableParams()
-    scoring = scoring or ScoringConfig()
+    scoring = (scoring or ScoringConfig()).for_camera(params.camera)  # the training camera's clutter
     names = [db.name for db in dbs]
     if true_model not in names:
         raise ConfigError(f"true model {true_model!r} is not among the databases {', '.join(names)}")
