@@ -38,7 +38,8 @@ import numpy as np
 
 from lab.estimation import EKFBank, EKFConfig, OrientationChart
 from lab.geometry import Pose2D
-from lab.identification import ModelScorer, observe_frame, uniform, z_turns
+from lab.identification import ModelScorer, ScoringConfig, observe_frame, uniform, z_turns
+from lab.robot import StereoCamera
 from lab.sim import SimRobot, SimWorld, load_box_models
 from lab.training import get_database
 from lab.vision import Matcher, stereo_features
@@ -104,7 +105,10 @@ def main(argv=None) -> int:
     dbs = [get_database(n) for n in names]
     set_threads = _openblas_threads()
     default_threads = int(os.environ.get("OPENBLAS_NUM_THREADS", os.cpu_count() or 1))
-    scorers = [ModelScorer(db) for db in dbs]
+    scorers = [
+        ModelScorer(db, ScoringConfig().for_camera(StereoCamera.from_fov()))  # the simulated robot's
+        for db in dbs
+    ]
     setups = {
         # FLANN matchers on database copies: observe_frame shares a search only with the scorer of the
         # same database object, so these search themselves, as the loop did before

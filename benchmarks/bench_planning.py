@@ -36,6 +36,7 @@ from lab.identification import (
     ModelScorer,
     MonteCarloConfig,
     MonteCarloEvaluator,
+    ScoringConfig,
     aim_pan_tilt,
     calc_possible_control_actions,
     entropy,
@@ -142,7 +143,7 @@ def part_rendered(args):
     dbs = [get_database(n) for n in names]
     tables = get_tables(names, dbs=dbs)
     matchers = [Matcher(db) for db in dbs]
-    scorers = [ModelScorer(db) for db in dbs]
+    scorers = [ModelScorer(db, ScoringConfig().for_camera(CAM)) for db in dbs]
     lut = LookupTableEvaluator(tables, CAM)
     mcs = [
         MonteCarloEvaluator(dbs, CAM, config=MonteCarloConfig(n_samples=args.samples, seed=s)) for s in (0, 1)

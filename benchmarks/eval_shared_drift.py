@@ -51,7 +51,7 @@ def one_episode(model: int, seed: int, planner: str, pool: bool, max_time_s: flo
     import numpy as np
 
     import lab.identification.agent as agent_module
-    from lab.identification.probabilities import ScoringConfig
+    from lab.identification.scoring import ScoringConfig
     from lab.runs.identify import run_identify
 
     agent_module.ScoringConfig = functools.partial(ScoringConfig, pool_shared=pool)

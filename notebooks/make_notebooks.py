@@ -411,6 +411,7 @@ We render frames of box $M_2$ from 1 m: once facing its unique face, once a shar
 from lab.estimation import EKFBank, EKFConfig, OrientationChart
 from lab.geometry import Pose2D
 from lab.identification import ModelScorer, ScoringConfig, observe_frame, uniform
+from lab.robot import StereoCamera
 from lab.sim import SimRobot, SimWorld, load_box_models
 from lab.vision import Matcher, stereo_features
 from lab.training import get_database
@@ -419,8 +420,8 @@ models = load_box_models()                                  # M0 .. M3 (the pape
 names = tuple(m.name for m in models)
 dbs = [get_database(n) for n in names]                      # trained once, cached
 matchers = [Matcher(db) for db in dbs]                      # the EKFs' correspondences
-scorers = [ModelScorer(db) for db in dbs]                   # Eqs. (7)-(9)
-scoring = ScoringConfig()
+scoring = ScoringConfig().for_camera(StereoCamera.from_fov(320, 240, 60.0, 0.12))   # log c: the robot's camera
+scorers = [ModelScorer(db, scoring) for db in dbs]          # Eqs. (7)-(9)
 
 def look_at_box(k, box_yaw, n_frames=3):
     \"\"\"P after each of n_frames frames of box M_k turned by box_yaw [rad], seen from 1 m.\"\"\"

@@ -63,7 +63,7 @@ def test_filters_on_a_wrong_turn_still_let_the_unique_face_identify_its_model():
     only at the filters' poses nobody explains the unique face; with the look-alike turns as candidate
     poses the right one is found and the unique face's model wins."""
     dbs = S.databases()
-    scorers = [ModelScorer(db) for db in dbs]
+    scorers = [ModelScorer(db, ScoringConfig().for_camera(S.CAMERA)) for db in dbs]
     rng = np.random.default_rng(11)
     G_WO, G_WC = S.box_pose(0.0), S.camera_at(5.0)  # the unique +X face of the true model, frontal
     wrong = S.estimate(G_WO @ z_turns(4)[2], G_WC)
@@ -112,6 +112,30 @@ def _agent(world, carrier_model=1, floor_plan=None, planner="circle", evaluator=
     return agent, carrier
 
 
+def test_the_agent_scores_with_the_clutter_density_of_its_robots_camera():
+    """The agent's scoring config takes ``log c`` from ``robot.camera`` (no rendering: nothing is
+    captured): the simulator's default camera gives the value that used to be an import-time constant,
+    bit for bit, and a 640 x 480 camera its own; an explicit value is kept."""
+    from lab.identification import clutter_log_density
+    from lab.identification.agent import IdentificationAgent
+    from lab.robot import StereoCamera
+    from lab.sim import SimRobot, SimWorld
+
+    def agent_for(camera=None, scoring=None):
+        with SimWorld("arena") as world:
+            robot = SimRobot(world, start=Pose2D(-1.2, 0.0, 0.0), seed=0, camera=camera)
+            return IdentificationAgent(robot, planner="circle", scoring=scoring)
+
+    default = agent_for()
+    assert default.scoring.log_clutter_density == float.fromhex("-0x1.1383e55a78440p+2")  # -4.30492528757992
+    wide = StereoCamera.from_fov(640, 480, 60.0, 0.12, mount_R=(0.0, 0.0, 0.7))
+    agent = agent_for(wide)
+    assert agent.scoring.log_clutter_density == clutter_log_density(wide)
+    assert agent.scoring.log_clutter_density != default.scoring.log_clutter_density
+    assert all(s.config is agent.scoring for s in agent.scorers)
+    assert agent_for(wide, ScoringConfig(log_clutter_density=-3.0)).scoring.log_clutter_density == -3.0
+
+
 def test_a_blocked_ring_holds_position_and_retries():
     from lab.runs.identify import floor_plan
     from lab.sim import SimWorld
@@ -148,8 +172,13 @@ def test_a_lost_track_scans_halts_and_resumes():
 
 def test_the_optional_visibility_rule_keeps_the_features_seen_from_that_direction():
     dbs = S.databases()
-    assert ModelScorer(dbs[0]).visible(S.estimate(S.box_pose(0.0), S.camera_at(180.0))) is None  # off
-    scorer = ModelScorer(dbs[0], ScoringConfig(visibility_deg=15.0))
+    assert (
+        ModelScorer(dbs[0], ScoringConfig().for_camera(S.CAMERA)).visible(
+            S.estimate(S.box_pose(0.0), S.camera_at(180.0))
+        )
+        is None
+    )  # off
+    scorer = ModelScorer(dbs[0], ScoringConfig(visibility_deg=15.0).for_camera(S.CAMERA))
     G_WO, G_WC = S.box_pose(0.0), S.camera_at(180.0)  # the -X face
     vis = scorer.visible(S.estimate(G_WO, G_WC))
     az = np.degrees(dbs[0].viewpoints[:, 0])

@@ -400,7 +400,7 @@ def test_symmetry_weights_rule_out_the_turn_that_shows_an_unseen_unique_face(syn
     dbs = synth[0]
     from lab.identification import ModelScorer, symmetry_log_weights
 
-    scorers = [ModelScorer(db) for db in dbs]
+    scorers = [ModelScorer(db, ScoringConfig().for_camera(S.CAMERA)) for db in dbs]
     rng = np.random.default_rng(7)
     G_WO, G_WC = S.box_pose(0.0), S.camera_at(180.0)  # the -X face is seen
     frames = [(S.observe(dbs[0], G_WO, G_WC, rng), G_WC) for _ in range(2)]

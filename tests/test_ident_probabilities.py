@@ -27,6 +27,8 @@ from lab.identification import (
     uniform,
     update_model_probabilities,
 )
+from lab.robot import StereoCamera
+from lab.vision import StereoParams
 
 prob_vectors = st.integers(1, 25).flatmap(
     lambda L: st.lists(st.floats(1e-12, 1.0), min_size=L, max_size=L).map(lambda v: np.array(v) / sum(v))
@@ -115,6 +117,32 @@ def test_clutter_density_is_uniform_over_the_stereo_frustum():
         clutter_log_density(cam, max_depth_m=0.1)
 
 
+def test_the_clutter_density_comes_from_the_camera():
+    """ScoringConfig.for_camera fills in the camera's clutter density (the robot's default camera:
+    bit for bit the value that used to be a constant computed at import), keeps an explicit one, and a
+    scorer refuses a config that has none."""
+    default = ScoringConfig().for_camera(StereoCamera.from_fov(320, 240, 60.0, 0.12))
+    assert default.log_clutter_density == float.fromhex("-0x1.1383e55a78440p+2")  # -4.30492528757992
+    assert ScoringConfig().for_camera(S.CAMERA) == default  # the mounting does not matter
+    wide = StereoCamera.from_fov(640, 480, 90.0, 0.12)
+    assert ScoringConfig().for_camera(wide).log_clutter_density == clutter_log_density(wide)
+    assert ScoringConfig().for_camera(wide).log_clutter_density != default.log_clutter_density
+    narrow = StereoParams(max_disparity=48)  # the disparity range bounds the nearest depth
+    assert ScoringConfig().for_camera(S.CAMERA, narrow).log_clutter_density == clutter_log_density(
+        S.CAMERA, narrow
+    )
+    explicit = ScoringConfig(log_clutter_density=-3.0)
+    assert explicit.for_camera(wide) is explicit
+    unresolved = ScoringConfig()
+    assert unresolved.log_clutter_density is None
+    with pytest.raises(ConfigError, match=r"no clutter density.*for_camera\(robot.camera\)"):
+        ModelScorer(S.databases()[0], unresolved)
+    with pytest.raises(ConfigError, match="no clutter density"):
+        pool_shared_evidence([], [], unresolved)
+    with pytest.raises(ConfigError, match="finite"):
+        ScoringConfig(log_clutter_density=math.inf)
+
+
 def test_rotation_vector_chart_gives_the_same_eq9_likelihood():
     rng = np.random.default_rng(0)
     mu = np.array([0.1, 0.0, 1.0, 0.3, 0.2, -0.4])
@@ -135,7 +163,7 @@ def test_rotation_vector_chart_gives_the_same_eq9_likelihood():
 @pytest.fixture(scope="module")
 def scene():
     dbs = S.databases()
-    return dbs, [ModelScorer(db) for db in dbs]
+    return dbs, [ModelScorer(db, ScoringConfig().for_camera(S.CAMERA)) for db in dbs]
 
 
 def test_the_model_that_explains_more_wins(scene):
@@ -214,7 +242,9 @@ def test_pose_sharing_scores_a_model_without_a_filter_at_the_others_pose(scene):
     states = [est, None, est, None]
     shared = calc_current_entropy(uniform(4), f, scorers, states)
     np.testing.assert_allclose(shared.P, 0.25, atol=1e-9)
-    own = calc_current_entropy(uniform(4), f, scorers, states, ScoringConfig(share_poses=False))
+    own = calc_current_entropy(
+        uniform(4), f, scorers, states, ScoringConfig(share_poses=False).for_camera(S.CAMERA)
+    )
     assert own.P[1] < 0.2 and own.P[0] > 0.3  # without sharing, no pose means no explanation
 
 
@@ -224,7 +254,9 @@ def test_joint_and_per_feature_forms_agree_on_clean_data(scene):
     G_WO, G_WC = S.box_pose(0.0), S.camera_at(0.0)
     f = S.observe(dbs[0], G_WO, G_WC, rng, clutter=0)
     est = S.estimate(G_WO, G_WC, Sigma=np.diag([1e-8] * 3 + [1e-8] * 3))  # pose known: no correlation
-    joint = ModelScorer(dbs[0], ScoringConfig(likelihood=LikelihoodForm.JOINT)).score(f, est)
+    joint = ModelScorer(dbs[0], ScoringConfig(likelihood=LikelihoodForm.JOINT).for_camera(S.CAMERA)).score(
+        f, est
+    )
     per = scorers[0].score(f, est)
     assert joint.n_explained == per.n_explained > 20
     assert joint.log_likelihood == pytest.approx(per.log_likelihood, rel=1e-4)
@@ -258,7 +290,8 @@ def test_shared_evidence_counts_alike_for_every_model_and_the_unique_face_still_
     est = S.estimate(G_WO, G_WC)
     runs = {}
     for pool in (False, True):
-        scorers = [ModelScorer(db, ScoringConfig(shared_region_m=0.05, pool_shared=pool)) for db in dbs]
+        cfg = ScoringConfig(shared_region_m=0.05, pool_shared=pool).for_camera(S.CAMERA)
+        scorers = [ModelScorer(db, cfg) for db in dbs]
         P = uniform(4)
         for _ in range(5):
             b = calc_current_entropy(P, f, scorers, [est] * 4)
@@ -282,10 +315,11 @@ def test_an_empty_database_shares_nothing_and_is_scored_as_before():
     assert all(not m.any() for m in shared_features(dbs))
     f = S.observe(dbs[0], S.box_pose(0.0), S.camera_at(180.0), np.random.default_rng(8))
     est = S.estimate(S.box_pose(0.0), S.camera_at(180.0))
-    pooled = calc_current_entropy(uniform(4), f, [ModelScorer(db) for db in dbs], [est] * 4)
-    raw = calc_current_entropy(
-        uniform(4), f, [ModelScorer(db, ScoringConfig(pool_shared=False)) for db in dbs], [est] * 4
+    pooled = calc_current_entropy(
+        uniform(4), f, [ModelScorer(db, ScoringConfig().for_camera(S.CAMERA)) for db in dbs], [est] * 4
     )
+    raw_cfg = ScoringConfig(pool_shared=False).for_camera(S.CAMERA)
+    raw = calc_current_entropy(uniform(4), f, [ModelScorer(db, raw_cfg) for db in dbs], [est] * 4)
     np.testing.assert_array_equal(pooled.P, raw.P)
     assert pooled.n_explained[3] == 0
 
@@ -294,7 +328,7 @@ def test_pooling_is_the_rule_of_the_docstring():
     """pool_shared_evidence on hand-made explanations: shared evidence gets the best density for all."""
     from lab.identification import Explanation, ModelScore
 
-    cfg = ScoringConfig()
+    cfg = ScoringConfig().for_camera(S.CAMERA)
     c = cfg.log_clutter_density
     # 4 measured features; database features 0-1 shared, 2 not
     shared = [np.array([True, True, False])] * 2

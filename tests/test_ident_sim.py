@@ -13,10 +13,13 @@ import pytest
 
 from lab.estimation import EKFBank, EKFConfig, OrientationChart
 from lab.geometry import Pose2D
-from lab.identification import ModelScorer, observe_frame, uniform
+from lab.identification import ModelScorer, ScoringConfig, observe_frame, uniform
+from lab.robot import StereoCamera
 from lab.sim import SimRobot, SimWorld, load_box_models
 from lab.training import get_database
 from lab.vision import Matcher, stereo_features
+
+_SCORING = ScoringConfig().for_camera(StereoCamera.from_fov())  # the simulated robot's camera's clutter
 
 # box yaw that turns each face towards a robot on the -x side: the unique +X face and the shared ones
 UNIQUE = math.pi
@@ -27,7 +30,7 @@ SHARED = {"-X": 0.0, "+Y": math.pi / 2, "-Y": -math.pi / 2}
 def models():
     models = load_box_models()
     dbs = [get_database(m.name, progress=False) for m in models]
-    return models, dbs, [Matcher(db) for db in dbs], [ModelScorer(db) for db in dbs]
+    return models, dbs, [Matcher(db) for db in dbs], [ModelScorer(db, _SCORING) for db in dbs]
 
 
 def _aim(robot, G_WO):

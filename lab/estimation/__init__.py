@@ -7,8 +7,10 @@ Euler angles (``docs/conventions.md``).
   analytic Jacobians, process noise.
 * :mod:`~lab.estimation.fit`: closed-form rigid fit and RANSAC initialisation.
 * :mod:`~lab.estimation.ekf`: :class:`PoseEKF` (predict, gated Joseph-form update, Eq. (9) likelihood,
-  divergence detection). ``EKFConfig(chart=OrientationChart.ROTATION_VECTOR)`` keeps the covariance
-  over a small rotation vector instead of the Euler angles: same state, no gimbal-lock breakdown.
+  divergence detection), with the geometric gate of :mod:`~lab.estimation.gate` and the
+  :class:`PoseEstimate` of :mod:`~lab.estimation.estimate` (and its NEES).
+  ``EKFConfig(chart=OrientationChart.ROTATION_VECTOR)`` keeps the covariance over a small rotation
+  vector instead of the Euler angles: same state, no gimbal-lock breakdown.
 * :mod:`~lab.estimation.bank`: :class:`EKFBank`, one filter per database model.
 * :mod:`~lab.estimation.synthetic`: synthetic box features and stereo-like noise for tests and notebooks.
 """
@@ -17,16 +19,14 @@ from lab.estimation.bank import EKFBank
 from lab.estimation.ekf import (
     DivergenceConfig,
     EKFConfig,
-    GateConfig,
     PoseEKF,
-    PoseEstimate,
     UpdateOutcome,
     UpdateResult,
     data_log_likelihood,
-    gate_matches,
-    nees,
 )
+from lab.estimation.estimate import PoseEstimate, nees
 from lab.estimation.fit import InitResult, RansacConfig, fit_rigid_transform, ransac_pose
+from lab.estimation.gate import GateConfig, gate_matches
 from lab.estimation.models import (
     ObjectNoiseKind,
     OrientationChart,

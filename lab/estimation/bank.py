@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from lab.estimation.ekf import EKFConfig, PoseEKF, PoseEstimate, UpdateResult
+from lab.estimation.ekf import EKFConfig, PoseEKF, UpdateResult
+from lab.estimation.estimate import PoseEstimate
 
 __all__ = ["EKFBank"]
 

@@ -43,6 +43,7 @@ from enum import Enum
 
 import numpy as np
 
+from lab.estimation.estimate import PoseEstimate
 from lab.estimation.fit import (
     RansacConfig,
     _check_matches,
@@ -51,6 +52,7 @@ from lab.estimation.fit import (
     point_spread,
     ransac_pose,
 )
+from lab.estimation.gate import GateConfig, _gate
 from lab.estimation.models import (
     OrientationChart,
     ProcessNoise,
@@ -64,58 +66,18 @@ from lab.estimation.models import (
     process_noise_covariance,
     retract_rv,
     rv_to_euler_jacobian,
-    state_residual,
 )
-from lab.geometry import pose6_to_G
 
 __all__ = [
-    "GateConfig",
     "DivergenceConfig",
     "EKFConfig",
-    "PoseEstimate",
     "UpdateOutcome",
     "UpdateResult",
     "PoseEKF",
-    "gate_matches",
     "data_log_likelihood",
-    "nees",
 ]
 
 _LOG_2PI = math.log(2.0 * math.pi)
-
-
-@dataclass(frozen=True)
-class GateConfig:
-    """The geometric feasibility check (search paper Sec. III-C) applied before each update.
-
-    Attributes
-    ----------
-    dist_max_m : float [m]
-        Reject a match whose measured point is farther than this from where the predicted pose puts
-        its database feature (the papers' distance threshold). ``inf`` disables it.
-    gate_prob : float or None
-        Reject a match whose Mahalanobis distance under its predicted covariance
-        ``C_j Sigma_bar C_j^T + Sigma_j`` exceeds the chi-square(3) quantile of this probability
-        (0.999 -> 16.27). ``None`` disables it.
-    min_matches : int
-        Fewest matches (after gating) for an update; below it the update is skipped (>= 3).
-    min_spread_m : float [m]
-        Skip the update when the used model points are collinear or coincident (RMS distance from
-        their best-fit line below this).
-    """
-
-    dist_max_m: float = 0.15
-    gate_prob: float | None = 0.999
-    min_matches: int = 3
-    min_spread_m: float = 5e-3
-
-    def __post_init__(self):
-        if self.min_matches < 3:
-            raise ValueError(f"GateConfig.min_matches must be >= 3, got {self.min_matches}")
-        if self.gate_prob is not None and not 0.0 < self.gate_prob < 1.0:
-            raise ValueError(f"GateConfig.gate_prob must be in (0, 1) or None, got {self.gate_prob}")
-        if not self.dist_max_m > 0:
-            raise ValueError(f"GateConfig.dist_max_m must be > 0, got {self.dist_max_m}")
 
 
 @dataclass(frozen=True)
@@ -178,66 +140,6 @@ class EKFConfig:
     chart: OrientationChart = OrientationChart.EULER
 
 
-def _frozen(a) -> np.ndarray:
-    a = np.array(a, dtype=float)
-    a.flags.writeable = False
-    return a
-
-
-@dataclass(frozen=True)
-class PoseEstimate:
-    """A pose estimate of the object in the camera frame C at time ``t``.
-
-    Attributes
-    ----------
-    mu : ndarray, shape (6,) [m, rad]
-        ``[x, y, z, alpha, beta, gamma]`` (read-only).
-    Sigma : ndarray, shape (6, 6)
-        Its covariance [m^2, m rad, rad^2] over ``X`` (Euler angles; read-only).
-    t : float [s]
-    Sigma_rv : ndarray, shape (6, 6)
-        The same uncertainty over ``[x_r, phi]``, ``phi`` a small rotation vector in C
-        (``R_true = Exp(phi) R``): ``T Sigma T^T`` with ``T = diag(I, E)``. Computed from ``Sigma``
-        when not given; finite at every orientation when given by a rotation-vector filter.
-    """
-
-    mu: np.ndarray = field(repr=False)
-    Sigma: np.ndarray = field(repr=False)
-    t: float = 0.0
-    Sigma_rv: np.ndarray | None = field(default=None, repr=False)
-
-    def __post_init__(self):
-        mu, Sigma = _frozen(self.mu), _frozen(self.Sigma)
-        if mu.shape != (6,) or Sigma.shape != (6, 6):
-            raise ValueError(f"PoseEstimate needs mu (6,) and Sigma (6, 6), got {mu.shape}, {Sigma.shape}")
-        if self.Sigma_rv is None:
-            T = euler_to_rv_jacobian(mu)
-            Sigma_rv = T @ Sigma @ T.T
-            Sigma_rv = _frozen(0.5 * (Sigma_rv + Sigma_rv.T))
-        else:
-            Sigma_rv = _frozen(self.Sigma_rv)
-            if Sigma_rv.shape != (6, 6):
-                raise ValueError(f"PoseEstimate needs Sigma_rv (6, 6), got {Sigma_rv.shape}")
-        object.__setattr__(self, "mu", mu)
-        object.__setattr__(self, "Sigma", Sigma)
-        object.__setattr__(self, "Sigma_rv", Sigma_rv)
-
-    @property
-    def G_CO(self) -> np.ndarray:
-        """The pose as a 4x4 transform (object frame O in the camera frame C)."""
-        return pose6_to_G(self.mu)
-
-    @property
-    def std(self) -> np.ndarray:
-        """Standard deviations of the six components, shape (6,) [m, rad]."""
-        return np.sqrt(np.diag(self.Sigma))
-
-    def __repr__(self) -> str:
-        x = ", ".join(f"{v:.4f}" for v in self.mu)
-        s = ", ".join(f"{v:.2g}" for v in self.std)
-        return f"PoseEstimate(t={self.t:.3f}, mu=[{x}], std=[{s}])"
-
-
 class UpdateOutcome(Enum):
     """What :meth:`PoseEKF.update` did with a frame's matches."""
 
@@ -286,57 +188,6 @@ class UpdateResult:
     dof: int = 0
     log_likelihood: float | None = None
     estimate: PoseEstimate | None = field(default=None, repr=False)
-
-
-def _gate(mu_bar, Sigma_bar, d, b, S, gate: GateConfig, chart=OrientationChart.EULER):
-    """Per-match gate; returns (keep mask, r (n,3), C (n,3,6)). ``Sigma_bar`` is in ``chart``."""
-    n = d.shape[0]
-    jac = measurement_jacobian if chart is OrientationChart.EULER else measurement_jacobian_rv
-    C = jac(mu_bar, b).reshape(n, 3, 6)
-    r = d - measurement_model(mu_bar, b)  # residual of each match under the predicted pose
-    keep = np.ones(n, bool)
-    if np.isfinite(gate.dist_max_m):
-        keep &= np.linalg.norm(r, axis=1) <= gate.dist_max_m  # Euclidean feasibility check
-    if gate.gate_prob is not None:
-        S_jj = C @ Sigma_bar @ np.swapaxes(C, 1, 2) + S  # predicted covariance of each match, (n, 3, 3)
-        m2 = np.einsum("na,na->n", r, np.linalg.solve(S_jj, r[..., None])[..., 0])
-        keep &= m2 <= chi2_quantile(gate.gate_prob, 3)  # Mahalanobis gate, 3 dof
-    return keep, r, C
-
-
-def gate_matches(mu_bar, Sigma_bar, d_C, b_O, Sigma_d, gate: GateConfig | None = None) -> np.ndarray:
-    """The geometric feasibility check: which matches are consistent with the predicted pose.
-
-    A match ``(d_j, b_j)`` passes when its residual ``r_j = d_j - (x_r + R b_j)`` is within
-    ``gate.dist_max_m`` and ``r_j^T (C_j Sigma_bar C_j^T + Sigma_j)^-1 r_j`` is within the
-    chi-square(3) quantile ``gate.gate_prob``. Rows with non-finite values fail.
-
-    Parameters
-    ----------
-    mu_bar : array_like, shape (6,)
-    Sigma_bar : array_like, shape (6, 6)
-    d_C, b_O : array_like, shape (n, 3) [m]
-    Sigma_d : array_like, shape (n, 3, 3) [m^2]
-    gate : GateConfig, optional
-
-    Returns
-    -------
-    inliers : ndarray, shape (n,), bool
-    """
-    d, b, S = _check_matches(d_C, b_O, Sigma_d)
-    valid = _valid_rows(d, b, S)
-    out = np.zeros(d.shape[0], bool)
-    if np.any(valid):
-        keep, _, _ = _gate(
-            np.asarray(mu_bar, float),
-            np.asarray(Sigma_bar, float),
-            d[valid],
-            b[valid],
-            S[valid],
-            gate or GateConfig(),
-        )
-        out[np.flatnonzero(valid)[keep]] = True
-    return out
 
 
 def _whitened(r, C, S):
@@ -411,31 +262,6 @@ def data_log_likelihood(
     C = jac(mu_bar, b).reshape(n, 3, 6)
     y_w, C_w, logdet_m = _whitened(r, C, S)
     return _information_update(np.asarray(Sigma_bar, float), y_w, C_w, logdet_m)[3]
-
-
-def nees(X_true, estimate: PoseEstimate, chart: OrientationChart = OrientationChart.EULER) -> float:
-    """Normalised estimation error squared ``e^T Sigma^-1 e``; chi-square(6) if the filter is consistent.
-
-    ``EULER``: ``e`` is the Euler-state difference (angles wrapped) and ``Sigma`` the estimate's.
-    ``ROTATION_VECTOR``: ``e = [x_r - x_r_true, phi]`` with ``Exp(phi) = R R_true^T`` and ``Sigma_rv``.
-    """
-    if chart is OrientationChart.EULER:
-        e, Sigma = state_residual(estimate.mu, X_true), estimate.Sigma
-    else:
-        R = pose6_to_G(estimate.mu)[:3, :3] @ pose6_to_G(X_true)[:3, :3].T
-        e = np.concatenate([estimate.mu[:3] - np.asarray(X_true, float)[:3], _rotation_vector(R)])
-        Sigma = estimate.Sigma_rv
-    L = np.linalg.cholesky(Sigma)
-    z = np.linalg.solve(L, e)
-    return float(z @ z)
-
-
-def _rotation_vector(R) -> np.ndarray:
-    """``Log(R)``: the rotation vector (3,) of a rotation matrix (angle < pi)."""
-    c = min(1.0, max(-1.0, 0.5 * (np.trace(R) - 1.0)))
-    th = math.acos(c)
-    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    return 0.5 * w * (th / math.sin(th) if th > 1e-8 else 1.0)
 
 
 def _is_rotation(G) -> bool:
@@ -738,43 +564,67 @@ class PoseEKF:
         d, b, S = d[idx], b[idx], S[idx]
 
         mu_bar, P_bar = self.mu, self.P
-        keep, r, C = _gate(mu_bar, P_bar, d, b, S, gc, self.config.chart)  # geometric feasibility check
-        inliers = np.zeros(n, bool)
-        inliers[idx[keep]] = True
-        n_used = int(np.count_nonzero(keep))
-        if n_used < gc.min_matches:
-            self._gated_out_run += 1
-            dcfg = self.config.divergence
-            if self._gated_out_run >= dcfg.gating_patience:
-                self.divergence = (
-                    f"track lost: the gate rejected the matches {self._gated_out_run} frames in a row"
-                )
-            return self._skip(
-                f"gating kept {n_used} of {n_valid} matches < {gc.min_matches}{note}", n, inliers
-            )
-        self._gated_out_run = 0
-        if point_spread(b[keep]) < gc.min_spread_m:
-            return self._skip(
-                f"degenerate geometry: the matched model points are collinear or coincident{note}", n, inliers
-            )
-
-        y = r[keep]  # innovation y = D - H(mu_bar)
+        keep, r, C, inliers, why_not = self._feasible_matches(d, b, S, idx, n, n_valid, note)
+        if why_not is not None:
+            return self._skip(why_not, n, inliers)
         try:
-            y_w, C_w, logdet_m = _whitened(y, C[keep], S[keep])
+            y_w, C_w, logdet_m = _whitened(r[keep], C[keep], S[keep])  # innovation y = D - H(mu_bar)
             dx, P, nis, loglik = _information_update(P_bar, y_w, C_w, logdet_m)
         except np.linalg.LinAlgError:
             self.divergence = "covariance is not positive definite"
             return self._skip("update failed: a covariance factorisation failed", n, inliers)
-        if self._euler:
-            mu, P = canonical_state(mu_bar + dx, P)  # mu = mu_bar + K y; alpha, gamma wrapped, beta in range
-        else:
-            mu = retract_rv(mu_bar, dx)  # x_r + dx_r, R <- Exp(phi) R (the reset's Jacobian ~ I is ignored)
+        mu, P = self._corrected(mu_bar, dx, P)
         problem = self._health(mu, P)
         if problem is not None and not problem.startswith(("covariance blow-up", "gimbal")):
             self.divergence = problem
             return self._skip(f"update rejected: {problem}", n, inliers)
         self.mu, self.P = mu, P
+        n_used = int(np.count_nonzero(keep))
         dof = 3 * n_used
+        self._watch_divergence(nis, dof, problem)
+        why = f"updated with {n_used} of {n_valid} matches{note}"
+        res = UpdateResult(
+            True, UpdateOutcome.UPDATED, why, n, n_used, inliers, nis, dof, loglik, self.estimate
+        )
+        self.last_result = res
+        return res
+
+    def _feasible_matches(self, d, b, S, idx, n: int, n_valid: int, note: str):
+        """The geometric feasibility check before an update: which usable matches pass the gate.
+
+        Returns ``(keep, r, C, inliers, why_not)``: the gate's verdict, residuals and Jacobians on the
+        usable rows (``_gate``), the verdict on all ``n`` input rows, and the reason to skip the update
+        (None to go on): too few matches passed (``gating_patience`` such frames in a row mean the
+        track is lost) or their model points are collinear.
+        """
+        gc = self.config.gate
+        keep, r, C = _gate(self.mu, self.P, d, b, S, gc, self.config.chart)
+        inliers = np.zeros(n, bool)
+        inliers[idx[keep]] = True
+        n_used = int(np.count_nonzero(keep))
+        if n_used < gc.min_matches:
+            self._gated_out_run += 1
+            if self._gated_out_run >= self.config.divergence.gating_patience:
+                self.divergence = (
+                    f"track lost: the gate rejected the matches {self._gated_out_run} frames in a row"
+                )
+            return keep, r, C, inliers, f"gating kept {n_used} of {n_valid} matches < {gc.min_matches}{note}"
+        self._gated_out_run = 0
+        if point_spread(b[keep]) < gc.min_spread_m:
+            why = f"degenerate geometry: the matched model points are collinear or coincident{note}"
+            return keep, r, C, inliers, why
+        return keep, r, C, inliers, None
+
+    def _corrected(self, mu_bar, dx, P):
+        """``mu = mu_bar + K y`` in the filter's chart, with its covariance ``P``."""
+        if self._euler:
+            return canonical_state(mu_bar + dx, P)  # alpha, gamma wrapped, beta in range
+        return retract_rv(mu_bar, dx), P  # x_r + dx_r, R <- Exp(phi) R (the reset's Jacobian ~ I is ignored)
+
+    def _watch_divergence(self, nis: float, dof: int, problem: str | None) -> None:
+        """After an update: a health problem the update was still applied with, or ``nis_patience``
+        updates in a row whose NIS exceeds its chi-square(``dof``) ``nis_prob`` quantile, mark the filter
+        diverged (the next frame re-initialises it)."""
         dcfg = self.config.divergence
         self._huge_nis_run = self._huge_nis_run + 1 if nis > chi2_quantile(dcfg.nis_prob, dof) else 0
         if problem is not None:
@@ -784,9 +634,3 @@ class PoseEKF:
                 f"NIS above its chi-square({dof}) {dcfg.nis_prob} quantile "
                 f"{self._huge_nis_run} updates in a row (last {nis:.1f})"
             )
-        why = f"updated with {n_used} of {n_valid} matches{note}"
-        res = UpdateResult(
-            True, UpdateOutcome.UPDATED, why, n, n_used, inliers, nis, dof, loglik, self.estimate
-        )
-        self.last_result = res
-        return res

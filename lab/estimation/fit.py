@@ -242,44 +242,71 @@ def ransac_pose(
     """
     cfg = config or RansacConfig()
     d, b, S = _check_matches(d_C, b_O, Sigma_d)
-    n = d.shape[0]
     valid = _valid_rows(d, b, S)
-    inliers = np.zeros(n, bool)
+    inliers = np.zeros(d.shape[0], bool)
+
+    def failed(why: str) -> InitResult:
+        return InitResult(False, why, inliers=inliers)
+
     n_valid = int(np.count_nonzero(valid))
     if n_valid < cfg.min_matches:
-        return InitResult(
-            False, f"too few valid matches to initialise: {n_valid} < {cfg.min_matches}", inliers=inliers
-        )
+        return failed(f"too few valid matches to initialise: {n_valid} < {cfg.min_matches}")
     idx = np.flatnonzero(valid)
     d, b, S = d[idx], b[idx], S[idx]
     if point_spread(b) < cfg.min_spread_m:
-        return InitResult(
-            False, "degenerate geometry: the model points are collinear or coincident", inliers=inliers
-        )
+        return failed("degenerate geometry: the model points are collinear or coincident")
     W = np.linalg.inv(S)  # 3x3 information matrices, one per feature
     thr = chi2_quantile(cfg.inlier_prob, 3)
 
-    # 1. minimal samples, all drawn up front: deterministic for a given generator state
-    m = len(idx)
+    hypotheses = _minimal_sample_hypotheses(b, d, rng, cfg)
+    if hypotheses is None:
+        return failed("degenerate geometry: every minimal sample is (nearly) collinear")
+    sel = _best_hypothesis_inliers(*hypotheses, b, d, W, thr, cfg)
+    X, Lam, sel = _refit_on_inliers(sel, b, d, S, W, thr, cfg)
+    n_in = int(np.count_nonzero(sel))
+    if X is None or Lam is None or n_in < cfg.min_matches:
+        return failed(f"too few inliers for a pose: {n_in} < {cfg.min_matches} (of {n_valid} valid matches)")
+    if point_spread(b[sel]) < cfg.min_spread_m:
+        return failed("degenerate geometry: the inliers are collinear or coincident")
+    covariances = _initial_covariances(X, Lam, cfg)
+    if covariances is None:
+        return failed("degenerate geometry: the pose is not observable from the inliers")
+    Sigma, Sigma_rv = covariances
+    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Sigma_rv))):
+        return failed("initial pose is not finite")
+    inliers[idx[sel]] = True
+    why = f"initialised from {n_in} of {n_valid} valid matches"
+    return InitResult(True, why, X, Sigma, inliers, Sigma_rv)
+
+
+def _minimal_sample_hypotheses(b, d, rng: np.random.Generator, cfg: RansacConfig):
+    """Step 1: ``n_hypotheses`` minimal samples of 3 pairs, all drawn up front (deterministic for a
+    given generator state), and the rigid transform ``(R, t)`` of each sample that is not (nearly)
+    collinear; None when none is usable."""
+    m = len(b)
     samples = np.argpartition(rng.random((cfg.n_hypotheses, m)), 2, axis=1)[:, :3]
     bs, ds = b[samples], d[samples]  # (K, 3, 3)
     area = 0.5 * np.linalg.norm(np.cross(bs[:, 1] - bs[:, 0], bs[:, 2] - bs[:, 0]), axis=1)
     ok = area >= cfg.min_sample_area_m2
     if not np.any(ok):
-        return InitResult(
-            False, "degenerate geometry: every minimal sample is (nearly) collinear", inliers=inliers
-        )
-    R, t = _kabsch_batch(bs[ok], ds[ok], np.ones((int(ok.sum()), 3)))
+        return None
+    return _kabsch_batch(bs[ok], ds[ok], np.ones((int(ok.sum()), 3)))
 
-    # 2. score every hypothesis on every pair: truncated Mahalanobis cost (MSAC)
+
+def _best_hypothesis_inliers(R, t, b, d, W, thr: float, cfg: RansacConfig) -> np.ndarray:
+    """Step 2: score every hypothesis on every pair with a truncated Mahalanobis cost (MSAC) and
+    return the inliers (m,) bool of the best."""
     r = d[None] - (np.einsum("kab,nb->kna", R, b) + t[:, None])  # (K, m, 3)
     m2 = _mahalanobis_sq(r, W)
     inl = (m2 <= thr) & (np.linalg.norm(r, axis=2) <= cfg.dist_max_m)
     cost = np.where(inl, m2, thr).sum(axis=1)
-    best = int(np.argmin(cost))
-    sel = inl[best]
+    return inl[int(np.argmin(cost))]
 
-    # 3. refit on the inliers, refine (Gauss-Newton), re-select until the inlier set settles
+
+def _refit_on_inliers(sel, b, d, S, W, thr: float, cfg: RansacConfig):
+    """Step 3: refit on the inliers, refine (Gauss-Newton), re-select, until the inlier set settles
+    (at most 5 rounds). Returns the pose ``X`` (6,), its information ``Lam`` (6, 6) (None when the fit
+    failed) and the final inliers."""
     X = None
     Lam = None
     for _ in range(5):
@@ -296,34 +323,24 @@ def ransac_pose(
         if np.array_equal(new, sel):
             break
         sel = new
-    n_in = int(np.count_nonzero(sel))
-    if X is None or Lam is None or n_in < cfg.min_matches:
-        return InitResult(
-            False,
-            f"too few inliers for a pose: {n_in} < {cfg.min_matches} (of {n_valid} valid matches)",
-            inliers=inliers,
-        )
-    if point_spread(b[sel]) < cfg.min_spread_m:
-        return InitResult(
-            False, "degenerate geometry: the inliers are collinear or coincident", inliers=inliers
-        )
+    return X, Lam, sel
+
+
+def _initial_covariances(X, Lam, cfg: RansacConfig):
+    """Step 4: the pose covariance ``Sigma0_scale (C^T Sigma_m^-1 C)^-1`` from the information ``Lam``,
+    in the rotation-vector chart and in Euler coordinates (huge near gimbal lock): ``(Sigma,
+    Sigma_rv)``, or None when ``Lam`` is not positive definite (the pose is not observable)."""
     try:
         L = np.linalg.cholesky(Lam)
     except np.linalg.LinAlgError:
-        return InitResult(
-            False, "degenerate geometry: the pose is not observable from the inliers", inliers=inliers
-        )
+        return None
     Linv = np.linalg.solve(L, np.eye(6))
     Sigma_rv = cfg.Sigma0_scale * (Linv.T @ Linv)  # (C^T Sigma_m^-1 C)^-1, a 6x6 inverse via Cholesky
     Sigma_rv = 0.5 * (Sigma_rv + Sigma_rv.T)
     T_inv = rv_to_euler_jacobian(X)
-    Sigma = T_inv @ Sigma_rv @ T_inv.T  # in Euler coordinates (huge near gimbal lock)
+    Sigma = T_inv @ Sigma_rv @ T_inv.T  # in Euler coordinates
     Sigma = 0.5 * (Sigma + Sigma.T)
-    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Sigma_rv))):
-        return InitResult(False, "initial pose is not finite", inliers=inliers)
-    inliers[idx[sel]] = True
-    why = f"initialised from {n_in} of {n_valid} valid matches"
-    return InitResult(True, why, X, Sigma, inliers, Sigma_rv)
+    return Sigma, Sigma_rv
 
 
 def _check_matches(d_C, b_O, Sigma_d):

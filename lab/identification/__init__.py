@@ -4,7 +4,10 @@ The data flow of one step, with the paper's three functions (Sec. IV)::
 
     frame -> stereo_features -> D_k                               (lab.vision)
     EKFBank.predict / update per model -> mu_bar, Sigma_bar         (lab.estimation)
-    calc_current_entropy(P, D_k, scorers, states) -> Belief(P, H)   Eqs. (5), (7)-(9)   probabilities.py
+    calc_current_entropy(P, D_k, scorers, states) -> Belief(P, H)   Eqs. (5), (7)-(9)   belief.py
+        ModelScorer(db, config).score(D_k, x), one per model        Eq. (9)             scoring.py
+        pool_shared_evidence (shared faces count alike)                                shared.py
+        update_model_probabilities, entropy                         Eqs. (5), (7)       bayes.py
         (observe_frame does the updates and this in one call)                          step.py
     ModelHypotheses.from_estimates(P, estimates, G_WC[, z_turns(4), symmetry_log_weights(...)])
                                     the models' poses in W (and their look-alike turns)  hypotheses.py
@@ -29,6 +32,8 @@ from lab.identification.actions import (
     calc_possible_control_actions,
     reachable_on,
 )
+from lab.identification.bayes import apply_floor, entropy, posterior, uniform, update_model_probabilities
+from lab.identification.belief import Belief, calc_current_entropy
 from lab.identification.hypotheses import (
     ModelHypotheses,
     NoObjectEstimate,
@@ -50,26 +55,21 @@ from lab.identification.planner import (
     plan_next_best_view,
     ring_smoothed,
 )
-from lab.identification.probabilities import (
-    Belief,
+from lab.identification.scoring import (
     Explanation,
     LikelihoodForm,
     ModelScore,
     ModelScorer,
     ScoringConfig,
-    apply_floor,
-    calc_current_entropy,
     clutter_log_density,
-    entropy,
+    pose_estimate_rv,
+    state_for_scoring,
+)
+from lab.identification.shared import (
     pool_shared_evidence,
     pools_shared_evidence,
-    pose_estimate_rv,
-    posterior,
     shared_features,
     shared_masks,
-    state_for_scoring,
-    uniform,
-    update_model_probabilities,
 )
 from lab.identification.step import FrameObservation, observe_frame
 from lab.identification.tables import LookupTables, ModelTables, load_model_tables, save_model_tables

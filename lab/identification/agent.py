@@ -67,6 +67,7 @@ from lab.errors import ConfigError
 from lab.estimation import EKFBank, EKFConfig, OrientationChart, UpdateOutcome
 from lab.geometry import G_to_pose6, Pose2D, relative_pose2d, wrap_angle
 from lab.identification.actions import ActionConfig, RingBlocked
+from lab.identification.bayes import uniform
 from lab.identification.head import HeadController, HeadMode
 from lab.identification.hypotheses import (
     ModelHypotheses,
@@ -77,7 +78,7 @@ from lab.identification.hypotheses import (
     z_turns,
 )
 from lab.identification.planner import continue_direction, plan_next_best_view, ring_smoothed
-from lab.identification.probabilities import ModelScorer, ScoringConfig, uniform
+from lab.identification.scoring import ModelScorer, ScoringConfig
 from lab.identification.step import observe_frame
 from lab.navigation.follower import PathFollower
 from lab.robot import Robot
@@ -294,7 +295,7 @@ class IdentificationAgent:
         self.robot = robot
         self.names = tuple(db.name for db in self.dbs)
         self.config = config or AgentConfig()
-        self.scoring = scoring or ScoringConfig()
+        self.scoring = (scoring or ScoringConfig()).for_camera(robot.camera)  # clutter density: this camera's
         self.action_config = action_config or ActionConfig()
         self.rng = np.random.default_rng(seed)
         self.scorers = [ModelScorer(db, self.scoring) for db in self.dbs]

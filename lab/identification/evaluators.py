@@ -14,7 +14,8 @@ from lab.errors import ConfigError
 from lab.identification.agent import PlannerChoice
 from lab.identification.lut import LookupTableEvaluator
 from lab.identification.montecarlo import MonteCarloEvaluator
-from lab.identification.probabilities import ScoringConfig, shared_features
+from lab.identification.scoring import ScoringConfig
+from lab.identification.shared import shared_features
 from lab.identification.tables import LookupTables
 from lab.robot import StereoCamera
 from lab.vision import FeatureDatabase
@@ -45,7 +46,7 @@ def make_evaluator(
         raise ConfigError(
             f"unknown planner {planner!r}; planners: {', '.join(p.value for p in PlannerChoice)}"
         ) from None
-    scoring = scoring or ScoringConfig()
+    scoring = (scoring or ScoringConfig()).for_camera(camera)  # the clutter density: this camera's
     dbs = list(databases)
     if planner is PlannerChoice.LUT:
         if tables is None:

@@ -28,7 +28,7 @@ import numpy as np
 from lab.errors import ConfigError, LabError
 from lab.estimation import PoseEstimate
 from lab.geometry import G_to_pose6, Rz, se3, se3_inv
-from lab.identification.probabilities import ModelScorer, ScoringConfig, pose_estimate_rv
+from lab.identification.scoring import ModelScorer, ScoringConfig, pose_estimate_rv
 from lab.vision import Features3D
 
 __all__ = [

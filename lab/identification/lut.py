@@ -28,7 +28,7 @@ For a candidate action ``u+`` and an assumed true model ``M_i`` (each of its pos
    and its entropy, averaged over the samples and weighted by ``P(M_i)``: Eq. (10).
 
 Where the model probabilities pool shared evidence (the default; see
-:mod:`~lab.identification.probabilities`, "Shared evidence"), a feature every database holds counts
+:mod:`~lab.identification.shared`), a feature every database holds counts
 alike for every model and cancels in Eq. (7): ``W_ij`` then counts only the features of ``M_j`` that
 are not shared, so a view of shared faces is expected to teach nothing, as it does.
 
@@ -51,8 +51,10 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.identification.actions import CandidateAction
+from lab.identification.bayes import entropy, posterior
 from lab.identification.hypotheses import ModelHypotheses
-from lab.identification.probabilities import ScoringConfig, entropy, pools_shared_evidence, posterior
+from lab.identification.scoring import ScoringConfig
+from lab.identification.shared import pools_shared_evidence
 from lab.identification.tables import LookupTables
 from lab.identification.viewpoints import direction_std, viewpoint_weights
 from lab.robot import StereoCamera
@@ -146,14 +148,15 @@ class LookupTableEvaluator:
     camera : StereoCamera
         The robot's camera (for ``Sigma_o``).
     scoring : ScoringConfig, optional
-        Evidence weight, floor and clutter density: the same as the model probabilities'.
+        Evidence weight, floor and clutter density: the same as the model probabilities'. A clutter
+        density left None is ``camera``'s (:meth:`ScoringConfig.for_camera`).
     n_frames : int
         Frames the robot observes at the goal; their evidence adds up.
     constants : Eq15Constants, optional
     shared : sequence of ndarray (N_j,) bool, optional
         The models' shared features (default: ``tables.shared``, which :func:`get_tables` fills in).
         Where the scoring pools shared evidence
-        (:func:`~lab.identification.probabilities.pools_shared_evidence`), those features count
+        (:func:`~lab.identification.shared.pools_shared_evidence`), those features count
         alike for every model and cancel in Eq. (7), so ``W_ij`` counts only the others
         (:meth:`LookupTables.without_features`); with the raw tables the evaluator would expect a
         view of shared faces to tell the models apart. Ignored where the scoring does not pool.
@@ -174,7 +177,7 @@ class LookupTableEvaluator:
             raise ConfigError(f"n_frames must be a positive integer, got {n_frames}")
         self.tables = tables
         self.camera = camera
-        self.scoring = scoring or ScoringConfig()
+        self.scoring = (scoring or ScoringConfig()).for_camera(camera)  # camera's clutter unless set
         self.n_frames = int(n_frames)
         self.constants = constants or Eq15Constants()
         self.pooled = pools_shared_evidence(self.scoring, tables.n_models)

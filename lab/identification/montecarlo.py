@@ -17,13 +17,13 @@ For a candidate action ``u+`` and an assumed truth, a pose hypothesis ``h`` of m
    ``b_l``'s (the cross-model correspondence structure, computed once from the databases: on a shared
    face every model has the twin of ``b_l``, on a unique face no other model has), among which the
    geometric gate picks the nearest, exactly as the real scoring does
-   (:class:`~lab.identification.probabilities.ModelScorer`). ``M_j`` is placed at the true pose ``h``
+   (:class:`~lab.identification.scoring.ModelScorer`). ``M_j`` is placed at the true pose ``h``
    (the real scoring shares the bank's poses, and the truth is among them) or, without pose sharing,
    at its own hypotheses. Each explained feature contributes
    ``N(d~_m; mu^j_m, C_m Sigma+ C_m^T + Sigma_m)`` (Eq. (12): independent features), each other one
    the clutter density. Where the model probabilities pool shared evidence (the default), a sampled
    feature that some model explains with one of its shared features counts for every model with the
-   best of their densities (:func:`~lab.identification.probabilities.pool_shared_evidence`).
+   best of their densities (:func:`~lab.identification.shared.pool_shared_evidence`).
 4. **Posterior and entropy** of every sample (Eq. (7), the same evidence weight and floor as the real
    update), averaged and weighted by the hypothesis's probability:
 
@@ -48,14 +48,10 @@ import numpy as np
 from lab.errors import ConfigError
 from lab.estimation.fit import chi2_quantile
 from lab.identification.actions import CandidateAction
+from lab.identification.bayes import entropy, posterior
 from lab.identification.hypotheses import ModelHypotheses
-from lab.identification.probabilities import (
-    ScoringConfig,
-    entropy,
-    pools_shared_evidence,
-    posterior,
-    shared_features,
-)
+from lab.identification.scoring import ScoringConfig
+from lab.identification.shared import pools_shared_evidence, shared_features
 from lab.identification.viewpoints import direction_std, viewpoint_directions, viewpoint_weights
 from lab.robot import StereoCamera
 from lab.vision import FeatureDatabase, Matcher
@@ -117,7 +113,8 @@ class MonteCarloEvaluator:
     camera : StereoCamera
         The robot's camera (image bounds, stereo error model).
     scoring : ScoringConfig, optional
-        Association rule, clutter density, evidence weight and floor: the model probabilities'.
+        Association rule, clutter density, evidence weight and floor: the model probabilities'. A clutter
+        density left None is ``camera``'s (:meth:`ScoringConfig.for_camera` with ``stereo``).
     n_frames : int
         Frames the robot observes at the goal; their evidence adds up.
     config : MonteCarloConfig, optional
@@ -147,10 +144,11 @@ class MonteCarloEvaluator:
             raise ConfigError("the Monte Carlo evaluator needs at least one database")
         self.dbs = tuple(dbs)
         self.camera = camera
-        self.scoring = scoring or ScoringConfig()
         self.n_frames = int(n_frames)
         self.config = config or MonteCarloConfig()
         self.stereo = stereo or StereoParams()
+        # the clutter density of the camera the measurements are sampled for, unless set explicitly
+        self.scoring = (scoring or ScoringConfig()).for_camera(camera, self.stereo)
         fB = camera.fx * camera.baseline
         self._z_range = (fB / self.stereo.max_disparity, fB / self.stereo.min_disparity)
         self._gate_m2 = chi2_quantile(self.scoring.gate_prob, 3)

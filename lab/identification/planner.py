@@ -1,7 +1,7 @@
 r"""The next-best view: information gain, Eq. (4), and its maximisation, Eq. (6).
 
 The paper's Sec. IV divides the computation into three functions; here they are
-:func:`~lab.identification.probabilities.calc_current_entropy` (model probabilities and entropy after a
+:func:`~lab.identification.belief.calc_current_entropy` (model probabilities and entropy after a
 frame), :func:`~lab.identification.actions.calc_possible_control_actions` (the ring of reachable goals)
 and :func:`calc_expected_entropy` (with an evaluator: lookup tables or Monte Carlo).
 :func:`plan_next_best_view` chains the last two:
@@ -27,8 +27,8 @@ import numpy as np
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
 from lab.identification.actions import ActionConfig, CandidateAction, calc_possible_control_actions
+from lab.identification.bayes import entropy
 from lab.identification.hypotheses import ModelHypotheses
-from lab.identification.probabilities import entropy
 from lab.robot import StereoCamera
 
 __all__ = [

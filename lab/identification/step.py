@@ -13,13 +13,8 @@ from dataclasses import dataclass, field
 
 from lab.errors import ConfigError
 from lab.estimation import EKFBank, PoseEstimate, UpdateResult
-from lab.identification.probabilities import (
-    Belief,
-    ModelScorer,
-    ScoringConfig,
-    calc_current_entropy,
-    state_for_scoring,
-)
+from lab.identification.belief import Belief, calc_current_entropy
+from lab.identification.scoring import ModelScorer, ScoringConfig, state_for_scoring
 from lab.vision import Features3D, Matcher
 
 __all__ = ["FrameObservation", "observe_frame"]

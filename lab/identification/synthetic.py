@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lab.identification.probabilities import shared_features
+from lab.identification.shared import shared_features
 from lab.identification.tables import LookupTables
 from lab.identification.viewpoints import viewpoint_directions
 from lab.vision import FeatureDatabase

@@ -198,7 +198,7 @@ class LookupTables:
         ``S``, the stratified quantile levels of :attr:`W_quantiles`.
     shared : sequence of ndarray (N_j,) bool, optional
         The shared features of the databases the tables were built from
-        (:func:`~lab.identification.probabilities.shared_features`): what the lookup-table evaluator
+        (:func:`~lab.identification.shared.shared_features`): what the lookup-table evaluator
         leaves out of ``W`` where the scoring pools shared evidence. :func:`get_tables` fills it in.
 
     Attributes
@@ -270,7 +270,7 @@ class LookupTables:
         ----------
         masks : sequence of ndarray, shape (N_j,), bool, length L
             Per model ``M_j``: the features to leave out of ``W_ij`` for every true model ``i`` (the
-            shared features, :func:`~lab.identification.probabilities.shared_features`, when the model
+            shared features, :func:`~lab.identification.shared.shared_features`, when the model
             probabilities pool shared evidence: they explain a frame equally for every model, so only
             the other features' count tells the models apart).
 

@@ -6,7 +6,7 @@ from a pose perturbed within the viewpoint's bin: the azimuth within half a ring
 looks up the *nearest* row, so a row must stand for its whole bin), the elevation and the distance
 within the ranges the robot's camera sees the object from. Every render's stereo features are matched
 against each database ``M_j`` exactly as the model probabilities do it
-(:meth:`~lab.identification.probabilities.ModelScorer.explain`: descriptor distance and the geometric
+(:meth:`~lab.identification.scoring.ModelScorer.explain`: descriptor distance and the geometric
 gate, at the true relative pose with a small tracking uncertainty), and each feature of ``M_j`` that
 explains a measured feature counts one match. The perturbations come from a generator seeded by
 ``(seed, model, viewpoint, repetition)``, so a build is deterministic and its rows independent.
@@ -32,7 +32,8 @@ import numpy as np
 
 from lab.errors import AssetError, ConfigError
 from lab.geometry import G_to_pose6, se3_inv
-from lab.identification.probabilities import ModelScorer, ScoringConfig, pose_estimate_rv, shared_features
+from lab.identification.scoring import ModelScorer, ScoringConfig, pose_estimate_rv
+from lab.identification.shared import shared_features
 from lab.identification.tables import (
     TABLE_FORMAT_VERSION,
     LookupTables,
@@ -206,7 +207,7 @@ def build_model_tables(
     from lab.sim import viewpoint_G_WC  # the simulator only when rendering
 
     params = params or TableParams()
-    scoring = scoring or ScoringConfig()
+    scoring = (scoring or ScoringConfig()).for_camera(params.camera)  # the training camera's clutter
     names = [db.name for db in dbs]
     views, rows = _training_rows(true_model, names, dbs, viewpoint_indices)
     V = len(views)

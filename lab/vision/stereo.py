@@ -236,50 +236,13 @@ def stereo_features(
     Features3D
     """
     params = params or StereoParams()
-    if left.shape != right.shape:
-        raise ConfigError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
-    if left.shape[:2] != (camera.height, camera.width):
-        raise ConfigError(
-            f"images are {left.shape[1]}x{left.shape[0]} px but the camera model is "
-            f"{camera.width}x{camera.height} px"
-        )
+    _check_pair(left, right, camera)
     det = detector or sift(params.n_features, params.contrast_threshold)
     gl, gr = _grey(left), _grey(right)
-    mask_l = mask_r = None
-    if roi is not None:
-        x, y, w, h = (int(v) for v in roi)
-        x, y = max(0, x), max(0, y)
-        w, h = min(w, camera.width - x), min(h, camera.height - y)
-        if w <= 0 or h <= 0:
-            return Features3D.empty(t)
-        mask_l = np.zeros(gl.shape, np.uint8)
-        mask_l[y : y + h, x : x + w] = 255
-        mask_r = np.zeros(gr.shape, np.uint8)
-        x0 = max(0, x - int(params.max_disparity))
-        mask_r[max(0, y - 2) : y + h + 2, x0 : x + w] = 255
-    if params.parallel:  # the right image in a second thread, with its own detector
-        right: dict = {}
-
-        def detect_right():
-            try:
-                right["kp_des"] = sift(params.n_features, params.contrast_threshold).detectAndCompute(
-                    gr, mask_r
-                )
-            except BaseException as e:  # re-raised in the caller's thread
-                right["error"] = e
-
-        worker = threading.Thread(target=detect_right, name="sift-right")
-        worker.start()
-        try:
-            kp_l, des_l = det.detectAndCompute(gl, mask_l)
-        finally:
-            worker.join()
-        if "error" in right:
-            raise right["error"]
-        kp_r, des_r = right["kp_des"]
-    else:
-        kp_l, des_l = det.detectAndCompute(gl, mask_l)
-        kp_r, des_r = det.detectAndCompute(gr, mask_r)
+    masks = (None, None) if roi is None else _roi_masks(roi, gl.shape, camera, params)
+    if masks is None:  # the region lies outside the image
+        return Features3D.empty(t)
+    (kp_l, des_l), (kp_r, des_r) = _detect_pair(gl, gr, *masks, det, params)
     if des_l is None or des_r is None:
         return Features3D.empty(t)
     il, ir = _epipolar_matches(kp_l, des_l, kp_r, des_r, params)
@@ -291,3 +254,55 @@ def stereo_features(
     pts = triangulate(uv_l, uv_r, camera)
     cov = triangulation_covariance(uv_l, disp, camera, params)
     return Features3D(pts, des_l[il].astype(np.float32), uv_l, disp, cov, t)
+
+
+def _check_pair(left: np.ndarray, right: np.ndarray, camera) -> None:
+    """The two images have one shape, the camera model's (else :class:`~lab.errors.ConfigError`)."""
+    if left.shape != right.shape:
+        raise ConfigError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
+    if left.shape[:2] != (camera.height, camera.width):
+        raise ConfigError(
+            f"images are {left.shape[1]}x{left.shape[0]} px but the camera model is "
+            f"{camera.width}x{camera.height} px"
+        )
+
+
+def _roi_masks(roi, shape, camera, params: StereoParams):
+    """Detection masks (uint8, ``shape``) for a region ``(x, y, w, h)`` [px] of the left image: the
+    region itself on the left, on the right the same rows (2 px more each side) from ``max_disparity``
+    further left to its right edge. None when the region, clipped to the image, is empty."""
+    x, y, w, h = (int(v) for v in roi)
+    x, y = max(0, x), max(0, y)
+    w, h = min(w, camera.width - x), min(h, camera.height - y)
+    if w <= 0 or h <= 0:
+        return None
+    mask_l = np.zeros(shape, np.uint8)
+    mask_l[y : y + h, x : x + w] = 255
+    mask_r = np.zeros(shape, np.uint8)
+    x0 = max(0, x - int(params.max_disparity))
+    mask_r[max(0, y - 2) : y + h + 2, x0 : x + w] = 255
+    return mask_l, mask_r
+
+
+def _detect_pair(gl, gr, mask_l, mask_r, det: cv2.SIFT, params: StereoParams):
+    """SIFT keypoints and descriptors of the left and the right grey image, ``((kp_l, des_l), (kp_r,
+    des_r))``; with ``params.parallel`` the right image in a second thread with its own detector."""
+    if not params.parallel:
+        return det.detectAndCompute(gl, mask_l), det.detectAndCompute(gr, mask_r)
+    right: dict = {}
+
+    def detect_right():
+        try:
+            right["kp_des"] = sift(params.n_features, params.contrast_threshold).detectAndCompute(gr, mask_r)
+        except BaseException as e:  # re-raised in the caller's thread
+            right["error"] = e
+
+    worker = threading.Thread(target=detect_right, name="sift-right")
+    worker.start()
+    try:
+        left = det.detectAndCompute(gl, mask_l)
+    finally:
+        worker.join()
+    if "error" in right:
+        raise right["error"]
+    return left, right["kp_des"]
