@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from lab.errors import ConfigError
-from lab.identification.agent import PlannerChoice
+from lab.identification.loop_config import PlannerChoice
 from lab.identification.lut import LookupTableEvaluator
 from lab.identification.montecarlo import MonteCarloEvaluator
 from lab.identification.scoring import ScoringConfig
