@@ -121,10 +121,14 @@ def test_the_agent_scores_with_the_clutter_density_of_its_robots_camera():
     from lab.robot import StereoCamera
     from lab.sim import SimRobot, SimWorld
 
+    from lab.identification.synthetic import synthetic_box_databases
+
+    dbs = synthetic_box_databases(4, np.random.default_rng(0))  # handed to the agent: none is trained
+
     def agent_for(camera=None, scoring=None):
         with SimWorld("arena") as world:
             robot = SimRobot(world, start=Pose2D(-1.2, 0.0, 0.0), seed=0, camera=camera)
-            return IdentificationAgent(robot, planner="circle", scoring=scoring)
+            return IdentificationAgent(robot, dbs, planner="circle", scoring=scoring)
 
     default = agent_for()
     assert default.scoring.log_clutter_density == float.fromhex("-0x1.1383e55a78440p+2")  # -4.30492528757992
