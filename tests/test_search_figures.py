@@ -7,7 +7,8 @@ from search_standin import truth_navigator
 from lab.navigation import Costmap, GridSpec
 from lab.robot import StereoCamera
 from lab.scene import load_scene
-from lab.search.figures import (
+from lab.search.trial import run_search
+from lab.viz.search import (
     draw_pose,
     fig2_global_search,
     fig5_trial,
@@ -15,7 +16,6 @@ from lab.search.figures import (
     panorama,
     write_figures,
 )
-from lab.search.trial import run_search
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,6 @@ The data flow, one module per stage::
     trial            run_search: world, placement, agent, scoring against truth -> the `lab search` JSON
     placement        valid spots on the floor, tables and shelf; searchable object names
     training         the search's object databases (three training rings)
-    figures          the paper's Figs. 2, 5 and 6 (matplotlib; the algorithms never plot)
 """
 
 from lab.search.agent import (

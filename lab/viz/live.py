@@ -678,7 +678,7 @@ class LiveView:
         return centre, cov
 
     def _draw_pose(self, img: np.ndarray, frame, i: int) -> np.ndarray:
-        from lab.search.figures import draw_pose
+        from lab.viz.search import draw_pose
 
         e = self.agent.bank.estimates[i]
         extent = getattr(self.agent.dbs[i], "extent", None)
@@ -786,7 +786,7 @@ class LiveView:
     def _search_picture(self, globals_):
         local = getattr(self.agent, "last_local", None)
         if local is not None and local.found and local.frame is not None and local.estimate is not None:
-            from lab.search.figures import draw_pose
+            from lab.viz.search import draw_pose
 
             img = draw_pose(local.frame.left, local.estimate.G_CO, self.agent.db.extent, local.frame.camera)
             return img, np.zeros((0, 2)), f"local search: found, {local.n_inliers} inliers, pose drawn"
