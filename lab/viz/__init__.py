@@ -3,7 +3,9 @@
 * :mod:`lab.viz.images`: PNG bytes, an RGB image saved atomically, the dense disparity as colour.
 * :mod:`lab.viz.identification`: the identification paper's Figs. 5, 6 and 7.
 * :mod:`lab.viz.search`: the search paper's Figs. 2, 5 and 6, and a pose drawn on an image.
-* :mod:`lab.viz.live`: live views of a run (notebook widget, window, recording) and the teleop panel.
+* :mod:`lab.viz.live`: live views of a run (notebook widget, window, recording): the loop, the canvas,
+  the identification and the search panels.
+* :mod:`lab.viz.teleop`: buttons that drive the teleop mover's carrier by hand.
 * :mod:`lab.viz.recorder`: a run's frames stamped with sim time, written as GIF or MP4.
 
 Importing this package starts neither the simulator (pybullet) nor matplotlib; the figure modules
