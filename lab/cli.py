@@ -442,7 +442,7 @@ def _cmd_search(args) -> int:
     if args.json is not None:
         write_json_atomic(args.json, data)
     if args.out is not None:
-        from lab.search.figures import write_figures
+        from lab.viz.search import write_figures
 
         cm = navigators[0].costmap if navigators else None
         files = write_figures(

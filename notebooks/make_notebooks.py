@@ -1244,7 +1244,7 @@ assert res.position_error_m <= 0.05 and res.orientation_error_deg <= 10
     (
         "code",
         """\
-from lab.search.figures import fig2_global_search, fig5_trial, fig6_snapshots
+from lab.viz.search import fig2_global_search, fig5_trial, fig6_snapshots
 
 agent = res.trace.agent
 for snap in agent.snapshots:

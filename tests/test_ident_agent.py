@@ -118,10 +118,9 @@ def test_the_agent_scores_with_the_clutter_density_of_its_robots_camera():
     bit for bit, and a 640 x 480 camera its own; an explicit value is kept."""
     from lab.identification import clutter_log_density
     from lab.identification.agent import IdentificationAgent
+    from lab.identification.synthetic import synthetic_box_databases
     from lab.robot import StereoCamera
     from lab.sim import SimRobot, SimWorld
-
-    from lab.identification.synthetic import synthetic_box_databases
 
     dbs = synthetic_box_databases(4, np.random.default_rng(0))  # handed to the agent: none is trained
 

@@ -25,7 +25,15 @@ import pytest
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
 from lab.training import box_model_names, get_database
-from lab.viz.live import LiveView, TeleopPanel, _ellipse_xy, identification_inliers, in_background
+from lab.viz.live import (
+    IdentificationPanels,
+    LiveView,
+    SearchPanels,
+    TeleopPanel,
+    identification_inliers,
+    in_background,
+)
+from lab.viz.live.identification import ellipse_xy
 from lab.viz.recorder import read_animation
 
 STAMP_ROWS = 40  # the recorder's time stamp sits in the bottom rows of each frame
@@ -94,19 +102,17 @@ class _Clock:
 def test_the_view_redraws_at_its_rate_in_sim_time(monkeypatch):
     monkeypatch.setattr(LiveView, "render", lambda self: np.zeros((4, 4, 3), np.uint8))
     for rate, dt, n_steps, expected in ((2.0, 0.2, 51, 21), (None, 0.2, 51, 51), (1.0, 0.1, 30, 3)):
-        view = LiveView("identification", _Clock(), rate_hz=rate, widget=False)
+        view = LiveView(IdentificationPanels(_Clock()), rate_hz=rate, widget=False)
         for k in range(n_steps):
             view(None, SimpleNamespace(t=k * dt))
         assert (view.n_calls, view.n_draws) == (n_steps, expected)  # 10 s at 2 Hz: 21 draws incl. t = 0
     with pytest.raises(ConfigError, match=r"rate_hz must be within \[0.05, 50\]"):
-        LiveView("identification", _Clock(), rate_hz=500)
-    with pytest.raises(ConfigError, match="unknown live view 'map'; views: identification, search"):
-        LiveView("map", _Clock())
+        LiveView(IdentificationPanels(_Clock()), rate_hz=500)
 
 
 def test_uncertainty_ellipse_is_the_two_sigma_contour():
     cov = np.array([[0.04, 0.015], [0.015, 0.01]])
-    pts = _ellipse_xy(np.array([1.0, -2.0]), cov)
+    pts = ellipse_xy(np.array([1.0, -2.0]), cov)
     d = pts - [1.0, -2.0]
     m = np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d)  # squared Mahalanobis distance
     np.testing.assert_allclose(m, 4.0, rtol=1e-9)
@@ -117,7 +123,7 @@ def _run_steps(agent, view, n: int):
     agent.robot.enable()
     for _ in range(n):
         agent.step()
-        frames.append(view._last_frame)
+        frames.append(view.panels.last_frame)
     return frames
 
 
@@ -142,6 +148,7 @@ def test_view_in_a_widget_on_the_simulator(tmp_path):
     with SimWorld("arena") as world:
         agent = _sim_agent(world)
         view = LiveView.for_identification(agent, rate_hz=None)
+        assert isinstance(view.panels, IdentificationPanels)
         w = view.widget
         frames = _run_steps(agent, view, 8)
         assert view.n_draws == 8 and agent.on_step is view
@@ -151,7 +158,7 @@ def test_view_in_a_widget_on_the_simulator(tmp_path):
         assert pic.shape == (540, 960, 3)
         np.testing.assert_array_equal(cv2.cvtColor(pic, cv2.COLOR_BGR2RGB), view.render())
         # the matches drawn are the frame's features, and as many as the EKF update used
-        i = view._top_model()
+        i = view.panels.top_model()
         assert i is not None  # the box is 1 m ahead: some model has a pose estimate after 8 frames
         matched, used = identification_inliers(agent, i)
         uv = agent.last_features.uv
@@ -245,6 +252,7 @@ def test_search_view_follows_the_robot_between_events_at_its_rate(monkeypatch):
         rng=np.random.default_rng(0),
     )  # fmt: skip
     view = LiveView.for_search(agent, rate_hz=2.0)
+    assert isinstance(view.panels, SearchPanels)
     w = view.widget
     assert agent.observer is view and "step" in vars(robot)
     agent._event("global", detail="scripted")  # an event draws at once (t = 0)
@@ -255,7 +263,7 @@ def test_search_view_follows_the_robot_between_events_at_its_rate(monkeypatch):
     assert view.n_calls == 1 and view.n_draws == 7  # t = 0 (event), then 0.5, 1.0, ..., 3.0 s
     p = robot.odometry()
     assert p.y > -1.5
-    x, y = view._a["map_robot"].get_data()
+    x, y = view.panels.a["map_robot"].get_data()
     assert (x[0], y[0]) == (p.x, p.y)
     assert cv2.imdecode(np.frombuffer(w.value, np.uint8), cv2.IMREAD_COLOR).shape == (540, 960, 3)
     view.close()

@@ -8,7 +8,7 @@ from lab.navigation import Costmap, GridSpec
 from lab.robot import StereoCamera
 from lab.runs.search import run_search
 from lab.scene import load_scene
-from lab.search.figures import (
+from lab.viz.search import (
     draw_pose,
     fig2_global_search,
     fig5_trial,
