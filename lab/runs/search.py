@@ -44,6 +44,7 @@ from lab.search.agent import (
 )
 from lab.search.probability_map import ProbabilityMap
 from lab.training.search import search_database
+from lab.vision.database import FeatureDatabase
 
 __all__ = [
     "SearchResult",
@@ -127,12 +128,14 @@ def path_obstacles(
 @dataclass(frozen=True)
 class SearchTrace:
     """Everything a trial recorded beyond the JSON (for the figures): the agent's record, the map's grid,
-    the odometry trajectory ``(t, x, y, theta)`` and the world's scene."""
+    the odometry trajectory ``(t, x, y, theta)``, the world's scene and the database the agent searched
+    with."""
 
     agent: AgentResult = field(repr=False)
     spec: GridSpec = field(repr=False)
     trajectory: np.ndarray = field(repr=False)
     scene: Scene = field(repr=False)
+    db: FeatureDatabase | None = field(default=None, repr=False)
 
 
 @dataclass(frozen=True)
@@ -319,7 +322,7 @@ def run_search(
         surface=surface,
         obstacles=tuple(obstacle_poses),
         events=out.events,
-        trace=SearchTrace(out, spec, np.array(budget.trajectory), scene),
+        trace=SearchTrace(out, spec, np.array(budget.trajectory), scene, db),
         recording=None if recorder is None or (p := recorder.close()) is None else str(p),
     )
 

@@ -202,7 +202,7 @@ def fig5_trial(result, costmap_state: np.ndarray | None = None, costmap_spec=Non
     # the pose on the image
     loc = agent.local
     if loc is not None and loc.found and loc.frame is not None:
-        ext = agent.db.extent  # the database the agent searched with
+        ext = result.trace.db.extent  # the database the agent searched with
         ax[0, 2].imshow(draw_pose(loc.frame.left, loc.estimate.G_CO, ext, loc.frame.camera))
         ax[0, 2].set_title(
             f"6D pose: {result.position_error_m * 100:.1f} cm, {result.orientation_error_deg:.1f} deg"
@@ -303,7 +303,7 @@ def write_figures(result, out, costmap_state: np.ndarray | None = None, costmap_
         written.append(out / name)
 
     if agent.globals_:
-        save(fig2_global_search(agent.globals_[0], spec, db=agent.db), "fig2_global_search.png")
+        save(fig2_global_search(agent.globals_[0], spec, db=result.trace.db), "fig2_global_search.png")
     save(fig6_snapshots(result), "fig6_snapshots.png")
     save(fig5_trial(result, costmap_state, costmap_spec), "fig5_trial.png")
     for k in range(len(agent.snapshots)):
