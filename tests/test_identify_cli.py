@@ -98,3 +98,21 @@ def test_unknown_mover_and_planner_names_are_refused_clearly():
         make_mover("teleport", carrier=None)
     with pytest.raises(ConfigError, match="unknown planner 'oracle'; planners: lut, mc, random, circle"):
         IdentificationAgent(None, [], planner="oracle")
+
+
+def test_the_agent_is_handed_its_parts_and_refuses_to_plan_without_them():
+    """The agent's constructor renders, trains and loads nothing: no databases, or the lut / mc planner
+    without its evaluator, is a clear error naming what to build it with."""
+    import numpy as np
+    import pytest
+
+    from lab.errors import ConfigError
+    from lab.identification.agent import IdentificationAgent
+    from lab.identification.synthetic import synthetic_box_databases
+
+    dbs = synthetic_box_databases(4, np.random.default_rng(0))
+    with pytest.raises(ConfigError, match="needs a sequence of FeatureDatabase"):
+        IdentificationAgent(None, ("M0", "M1"), planner="circle")
+    for planner in ("lut", "mc"):
+        with pytest.raises(ConfigError, match=f"the {planner} planner needs an expected-entropy evaluator"):
+            IdentificationAgent(None, dbs, planner=planner)

@@ -28,6 +28,7 @@ from lab.errors import ConfigError
 from lab.geometry import Pose2D, se3_inv
 from lab.identification.agent import AgentConfig, IdentificationAgent, PlannerChoice
 from lab.identification.evaluators import make_evaluator
+from lab.identification.scoring import ScoringConfig
 from lab.io import write_json_atomic
 from lab.robot import Robot
 from lab.runs.robots import RobotKind, RobotSession, make_robot
@@ -86,11 +87,12 @@ def build_agent(
         ) from None
     names = tuple(names or box_model_names())
     dbs = [get_database(n) for n in names]
-    agent = IdentificationAgent(robot, dbs, planner=choice, seed=seed, config=config, floor_plan=floor_plan)
-    if choice in (PlannerChoice.LUT, PlannerChoice.MC):
-        tables = get_tables(names, dbs=dbs) if choice is PlannerChoice.LUT else None
-        agent.evaluator = make_evaluator(choice, dbs, robot.camera, agent.scoring, tables)
-    return agent
+    scoring = ScoringConfig().for_camera(robot.camera)  # the agent's and its evaluator's
+    tables = get_tables(names, dbs=dbs) if choice is PlannerChoice.LUT else None
+    evaluator = make_evaluator(choice, dbs, robot.camera, scoring, tables)
+    return IdentificationAgent(
+        robot, dbs, evaluator, config, planner=choice, seed=seed, scoring=scoring, floor_plan=floor_plan
+    )
 
 
 def run_identify(
