@@ -4,8 +4,10 @@
 from __future__ import annotations
 
 from lab.navigation.astar import astar_to_region
+from lab.navigation.drive_loop import NavOutcome as _Outcome
+from lab.navigation.grid import room_bounds
 from lab.navigation.navigator import Navigator
-from lab.navigation.navigator import NavOutcome as _Outcome
+from lab.scene import load_scene
 from lab.search.agent import NavOutcome
 
 __all__ = ["navigator_factory"]
@@ -18,7 +20,7 @@ def navigator_factory(robot, spec, timeout_s: float = 120.0):
     costmap is what ``lab search --out`` draws under the trajectory). Each outcome carries the path A*
     plans first on the current costmap (``path_xy``, for the figures; the navigator replans on the way).
     """
-    nav = Navigator(robot)
+    nav = Navigator(robot, bounds=room_bounds(load_scene("lab_room")))
     state = {"scanned": False}
 
     def navigate(target_xy, min_distance: float, max_distance: float) -> NavOutcome:
