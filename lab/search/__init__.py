@@ -5,7 +5,9 @@ The data flow, one module per stage::
     probability_map  M_p: Eqs. (1)-(3), the detection model with alpha and beta, the growing beta
     global_search    pan-tilt scan -> colour back-projection -> N_hist clusters -> sparse stereo -> M_p
     local_search     9 pan-tilt views -> SIFT + EKF (RANSAC start, ROI, gate) -> 6D pose or a miss
-    agent            the closed loop (paper / lawnmower / frontier), navigation injected, time budget
+    agent            the closed loop (paper / lawnmower / frontier), navigation injected
+    budget           the time budget: a Robot wrapper that stops the run at its deadline
+    baselines        where the lawnmower and frontier baselines look next
     trial            run_search: world, placement, agent, scoring against truth -> the `lab search` JSON
     placement        valid spots on the floor, tables and shelf; searchable object names
     training         the search's object databases (three training rings)
@@ -15,14 +17,13 @@ The data flow, one module per stage::
 from lab.search.agent import (
     AgentConfig,
     AgentResult,
-    BudgetedRobot,
     MapSnapshot,
-    NavOutcome,
+    NavigationResult,
     SearchAgent,
-    SearchBudgetExceeded,
     SearchEvent,
     Strategy,
 )
+from lab.search.budget import BudgetedRobot, SearchBudgetExceeded
 from lab.search.global_search import ColourPeak, GlobalSearchConfig, GlobalSearchResult, global_search
 from lab.search.local_search import LocalSearchConfig, LocalSearchResult, local_search
 from lab.search.placement import check_placement, random_placement, searchable_objects
@@ -54,7 +55,7 @@ __all__ = [
     "LocalSearchConfig",
     "LocalSearchResult",
     "MapSnapshot",
-    "NavOutcome",
+    "NavigationResult",
     "ProbabilityMap",
     "SearchAgent",
     "SearchBudgetExceeded",

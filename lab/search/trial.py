@@ -19,7 +19,8 @@ from lab.geometry import R_to_euler_zyx, se3_inv
 from lab.navigation.grid import GridSpec
 from lab.robot import Robot
 from lab.scene import BodySpec, Scene, load_scene
-from lab.search.agent import AgentConfig, AgentResult, BudgetedRobot, SearchAgent, SearchEvent, Strategy
+from lab.search.agent import AgentConfig, AgentResult, SearchAgent, SearchEvent, Strategy
+from lab.search.budget import BudgetedRobot
 from lab.search.placement import (
     check_placement,
     circle_polygon,
@@ -256,7 +257,7 @@ def run_search(
         Simulated-time budget; the run ends "not found" when it is used up.
     navigate : callable ``(robot, spec) -> navigate``
         Builds the navigation callable (see :mod:`lab.search.agent`) for the robot the search drives
-        (a :class:`~lab.search.agent.BudgetedRobot`) and the map's grid. Required.
+        (a :class:`~lab.search.budget.BudgetedRobot`) and the map's grid. Required.
     obstacles : bool
         Add boxes on the straight line from the start to the object (:func:`path_obstacles`).
     world : str or Scene
