@@ -29,7 +29,7 @@ import numpy as np
 from scipy import ndimage
 
 from lab.geometry import Pose2D, transform_points
-from lab.navigation import GridSpec, Navigator, astar
+from lab.navigation import GridSpec, Navigator, astar, room_bounds
 from lab.navigation.costmap import CellState
 from lab.navigation.ground import GroundPlane, NoGroundPlane, fit_ground_plane
 from lab.sim import SimRobot, SimWorld
@@ -67,7 +67,7 @@ def main():
         with SimWorld("lab_room") as world:
             robot = SimRobot(world, start=pose, seed=k)
             robot.enable()
-            nav = Navigator(robot)
+            nav = Navigator(robot, bounds=room_bounds(world.scene))
             for pan in nav.config.scan_pans:
                 robot.command_pan_tilt(pan, nav.config.tilt)
                 robot.wait_pan_tilt()
@@ -96,7 +96,7 @@ def main():
     with SimWorld("lab_room") as world:
         robot = SimRobot(world, start=poses[0])
         for _ in range(args.repeats):
-            nav = Navigator(robot)
+            nav = Navigator(robot, bounds=room_bounds(world.scene))
             g = np.random.default_rng(0)
             for f in frames:
                 t1 = time.perf_counter()

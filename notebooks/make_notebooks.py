@@ -1137,9 +1137,9 @@ The robot looks around with its head tilted down, and the navigator builds the c
         "code",
         """\
 from scipy.ndimage import binary_dilation
-from lab.navigation import CellState, Navigator
+from lab.navigation import CellState, Navigator, room_bounds
 
-nav = Navigator(robot)
+nav = Navigator(robot, bounds=room_bounds(scene))   # the costmap covers the scene's floor
 pans_deg = (-100, -50, 0, 50) if FAST else (-150, -100, -50, 0, 50, 100, 150)
 nav.scan(pans=[math.radians(a) for a in pans_deg])
 state = nav.costmap.state

@@ -3,7 +3,7 @@ and set-ups that place the robot in front of an object from the truth.
 
 The real ``Navigator`` (stereo costmap + A*, ``lab.navigation.navigator``) replaces
 :class:`TruthNavigator` in ``lab search``; the agent takes either through the same call,
-``navigate(target_xy, min_distance, max_distance) -> NavOutcome``. This one knows the obstacles from the
+``navigate(target_xy, min_distance, max_distance) -> NavigationResult``. This one knows the obstacles from the
 scene file (every body's footprint, tables whole, the walls), so it isolates the search from
 costmap errors; it plans with ``lab.navigation``'s A* to the ring around the target and drives with
 its pure-pursuit follower on odometry, like the real one will.
@@ -19,7 +19,7 @@ from lab.geometry import Pose2D
 from lab.navigation import Costmap, GridSpec, astar_to_region, drive_to, heading_towards, simplify_path
 from lab.navigation.follower import DriveOutcome
 from lab.runs.placement import footprint
-from lab.search.agent import NavOutcome
+from lab.search.agent import NavigationResult
 
 
 def _inside_convex(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
@@ -73,7 +73,7 @@ class TruthNavigator:
         self.timeout_s = timeout_s
         self.calls: list[tuple] = []
 
-    def __call__(self, target_xy, min_distance: float, max_distance: float) -> NavOutcome:
+    def __call__(self, target_xy, min_distance: float, max_distance: float) -> NavigationResult:
         pose = self.robot.odometry()
         for grid in self.grids:
             path = astar_to_region(grid, pose, target_xy, max_distance, min_distance)
@@ -81,7 +81,7 @@ class TruthNavigator:
                 break
         self.calls.append((tuple(target_xy), path.reason))
         if not path.found:
-            return NavOutcome(False, f"no path: {path.reason}", pose)
+            return NavigationResult(False, f"no path: {path.reason}", pose)
         waypoints = simplify_path(path, grid)
         if len(waypoints) == 1:
             waypoints = np.array([[pose.x, pose.y]])
@@ -90,7 +90,7 @@ class TruthNavigator:
         heading = heading_towards(waypoints[-1], target_xy)
         res = drive_to(self.robot, waypoints, heading, timeout=self.timeout_s)
         ok = res.outcome is DriveOutcome.ARRIVED
-        return NavOutcome(ok, res.outcome.value, res.pose, path.points_xy)
+        return NavigationResult(ok, res.outcome.value, res.pose, path.points_xy)
 
 
 def truth_navigator(robot, spec) -> TruthNavigator:

@@ -240,7 +240,8 @@ def test_search_view_follows_the_robot_between_events_at_its_rate(monkeypatch):
 
     import lab.search.agent as agent_mod
     from lab.navigation import GridSpec
-    from lab.search.agent import BudgetedRobot, SearchAgent, SearchEvent
+    from lab.search.agent import SearchAgent, SearchEvent
+    from lab.search.budget import BudgetedRobot
     from lab.search.probability_map import ProbabilityMap
 
     monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)

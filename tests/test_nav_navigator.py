@@ -9,7 +9,8 @@ from nav_fakes import KinematicRobot
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
-from lab.navigation import Costmap, GridSpec, Navigator, NavigatorConfig
+from lab.navigation import Costmap, GridSpec, Navigator, NavigatorConfig, room_bounds
+from lab.scene import load_scene
 
 
 @pytest.fixture
@@ -40,14 +41,17 @@ def test_the_path_ahead_is_checked_only_as_far_as_asked(nav):
     assert nav.path_ahead_clear(W2, Pose2D(0.6, 2.05, 0.0), 3.0)
 
 
-def test_default_grid_covers_the_lab_room_with_a_margin():
-    nav = Navigator(KinematicRobot(Pose2D(0.0, 0.0, 0.0)))
+def test_the_grid_covers_the_scenes_floor_with_a_margin():
+    assert room_bounds(load_scene("lab_room")) == (-3.0, -4.0, 3.0, 4.0)
+    nav = Navigator(KinematicRobot(Pose2D(0.0, 0.0, 0.0)), bounds=room_bounds(load_scene("lab_room")))
     assert nav.spec.extent == pytest.approx((-3.5, 3.5, -4.5, 4.5))
     assert nav.spec.resolution == 0.1 and nav.radius == pytest.approx(0.3)
     small = Navigator(KinematicRobot(Pose2D(0.0, 0.0, 0.0)), bounds=(0, 0, 2, 1))
     assert small.spec.extent == pytest.approx((-0.5, 2.5, -0.5, 1.5))
     with pytest.raises(ConfigError, match="spec or bounds"):
         Navigator(KinematicRobot(Pose2D(0.0, 0.0, 0.0)), small.spec, bounds=(0, 0, 1, 1))
+    with pytest.raises(ConfigError, match="workspace"):
+        Navigator(KinematicRobot(Pose2D(0.0, 0.0, 0.0)))  # no world size is assumed
     with pytest.raises(ConfigError, match="max_range"):
         NavigatorConfig(max_range=math.nan)
 

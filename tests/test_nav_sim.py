@@ -17,13 +17,15 @@ import pytest
 from scipy import ndimage
 
 from lab.geometry import Pose2D, transform_points, wrap_angle
-from lab.navigation import Costmap, GridSpec, astar
-from lab.navigation.navigator import LAB_ROOM_BOUNDS, Navigator, NavigatorConfig, NavOutcome
+from lab.navigation import Costmap, GridSpec, Navigator, NavigatorConfig, NavOutcome, astar, room_bounds
 from lab.robot import StereoCamera
+from lab.scene import load_scene
 from lab.sim import SimRobot, SimWorld
 from lab.vision.dense import checked_disparity, disparity_map
 
 CFG = NavigatorConfig()
+#: ``(x_min, y_min, x_max, y_max)`` [m] of the lab room's floor, from its scene file (6 x 8 m)
+LAB_ROOM_BOUNDS = room_bounds(load_scene("lab_room"))
 BAND = (CFG.costmap.obstacle_min_height, CFG.costmap.obstacle_max_height)
 NEIGHBOURS = np.ones((3, 3), dtype=bool)
 
@@ -161,7 +163,7 @@ def test_checked_disparity_covers_the_full_width_with_fewer_gross_errors():
     fb = cam.fx * cam.baseline
     valid, band, common, gross = {}, {}, {}, {}
     with world:
-        nav = Navigator(robot)
+        nav = Navigator(robot, bounds=LAB_ROOM_BOUNDS)
         for pan in CFG.scan_pans:
             frame = nav.look(pan)
             D = world.truth.depth(world.truth.G_WC(), cam)
@@ -234,7 +236,7 @@ def test_scan_maps_the_obstacles_within_sensing_range():
     for k, (start, _) in enumerate(pairs):
         world, robot = robot_in("lab_room", start, seed=k)
         with world:
-            nav = Navigator(robot)
+            nav = Navigator(robot, bounds=LAB_ROOM_BOUNDS)
             views = []
             for pan in CFG.scan_pans:  # Navigator.scan, keeping the true camera pose of each view
                 nav.observe(nav.look(pan))
@@ -258,7 +260,7 @@ def test_the_same_seed_gives_the_same_map():
     for _ in range(2):
         world, robot = robot_in("lab_room", start, seed=3)
         with world:
-            nav = Navigator(robot)
+            nav = Navigator(robot, bounds=LAB_ROOM_BOUNDS)
             nav.scan(pans=CFG.scan_pans[2:5])
             maps.append(nav.costmap.evidence)
     np.testing.assert_array_equal(maps[0], maps[1])
@@ -282,7 +284,7 @@ def test_drives_to_20_seeded_goals_without_touching_anything():
     for k, (start, goal) in enumerate(pairs):
         world, robot = robot_in("lab_room", start, seed=k)
         with world:
-            nav = Navigator(robot)
+            nav = Navigator(robot, bounds=LAB_ROOM_BOUNDS)
             nav.scan()
             res = nav.go_to((goal.x, goal.y), goal.theta, timeout=90.0)
             true = world.truth.robot_pose()
@@ -315,7 +317,7 @@ def test_an_obstacle_dropped_on_the_path_is_seen_and_avoided():
     start, goal = Pose2D(0.0, -3.2, math.pi / 2), (0.0, 2.0)
     world, robot = robot_in("lab_room", start, seed=0)
     with world:
-        nav = Navigator(robot)
+        nav = Navigator(robot, bounds=LAB_ROOM_BOUNDS)
         nav.scan()
         planned = astar(nav.planning_grid(), (start.x, start.y), goal)
         assert planned.found
@@ -358,7 +360,7 @@ def test_go_near_faces_the_target_from_within_the_ring():
     target, d_min, d_max = (-2.3, -1.0), 0.6, 1.2
     world, robot = robot_in("lab_room", Pose2D(0.5, -2.5, 0.0), seed=1)
     with world:
-        nav = Navigator(robot)
+        nav = Navigator(robot, bounds=LAB_ROOM_BOUNDS)
         nav.scan()
         res = nav.go_near(target, d_min, d_max, timeout=60.0)
         true = world.truth.robot_pose()
@@ -381,7 +383,7 @@ def test_go_near_faces_the_target_from_within_the_ring():
 def scanned():
     world, robot = robot_in("lab_room", Pose2D(1.4, -2.3, 0.0), seed=5)
     with world:
-        nav = Navigator(robot)
+        nav = Navigator(robot, bounds=LAB_ROOM_BOUNDS)
         nav.scan()
         yield world, robot, nav
 
@@ -419,7 +421,7 @@ def test_an_unreachable_goal_gives_a_reason_in_bounded_time():
             ("pen_e", (0.1, 1.0, 0.5), 0.55, 0.0),
         ):
             world.add_box(name, size, (c[0] + dx, c[1] + dy))
-        nav = Navigator(robot)
+        nav = Navigator(robot, bounds=LAB_ROOM_BOUNDS)
         nav.scan()
         res = nav.go_to(c, timeout=60.0)
         print(

@@ -18,15 +18,9 @@ from lab.geometry import Pose2D
 from lab.navigation import GridSpec, drive_to
 from lab.runs.search import run_search
 from lab.scene import load_scene
-from lab.search.agent import (
-    AgentConfig,
-    BudgetedRobot,
-    NavOutcome,
-    SearchAgent,
-    Strategy,
-    frontier_cells,
-    lawnmower_targets,
-)
+from lab.search.agent import AgentConfig, NavigationResult, SearchAgent, Strategy
+from lab.search.baselines import frontier_cells, lawnmower_targets
+from lab.search.budget import BudgetedRobot
 from lab.search.local_search import LocalSearchResult
 from lab.search.probability_map import ProbabilityMap
 
@@ -71,13 +65,13 @@ def straight_navigator(robot, refuse=()):
         p = robot.odometry()
         d = math.hypot(target_xy[0] - p.x, target_xy[1] - p.y)
         if any(math.hypot(target_xy[0] - x, target_xy[1] - y) < 0.15 for x, y in refuse):
-            return NavOutcome(False, "no path: UNREACHABLE", p)
+            return NavigationResult(False, "no path: UNREACHABLE", p)
         r = 0.5 * (min_distance + max_distance)
         k = max(0.0, (d - r) / d) if d > 1e-9 else 0.0
         goal = (p.x + k * (target_xy[0] - p.x), p.y + k * (target_xy[1] - p.y))
         heading = math.atan2(target_xy[1] - goal[1], target_xy[0] - goal[0])
         res = drive_to(robot, np.array([[p.x, p.y], goal]), heading, timeout=60.0)
-        return NavOutcome(res.outcome.value == "arrived", res.outcome.value, res.pose)
+        return NavigationResult(res.outcome.value == "arrived", res.outcome.value, res.pose)
 
     return navigate
 
@@ -133,7 +127,7 @@ def test_a_revisit_goes_round_the_other_way_when_one_side_is_out_of_reach(monkey
 
         def navigate(target_xy, min_distance, max_distance):
             if target_xy[0] > obj[0] + 0.3:
-                return NavOutcome(False, "no path: UNREACHABLE", robot.odometry())
+                return NavigationResult(False, "no path: UNREACHABLE", robot.odometry())
             return inner(target_xy, min_distance, max_distance)
 
         return navigate
@@ -164,7 +158,7 @@ def test_a_cell_whose_band_is_blocked_is_approached_from_farther_out(monkeypatch
 
         def navigate(target_xy, min_distance, max_distance):
             if max_distance <= 0.9 + 1e-9:
-                return NavOutcome(False, "no path: UNREACHABLE", robot.odometry())
+                return NavigationResult(False, "no path: UNREACHABLE", robot.odometry())
             return inner(target_xy, 0.95, max_distance)
 
         return navigate

@@ -8,7 +8,9 @@ The object-search paper's Sec. III-D (the costmap ``M_c`` and A*), as a data flo
     and after every costmap update: Replanner.update(grid, pose) -> replan if the path ahead is blocked
 
 :class:`~lab.navigation.navigator.Navigator` runs the whole loop on a :class:`lab.robot.Robot` (stereo
-frames in, velocity and pan-tilt commands out): ``scan()``, ``go_to(goal)``, ``go_near(target)``.
+frames in, velocity and pan-tilt commands out): ``scan()``, ``go_to(goal)``, ``go_near(target)``; each
+request is a :class:`~lab.navigation.drive_loop.DriveLoop` (plan, look, drive and replan, face, report).
+Its workspace comes from the world's scene: ``Navigator(robot, bounds=room_bounds(load_scene(name)))``.
 
 Grid geometry and frames follow ``docs/conventions.md`` (world frame W, metres, radians); cell
 ``(i, j)`` counts along W's x and y axes (:mod:`lab.navigation.grid`).
@@ -23,6 +25,7 @@ from lab.navigation.astar import (
     heading_towards,
 )
 from lab.navigation.costmap import CellState, CostGrid, Costmap, CostmapConfig, CostmapUpdate
+from lab.navigation.drive_loop import NavOutcome, NavResult
 from lab.navigation.follower import (
     Command,
     DriveOutcome,
@@ -32,17 +35,9 @@ from lab.navigation.follower import (
     StepUpdate,
     drive_to,
 )
-from lab.navigation.grid import GridSpec, OutsideMap
+from lab.navigation.grid import GridSpec, OutsideMap, room_bounds
 from lab.navigation.ground import GroundPlane, NoGroundPlane, fit_ground_plane
-from lab.navigation.navigator import (
-    LAB_ROOM_BOUNDS,
-    Navigator,
-    NavigatorConfig,
-    NavOutcome,
-    NavResult,
-    Observation,
-    ScanResult,
-)
+from lab.navigation.navigator import Navigator, NavigatorConfig, Observation, ScanResult
 from lab.navigation.paths import (
     ReplanDecision,
     Replanner,
@@ -52,7 +47,6 @@ from lab.navigation.paths import (
 )
 
 __all__ = [
-    "LAB_ROOM_BOUNDS",
     "NavOutcome",
     "NavResult",
     "Navigator",
@@ -85,6 +79,7 @@ __all__ = [
     "first_blocked_index",
     "fit_ground_plane",
     "heading_towards",
+    "room_bounds",
     "segment_is_clear",
     "simplify_path",
 ]

@@ -440,10 +440,7 @@ def drive_to(
     -------
     DriveResult
     """
-    if not (math.isfinite(dt) and 0 < dt < robot.cmd_timeout_s):
-        raise ValueError(f"dt must be within (0, {robot.cmd_timeout_s}) s (the command watchdog), got {dt!r}")
-    if not (math.isfinite(timeout) and timeout > 0):
-        raise ValueError(f"timeout must be a finite number > 0 s, got {timeout!r}")
+    _check_control_period(robot, dt, timeout)
     f = follower if follower is not None else PathFollower(robot.base_limits)
     f.set_path(path, final_heading)
     f.reset()
@@ -460,30 +457,54 @@ def drive_to(
             new_pose = robot.odometry()
             distance += math.hypot(new_pose.x - pose.x, new_pose.y - pose.y)
             pose = new_pose
-            if on_step is not None:
-                upd = on_step(pose, t)
-                if upd is not None and upd.abort:
-                    outcome = DriveOutcome.ABORTED
-                    break
-                if upd is not None and upd.waypoints is not None:
-                    heading = upd.final_heading if upd.final_heading is not None else f.final_heading
-                    f.set_path(upd.waypoints, heading)
-            cmd = f.command(pose, t)
-            if cmd.status is FollowStatus.ARRIVED:
-                outcome = DriveOutcome.ARRIVED
+            if on_step is not None and _take_update(f, on_step(pose, t)):
+                outcome = DriveOutcome.ABORTED
                 break
-            if cmd.status is FollowStatus.NO_PATH:
-                outcome = DriveOutcome.NO_PATH
+            cmd = f.command(pose, t)
+            if cmd.status in _FOLLOWER_ENDS:
+                outcome = _FOLLOWER_ENDS[cmd.status]
                 break
             if t - t0 >= timeout:
                 break
-            robot.drive(cmd.v, cmd.omega)
+            robot.drive(cmd.v, cmd.omega)  # every step, so the command watchdog never fires
             steps += 1
             robot.step(dt)
     finally:
         with contextlib.suppress(Exception):
             robot.stop()
+    return _drive_result(f, outcome, pose, robot.now() - t0, steps, distance)
+
+
+#: Follower states that end a :func:`drive_to` run, and how.
+_FOLLOWER_ENDS = {FollowStatus.ARRIVED: DriveOutcome.ARRIVED, FollowStatus.NO_PATH: DriveOutcome.NO_PATH}
+
+
+def _check_control_period(robot: Robot, dt: float, timeout: float) -> None:
+    """Refuse a control period ``dt`` [s] outside ``(0, robot.cmd_timeout_s)`` and a timeout [s] that is
+    not a finite number > 0 (ValueError)."""
+    if not (math.isfinite(dt) and 0 < dt < robot.cmd_timeout_s):
+        raise ValueError(f"dt must be within (0, {robot.cmd_timeout_s}) s (the command watchdog), got {dt!r}")
+    if not (math.isfinite(timeout) and timeout > 0):
+        raise ValueError(f"timeout must be a finite number > 0 s, got {timeout!r}")
+
+
+def _take_update(f: PathFollower, upd: StepUpdate | None) -> bool:
+    """Hand a step callback's new path (and heading) to the follower; True when it asks to abort."""
+    if upd is None:
+        return False
+    if upd.abort:
+        return True
+    if upd.waypoints is not None:
+        heading = upd.final_heading if upd.final_heading is not None else f.final_heading
+        f.set_path(upd.waypoints, heading)
+    return False
+
+
+def _drive_result(
+    f: PathFollower, outcome: DriveOutcome, pose: Pose2D, elapsed_s: float, steps: int, distance_m: float
+) -> DriveResult:
+    """The :class:`DriveResult` of a run that ended at ``pose``, with its errors to the follower's goal."""
     goal = f.goal_xy
     pos_err = math.inf if goal is None else math.hypot(goal[0] - pose.x, goal[1] - pose.y)
     head_err = None if f.final_heading is None else wrap_angle(f.final_heading - pose.theta)
-    return DriveResult(outcome, pose, robot.now() - t0, steps, distance, pos_err, head_err)
+    return DriveResult(outcome, pose, elapsed_s, steps, distance_m, pos_err, head_err)

@@ -15,12 +15,29 @@ from dataclasses import dataclass
 import numpy as np
 
 from lab.errors import ConfigError, LabError
+from lab.scene import Scene
 
-__all__ = ["GridSpec", "OutsideMap", "check_finite_xy"]
+__all__ = ["GridSpec", "OutsideMap", "check_finite_xy", "room_bounds"]
 
 
 class OutsideMap(LabError, ValueError):
     """A world point or a cell lies outside the grid (the message gives the map's extent)."""
+
+
+def room_bounds(scene: Scene) -> tuple[float, float, float, float]:
+    """``(x_min, y_min, x_max, y_max)`` [m] of a scene's floor: its ``[room] size`` centred on W's origin.
+
+    The lab room (``worlds/lab_room.toml``, 6 x 8 m) gives ``(-3.0, -4.0, 3.0, 4.0)``.
+
+    Raises
+    ------
+    ConfigError
+        The scene has no ``[room]`` (then the workspace must be given explicitly).
+    """
+    if scene.room is None:
+        raise ConfigError(f"scene {scene.name!r} has no [room]: give the workspace bounds explicitly")
+    sx, sy = (float(v) for v in scene.room.size)
+    return (-sx / 2, -sy / 2, sx / 2, sy / 2)
 
 
 def check_finite_xy(name: str, xy) -> tuple[float, float]:

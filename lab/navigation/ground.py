@@ -182,43 +182,11 @@ def fit_ground_plane(
     if n_pts < need:
         raise NoGroundPlane(f"ground plane: only {n_pts} finite points, need at least {need}")
     t = float(inlier_threshold)
-    cos_max_tilt = math.cos(max_tilt)
-    centre_xy = np.median(P[:, :2], axis=0)
-
-    def admitted(n, d):
-        z_c = -(d + n[..., 0] * centre_xy[0] + n[..., 1] * centre_xy[1]) / np.maximum(n[..., 2], 1e-12)
-        return (n[..., 2] >= cos_max_tilt) & (np.abs(z_c) <= max_offset)
-
-    # Sampling prior: a point can only lie on an admitted plane if it is within this band of z = 0.
-    r_xy = np.linalg.norm(P[:, :2] - centre_xy, axis=1)
-    pool = P[np.abs(P[:, 2]) <= max_offset + t + math.tan(max_tilt) * r_xy]
-    if len(pool) < 3:
-        raise NoGroundPlane(f"ground plane: no points within {max_offset:.2f} m of z = 0 among {n_pts}")
+    window = _Admitted(max_tilt, float(max_offset), np.median(P[:, :2], axis=0), n_pts)
+    pool = _sampling_pool(P, window, t)
     S = P if n_pts <= max_score_points else P[rng.choice(n_pts, max_score_points, replace=False)]
-
-    idx = rng.integers(0, len(pool), size=(int(n_hypotheses), 3))
-    normals, offsets, valid = _planes_through(pool[idx])
-    valid &= admitted(normals, offsets)
-    if not valid.any():
-        raise NoGroundPlane(
-            f"ground plane: no sampled plane within {math.degrees(max_tilt):.0f} deg of horizontal "
-            f"and {max_offset:.2f} m of z = 0 among {n_pts} points"
-        )
-    normals, offsets = normals[valid], offsets[valid]
-    h = S @ normals.T + offsets  # (m, k) heights of the scoring points above each hypothesis
-    msac = np.minimum(h * h, t * t).sum(axis=0)
-    best = int(np.argmin(msac))  # argmin takes the first of equals: deterministic
-    n, d = normals[best], float(offsets[best])
-
-    for _ in range(int(refine_iterations)):
-        inl = np.abs(P @ n + d) <= t
-        if inl.sum() < 3:
-            break
-        n_new, d_new = _tls_plane(P[inl])
-        if not admitted(n_new, d_new):
-            break
-        n, d = n_new, d_new
-
+    n, d = _best_sampled_plane(pool, S, rng, int(n_hypotheses), window, t)
+    n, d = _refined(P, n, d, window, t, int(refine_iterations))
     h_all = P @ n + d
     inl = np.abs(h_all) <= t
     n_inl = int(inl.sum())
@@ -229,3 +197,77 @@ def fit_ground_plane(
         )
     rms = float(np.sqrt(np.mean(h_all[inl] ** 2)))
     return GroundPlane(tuple(n), d, n_inl, n_pts, rms)
+
+
+@dataclass(frozen=True, eq=False)
+class _Admitted:
+    """Which planes :func:`fit_ground_plane` admits: tilted at most ``max_tilt`` [rad], and within
+    ``max_offset`` [m] of ``z = 0`` under the centre ``centre_xy`` [m] of the ``n_points`` points."""
+
+    max_tilt: float
+    max_offset: float
+    centre_xy: np.ndarray
+    n_points: int
+
+    @property
+    def cos_max_tilt(self) -> float:
+        return math.cos(self.max_tilt)
+
+    @property
+    def max_tilt_deg(self) -> float:
+        return math.degrees(self.max_tilt)
+
+    def __call__(self, n: np.ndarray, d) -> np.ndarray:
+        """Admission of planes with unit normals ``n`` (..., 3) and offsets ``d`` (...,)."""
+        c = self.centre_xy
+        z_c = -(d + n[..., 0] * c[0] + n[..., 1] * c[1]) / np.maximum(n[..., 2], 1e-12)
+        return (n[..., 2] >= self.cos_max_tilt) & (np.abs(z_c) <= self.max_offset)
+
+
+def _sampling_pool(P: np.ndarray, window: _Admitted, t: float) -> np.ndarray:
+    """The points that can lie on an admitted plane (the sampling prior): within the band of z = 0 that
+    such a plane sweeps at their distance from the centre, plus the inlier threshold ``t`` [m]."""
+    r_xy = np.linalg.norm(P[:, :2] - window.centre_xy, axis=1)
+    pool = P[np.abs(P[:, 2]) <= window.max_offset + t + math.tan(window.max_tilt) * r_xy]
+    if len(pool) < 3:
+        raise NoGroundPlane(
+            f"ground plane: no points within {window.max_offset:.2f} m of z = 0 among {len(P)}"
+        )
+    return pool
+
+
+def _best_sampled_plane(
+    pool: np.ndarray, S: np.ndarray, rng: np.random.Generator, n_hypotheses: int, window: _Admitted, t: float
+) -> tuple[np.ndarray, float]:
+    """RANSAC: planes through ``n_hypotheses`` random triples of ``pool``; among the admitted ones, the
+    lowest MSAC cost ``sum(min(h_i^2, t^2))`` over the scoring points ``S`` wins (NoGroundPlane: none
+    admitted)."""
+    idx = rng.integers(0, len(pool), size=(n_hypotheses, 3))
+    normals, offsets, valid = _planes_through(pool[idx])
+    valid &= window(normals, offsets)
+    if not valid.any():
+        raise NoGroundPlane(
+            f"ground plane: no sampled plane within {window.max_tilt_deg:.0f} deg of horizontal "
+            f"and {window.max_offset:.2f} m of z = 0 among {window.n_points} points"
+        )
+    normals, offsets = normals[valid], offsets[valid]
+    h = S @ normals.T + offsets  # (m, k) heights of the scoring points above each hypothesis
+    msac = np.minimum(h * h, t * t).sum(axis=0)
+    best = int(np.argmin(msac))  # argmin takes the first of equals: deterministic
+    return normals[best], float(offsets[best])
+
+
+def _refined(
+    P: np.ndarray, n: np.ndarray, d: float, window: _Admitted, t: float, iterations: int
+) -> tuple[np.ndarray, float]:
+    """Total least squares on the plane's inliers among all points, ``iterations`` times (stopping
+    early when too few inliers are left or the refit would not be admitted)."""
+    for _ in range(iterations):
+        inl = np.abs(P @ n + d) <= t
+        if inl.sum() < 3:
+            break
+        n_new, d_new = _tls_plane(P[inl])
+        if not window(n_new, d_new):
+            break
+        n, d = n_new, d_new
+    return n, d

@@ -9,6 +9,7 @@ The object-search paper's navigation mode (Sec. III-D and Fig. 4), on any :class
                      seconds the head looks along the path ahead, observe(), and the Replanner plans
                      again when the path ahead crosses a (grown) obstacle
     go_near(target): the same towards any cell at a distance band from a target, then face it
+                     (both run a :class:`~lab.navigation.drive_loop.DriveLoop`, step by step)
 
 The navigator sees only what the robot gives every algorithm: stereo frames with their pan-tilt state
 and odometry, and odometry. Poses are odometry poses in the world frame W (``docs/conventions.md``); its
@@ -63,37 +64,29 @@ StereoSGBM with 64 disparities; ``benchmarks/bench_navigation.py`` measures the 
 
 from __future__ import annotations
 
-import contextlib
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from enum import Enum
 
 import numpy as np
 
-from lab.errors import ConfigError, SafetyStop
-from lab.geometry import Pose2D, transform_points, wrap_angle
-from lab.navigation.astar import PathResult, PathStatus, astar, astar_to_region, heading_towards
+from lab.errors import ConfigError
+from lab.geometry import Pose2D, transform_points
+from lab.navigation.astar import heading_towards
 from lab.navigation.costmap import CellState, CostGrid, Costmap, CostmapConfig, CostmapUpdate
-from lab.navigation.follower import DriveOutcome, FollowStatus, PathFollower, StepUpdate, drive_to
+from lab.navigation.drive_loop import DriveLoop, NavResult, NearTarget, ToGoal, check_timeout
 from lab.navigation.grid import GridSpec, check_finite_xy
 from lab.navigation.ground import GroundPlane, NoGroundPlane, fit_ground_plane
-from lab.navigation.paths import Replanner, nearest_index
+from lab.navigation.paths import nearest_index, point_ahead
 from lab.robot import Robot, StereoFrame
 from lab.vision.dense import dense_points
 
 __all__ = [
-    "LAB_ROOM_BOUNDS",
-    "NavOutcome",
-    "NavResult",
     "Navigator",
     "NavigatorConfig",
     "Observation",
     "ScanResult",
 ]
-
-#: ``(x_min, y_min, x_max, y_max)`` [m] of the lab room's floor (``worlds/lab_room.toml``: 6 x 8 m)
-LAB_ROOM_BOUNDS = (-3.0, -4.0, 3.0, 4.0)
 
 #: Height of the stereo head above its pan-tilt axes [m]: the top of the robot is ``mount_R[2]`` plus this.
 HEAD_HEIGHT_M = 0.15
@@ -257,84 +250,6 @@ class ScanResult:
         return sum(len(o.update.new_obstacles) for o in self.observations if o.update is not None)
 
 
-class NavOutcome(Enum):
-    """How a navigation request ended."""
-
-    ARRIVED = "arrived within the follower's tolerances (odometry)"
-    NO_PATH = "no path (see the reason)"
-    TIMEOUT = "timed out"
-    BUMPED = "the base bumped into something (its collision counter rose)"
-    SAFETY_STOP = "the robot stopped itself (bump, cliff or wheel drop)"
-
-
-@dataclass(frozen=True)
-class NavResult:
-    """The end of :meth:`Navigator.go_to` or :meth:`Navigator.go_near`.
-
-    Attributes
-    ----------
-    outcome : NavOutcome
-    reason : str or None
-        For NO_PATH the :class:`~lab.navigation.astar.PathStatus` name (``"GOAL_OUTSIDE_MAP"``,
-        ``"GOAL_IN_OBSTACLE"``, ``"UNREACHABLE"``, ``"START_IN_OBSTACLE"``, ...); a message for
-        SAFETY_STOP; None otherwise.
-    pose : Pose2D
-        Odometry pose at the end.
-    goal_xy : (float, float) or None [m]
-        Where the robot was sent (for ``go_near``, the cell of the ring it chose last).
-    final_heading : float [rad] or None
-    replans : int
-        Paths planned after the first one (the path ahead was blocked, or an escape).
-    frames : int
-        Stereo frames integrated while driving.
-    distance_m : float [m]
-        Path length driven (odometry).
-    elapsed_s : float [s]
-        Robot time from the request to the end.
-    position_error_m : float [m]
-        Distance from the end pose to ``goal_xy`` (odometry; inf without a goal).
-    heading_error_rad : float [rad] or None
-        Wrapped final heading error (odometry), None without a final heading.
-    """
-
-    outcome: NavOutcome
-    reason: str | None
-    pose: Pose2D
-    goal_xy: tuple[float, float] | None
-    final_heading: float | None
-    replans: int
-    frames: int
-    distance_m: float
-    elapsed_s: float
-    position_error_m: float
-    heading_error_rad: float | None
-
-    @property
-    def arrived(self) -> bool:
-        return self.outcome is NavOutcome.ARRIVED
-
-
-def _point_ahead(waypoints: np.ndarray, xy, dist: float) -> np.ndarray:
-    """The point ``dist`` [m] along the polyline from the projection of ``xy`` on it (the end if nearer)."""
-    W = waypoints
-    if len(W) == 1:
-        return W[0].copy()
-    k = nearest_index(W, xy)
-    a, b = W[k], W[k + 1]
-    ab = b - a
-    L2 = float(ab @ ab)
-    t = 0.0 if L2 == 0 else min(1.0, max(0.0, float((np.asarray(xy) - a) @ ab) / L2))
-    p = a + t * ab
-    left = dist
-    for q in W[k + 1 :]:
-        seg = float(np.hypot(*(q - p)))
-        if seg >= left:
-            return p + (q - p) * (left / seg)
-        left -= seg
-        p = q
-    return W[-1].copy()
-
-
 class Navigator:
     """Drive a robot to goals on a costmap it builds from its own stereo frames (module docstring).
 
@@ -346,7 +261,8 @@ class Navigator:
         The costmap's grid. Default: ``bounds`` plus ``config.margin`` at ``config.resolution``.
     config : NavigatorConfig, optional
     bounds : (x_min, y_min, x_max, y_max) [m], optional
-        The workspace when ``spec`` is not given; default :data:`LAB_ROOM_BOUNDS`.
+        The workspace, required when ``spec`` is not given: the world's floor, read from its scene
+        (:func:`~lab.navigation.grid.room_bounds` of :func:`lab.scene.load_scene`'s result).
 
     The costmap's ``robot_height`` is raised to the top of the robot's head (the pan-tilt axes,
     ``camera.mount_R``, plus :data:`HEAD_HEIGHT_M`) when the configured one is lower: the lab room's
@@ -363,7 +279,8 @@ class Navigator:
 
     Examples
     --------
-    >>> nav = Navigator(robot)                                       # doctest: +SKIP
+    >>> bounds = room_bounds(load_scene("lab_room"))                 # doctest: +SKIP
+    >>> nav = Navigator(robot, bounds=bounds)                        # doctest: +SKIP
     >>> nav.scan()                                                   # doctest: +SKIP
     >>> res = nav.go_to((1.0, 2.0), final_heading=0.0, timeout=60)   # doctest: +SKIP
     >>> res.outcome, res.replans                                     # doctest: +SKIP
@@ -384,8 +301,10 @@ class Navigator:
             # a taller robot than the costmap assumes: what its head would hit is an obstacle too
             cfg = replace(cfg, costmap=replace(cfg.costmap, robot_height=head_top))
         self.config = cfg
+        if spec is None and bounds is None:
+            raise ConfigError("give the navigator its workspace: spec, or bounds (room_bounds(scene))")
         if spec is None:
-            x0, y0, x1, y1 = (float(v) for v in (bounds if bounds is not None else LAB_ROOM_BOUNDS))
+            x0, y0, x1, y1 = (float(v) for v in bounds)
             m = cfg.margin
             spec = GridSpec.from_bounds(x0 - m, y0 - m, x1 + m, y1 + m, cfg.resolution)
         elif bounds is not None:
@@ -552,50 +471,9 @@ class Navigator:
             a heading and ``face_xy`` are given.
         """
         gx, gy = check_finite_xy("goal_xy", goal_xy)
-        if final_heading is None and isinstance(goal_xy, Pose2D):
-            final_heading = goal_xy.theta
-        if final_heading is not None and not math.isfinite(final_heading):
-            raise ValueError(f"final_heading must be finite or None, got {final_heading!r}")
-        if face_xy is not None:
-            if final_heading is not None:
-                raise ValueError("give final_heading or face_xy, not both")
-            final_heading = heading_towards((gx, gy), face_xy)
-        _check_timeout(timeout)
-        goal = np.array([gx, gy])
-
-        goal_cell = self.spec.cells_of(goal[None, :])[0][0]
-
-        def plan(grid: CostGrid, start) -> PathResult:
-            result = astar(grid, start, (gx, gy))
-            if result.status is PathStatus.GOAL_IN_OBSTACLE and self.config.goal_approach > 0:
-                # the goal lies in the grown obstacles; if the footprint fits there, plan to the nearest
-                # open cell and drive the last stretch straight
-                near = astar_to_region(grid, start, (gx, gy), self.config.goal_approach)
-                if near.found and self.footprint_clear(near.points_xy[-1], goal):
-                    return near
-            return result
-
-        def waypoints(wp: np.ndarray) -> np.ndarray:
-            if tuple(self.spec.cells_of(wp[-1:])[0][0]) == tuple(goal_cell):
-                wp = wp.copy()
-                wp[-1] = goal  # the exact goal, not its cell's centre
-                return wp
-            return np.vstack([wp, goal[None, :]])  # the straight last stretch into the grown zone
-
-        def last_stretch_clear(wp: np.ndarray) -> bool:
-            if len(wp) < 2 or tuple(self.spec.cells_of(wp[-2:-1])[0][0]) == tuple(goal_cell):
-                return True  # the A* path reaches the goal's own cell: the Replanner checks it all
-            return self.footprint_clear(wp[-2], wp[-1])
-
-        return self._navigate(
-            plan,
-            waypoints,
-            lambda wp: final_heading,
-            None,
-            timeout,
-            still_clear=last_stretch_clear,
-            requested=((gx, gy), final_heading),
-        )
+        heading = _final_heading(goal_xy, final_heading, face_xy)
+        check_timeout(timeout)
+        return DriveLoop(self, ToGoal(self, (gx, gy), heading), timeout).run()
 
     def go_near(
         self,
@@ -621,14 +499,8 @@ class Navigator:
             raise ValueError(
                 f"need 0 <= min_distance <= max_distance < inf, got {min_distance!r}, {max_distance!r}"
             )
-        _check_timeout(timeout)
-
-        def plan(grid: CostGrid, start) -> PathResult:
-            return astar_to_region(grid, start, (tx, ty), max_distance, min_distance)
-
-        return self._navigate(
-            plan, lambda wp: wp, lambda wp: heading_towards(wp[-1], (tx, ty)), (tx, ty), timeout
-        )
+        check_timeout(timeout)
+        return DriveLoop(self, NearTarget((tx, ty), min_distance, max_distance), timeout).run()
 
     def footprint_clear(self, a_xy, b_xy, step: float = 0.02) -> bool:
         """Whether the robot's footprint, swept straight from ``a_xy`` to ``b_xy`` [m], keeps at least
@@ -662,7 +534,7 @@ class Navigator:
         pts = [xy]
         if len(W) > 1:
             k = nearest_index(W, xy)
-            pts.append(_point_ahead(W[k:], xy, 0.0))
+            pts.append(point_ahead(W[k:], xy, 0.0))
             left = distance
             for q in W[k + 1 :]:
                 seg = float(np.hypot(*(q - pts[-1])))
@@ -675,191 +547,16 @@ class Navigator:
             pts.append(W[0])
         return all(self.footprint_clear(a, b) for a, b in zip(pts[:-1], pts[1:], strict=True))
 
-    def _follower(self) -> PathFollower:
-        cfg = self.config
-        return PathFollower(
-            self.robot.base_limits,
-            goal_tolerance_xy=cfg.goal_tolerance_xy,
-            goal_tolerance_theta=cfg.goal_tolerance_theta,
-        )
 
-    def _bumps(self) -> int:
-        """The base's bump count, where the robot has one (``SimRobot.collisions``), else 0."""
-        return int(getattr(self.robot, "collisions", 0))
-
-    def _navigate(
-        self,
-        plan: Callable[[CostGrid, tuple[float, float]], PathResult],
-        waypoints_of: Callable[[np.ndarray], np.ndarray],
-        heading_of: Callable[[np.ndarray], float | None],
-        face_target: tuple[float, float] | None,
-        timeout: float,
-        still_clear: Callable[[np.ndarray], bool] | None = None,
-        requested: tuple[tuple[float, float], float | None] | None = None,
-    ) -> NavResult:
-        """The drive loop shared by :meth:`go_to` and :meth:`go_near` (see the module docstring).
-
-        ``plan(grid, start_xy)`` plans on the inflated grid; ``waypoints_of`` and ``heading_of`` turn
-        the Replanner's waypoints into what the follower drives and its final heading; ``face_target``
-        asks for a last turn towards a point from where the robot stopped; ``still_clear(waypoints)``
-        checks what the Replanner does not (the straight last stretch of a goal in the grown zone);
-        ``requested`` is the goal and heading reported when there is no path at all.
-        """
-        robot, cfg = self.robot, self.config
-        t0 = robot.now()
-        t_end = t0 + timeout
-        pose0 = robot.odometry()
-        bumps0 = self._bumps()
-        rp = Replanner(plan)
-        s = _RunState()
-
-        def finish(outcome: NavOutcome, reason: str | None, pose: Pose2D, goal, heading, dist=0.0):
-            g = None if goal is None else (float(goal[0]), float(goal[1]))
-            pos_err = math.inf if g is None else math.hypot(g[0] - pose.x, g[1] - pose.y)
-            head_err = None if heading is None else wrap_angle(heading - pose.theta)
-            return NavResult(
-                outcome,
-                reason,
-                pose,
-                g,
-                heading,
-                s.replans,
-                s.frames,
-                dist,
-                robot.now() - t0,
-                pos_err,
-                head_err,
-            )
-
-        d = rp.update(self.planning_grid(), pose0)
-        if not d.path.found:
-            goal, heading = requested if requested is not None else (None, None)
-            return finish(NavOutcome.NO_PATH, d.path.reason, pose0, goal, heading)
-        s.waypoints = self.planned_path = waypoints_of(d.waypoints)
-        s.heading = heading_of(d.waypoints)
-
-        try:
-            # look before driving: towards the path ahead, then replan on what the head saw
-            self._point_head(pose0, s, wait=True)
-            self.observe(robot.capture_stereo())
-            s.frames += 1
-            d = rp.update(self.planning_grid(), pose0)
-            if d.replanned and d.path.found:
-                s.replans += 1
-                s.waypoints, s.heading = waypoints_of(d.waypoints), heading_of(d.waypoints)
-                self.planned_path = s.waypoints
-            elif d.replanned and not self.path_ahead_clear(s.waypoints, pose0, cfg.confirm_range):
-                # (a blockage farther along is decided on the way, as below)
-                return finish(NavOutcome.NO_PATH, d.path.reason, pose0, s.waypoints[-1], s.heading)
-            k_frame = max(1, round(cfg.frame_period / cfg.control_dt))
-
-            follower = self._follower()
-
-            def on_step(pose: Pose2D, t: float) -> StepUpdate | None:
-                s.step += 1
-                if self._bumps() > bumps0:
-                    s.outcome = NavOutcome.BUMPED
-                    return StepUpdate(abort=True)
-                self._point_head(pose, s)
-                if s.step % k_frame:
-                    return None
-                self.observe(robot.capture_stereo())
-                s.frames += 1
-                if follower.status in (FollowStatus.FINAL_TURN, FollowStatus.ARRIVED):
-                    return None  # turning in place at the goal: nothing ahead to check
-                d = rp.update(self.planning_grid(), pose)
-                if d.replanned and d.path.found:
-                    s.replans += 1
-                    s.waypoints, s.heading = waypoints_of(d.waypoints), heading_of(d.waypoints)
-                    self.planned_path = s.waypoints
-                    return StepUpdate(waypoints=s.waypoints, final_heading=s.heading)
-                if d.replanned:
-                    failure = d.path.reason
-                elif still_clear is not None and not still_clear(s.waypoints):
-                    failure = PathStatus.GOAL_IN_OBSTACLE.name
-                else:
-                    return None
-                # No path on this map. Far cells come from noisy far views that nearer ones may clear:
-                # keep to the old path while its next confirm_range metres are clear (the Replanner
-                # plans again at the next frame), and give up when the blockage is that close.
-                if self.path_ahead_clear(s.waypoints, pose, cfg.confirm_range):
-                    return None
-                s.outcome, s.reason = NavOutcome.NO_PATH, failure
-                return StepUpdate(abort=True)
-
-            res = drive_to(
-                robot,
-                s.waypoints,
-                s.heading,
-                cfg.control_dt,
-                max(t_end - robot.now(), cfg.control_dt),
-                follower=follower,
-                on_step=on_step,
-            )
-            dist, pose = res.distance_m, res.pose
-            if res.outcome is DriveOutcome.ARRIVED and face_target is not None and t_end > robot.now():
-                # face the target from where the robot actually stopped
-                s.heading = heading_towards((pose.x, pose.y), face_target)
-                turn = drive_to(
-                    robot,
-                    np.array([[pose.x, pose.y]]),
-                    s.heading,
-                    cfg.control_dt,
-                    t_end - robot.now(),
-                    follower=self._follower(),
-                )
-                res, pose = turn, turn.pose
-            if self._bumps() > bumps0:
-                outcome, reason = NavOutcome.BUMPED, None
-            elif s.outcome is not None:
-                outcome, reason = s.outcome, s.reason
-            else:
-                outcome, reason = _OUTCOMES[res.outcome], None
-            return finish(outcome, reason, pose, s.waypoints[-1], s.heading, dist)
-        except SafetyStop as e:
-            with contextlib.suppress(Exception):
-                robot.stop()
-            return finish(NavOutcome.SAFETY_STOP, str(e), robot.odometry(), s.waypoints[-1], s.heading)
-
-    def _point_head(self, pose: Pose2D, s: _RunState, wait: bool = False) -> None:
-        """Pan the head towards the path ``look_ahead`` metres ahead (along the final heading at the end)."""
-        cfg, robot = self.config, self.robot
-        xy = np.array([pose.x, pose.y])
-        p = _point_ahead(s.waypoints, xy, cfg.look_ahead)
-        if np.hypot(*(p - xy)) > 0.3:
-            bearing = math.atan2(p[1] - xy[1], p[0] - xy[0])
-        elif s.heading is not None:
-            bearing = s.heading
-        else:
-            bearing = pose.theta + robot.pan_tilt().pan_target
-        lim = robot.pan_tilt_limits
-        pan = min(max(wrap_angle(bearing - pose.theta), lim.pan_min), lim.pan_max)
-        robot.command_pan_tilt(pan, cfg.tilt)
-        if wait:
-            robot.wait_pan_tilt(timeout=2.0 * (lim.pan_max - lim.pan_min) / lim.min_speed)
-
-
-_OUTCOMES = {
-    DriveOutcome.ARRIVED: NavOutcome.ARRIVED,
-    DriveOutcome.TIMEOUT: NavOutcome.TIMEOUT,
-    DriveOutcome.NO_PATH: NavOutcome.NO_PATH,
-    DriveOutcome.ABORTED: NavOutcome.NO_PATH,
-}
-
-
-@dataclass
-class _RunState:
-    """Mutable state of one navigation request (shared with the drive loop's step callback)."""
-
-    waypoints: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
-    heading: float | None = None
-    step: int = 0
-    frames: int = 0
-    replans: int = 0
-    outcome: NavOutcome | None = None
-    reason: str | None = None
-
-
-def _check_timeout(timeout: float) -> None:
-    if not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
-        raise ValueError(f"timeout must be a finite number > 0 s, got {timeout!r}")
+def _final_heading(goal_xy, final_heading: float | None, face_xy) -> float | None:
+    """The heading [rad] :meth:`Navigator.go_to` turns to at the goal: ``final_heading``, else a
+    :class:`Pose2D` goal's own, else towards ``face_xy``; None for none (ValueError: NaN, or both)."""
+    if final_heading is None and isinstance(goal_xy, Pose2D):
+        final_heading = goal_xy.theta
+    if final_heading is not None and not math.isfinite(final_heading):
+        raise ValueError(f"final_heading must be finite or None, got {final_heading!r}")
+    if face_xy is not None:
+        if final_heading is not None:
+            raise ValueError("give final_heading or face_xy, not both")
+        final_heading = heading_towards(check_finite_xy("goal_xy", goal_xy), face_xy)
+    return final_heading

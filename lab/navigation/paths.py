@@ -25,6 +25,7 @@ __all__ = [
     "simplify_path",
     "first_blocked_index",
     "nearest_index",
+    "point_ahead",
     "ReplanDecision",
     "Replanner",
 ]
@@ -128,6 +129,30 @@ def nearest_index(waypoints_xy: np.ndarray, xy) -> int:
     t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
     d = np.linalg.norm(a + t[:, None] * ab - p, axis=1)
     return int(np.argmin(d))
+
+
+def point_ahead(waypoints_xy: np.ndarray, xy, dist: float) -> np.ndarray:
+    """The point ``dist`` [m] along the polyline from the projection of ``xy`` on it (the end if nearer).
+
+    ``waypoints_xy`` is a float array of shape (n, 2) [m], n >= 1; returns shape (2,) [m].
+    """
+    W = waypoints_xy
+    if len(W) == 1:
+        return W[0].copy()
+    k = nearest_index(W, xy)
+    a, b = W[k], W[k + 1]
+    ab = b - a
+    L2 = float(ab @ ab)
+    t = 0.0 if L2 == 0 else min(1.0, max(0.0, float((np.asarray(xy) - a) @ ab) / L2))
+    p = a + t * ab
+    left = dist
+    for q in W[k + 1 :]:
+        seg = float(np.hypot(*(q - p)))
+        if seg >= left:
+            return p + (q - p) * (left / seg)
+        left -= seg
+        p = q
+    return W[-1].copy()
 
 
 @dataclass(frozen=True, eq=False)

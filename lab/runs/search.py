@@ -17,9 +17,9 @@ import numpy as np
 from lab.errors import ConfigError
 from lab.geometry import R_to_euler_zyx, se3_inv
 from lab.navigation.astar import astar_to_region
+from lab.navigation.drive_loop import NavOutcome
 from lab.navigation.grid import GridSpec
 from lab.navigation.navigator import Navigator
-from lab.navigation.navigator import NavOutcome as _Outcome
 from lab.robot import Robot
 from lab.runs.placement import (
     check_placement,
@@ -33,15 +33,8 @@ from lab.runs.placement import (
 )
 from lab.runs.robots import make_robot
 from lab.scene import BodySpec, Scene, load_scene
-from lab.search.agent import (
-    AgentConfig,
-    AgentResult,
-    BudgetedRobot,
-    NavOutcome,
-    SearchAgent,
-    SearchEvent,
-    Strategy,
-)
+from lab.search.agent import AgentConfig, AgentResult, NavigationResult, SearchAgent, SearchEvent, Strategy
+from lab.search.budget import BudgetedRobot
 from lab.search.probability_map import ProbabilityMap
 from lab.training.search import search_database
 from lab.vision.database import FeatureDatabase
@@ -279,7 +272,7 @@ def run_search(
         Simulated-time budget (the run ends "not found" when it is used up); and, optionally, wall time.
     navigate : callable ``(robot, spec) -> navigate``
         Builds the navigation callable (see :mod:`lab.search.agent`) for the robot the search drives
-        (a :class:`~lab.search.agent.BudgetedRobot`) and the map's grid. Required.
+        (a :class:`~lab.search.budget.BudgetedRobot`) and the map's grid. Required.
     obstacles : bool
         Add boxes on the straight line from the start to the object (:func:`path_obstacles`).
     world : str or Scene
@@ -423,24 +416,26 @@ def _place_object(scene: Scene, object: str, place, obstacles: bool, rng: np.ran
 
 
 def navigator_factory(robot, spec, timeout_s: float = 120.0):
-    """``navigate`` for :func:`lab.runs.search.run_search`: scan once, then ``go_near`` each target.
+    """``navigate`` for :func:`run_search`: scan once, then ``go_near`` each target.
 
-    The returned callable keeps its :class:`~lab.navigation.Navigator` as ``navigate.navigator`` (its
-    costmap is what ``lab search --out`` draws under the trajectory). Each outcome carries the path A*
-    plans first on the current costmap (``path_xy``, for the figures; the navigator replans on the way).
+    The navigator's workspace is the floor the map ``spec`` covers (the scene's room). The returned
+    callable keeps its :class:`~lab.navigation.Navigator` as ``navigate.navigator`` (its costmap is what
+    ``lab search --out`` draws under the trajectory). Each outcome carries the path A* plans first on the
+    current costmap (``path_xy``, for the figures; the navigator replans on the way).
     """
-    nav = Navigator(robot)
+    x0, x1, y0, y1 = (round(v, 9) for v in spec.extent)  # 30 x 0.2 m is 6.000000000000001 m
+    nav = Navigator(robot, bounds=(x0, y0, x1, y1))
     state = {"scanned": False}
 
-    def navigate(target_xy, min_distance: float, max_distance: float) -> NavOutcome:
+    def navigate(target_xy, min_distance: float, max_distance: float) -> NavigationResult:
         if not state["scanned"]:
             nav.scan()
             state["scanned"] = True
         first = astar_to_region(nav.planning_grid(), robot.odometry(), target_xy, max_distance, min_distance)
         r = nav.go_near(target_xy, min_distance, max_distance, timeout=timeout_s)
-        arrived = r.outcome is _Outcome.ARRIVED
+        arrived = r.outcome is NavOutcome.ARRIVED
         path = first.points_xy if first.found else None
-        return NavOutcome(arrived, r.reason or r.outcome.name, r.pose, path)
+        return NavigationResult(arrived, r.reason or r.outcome.name, r.pose, path)
 
     navigate.navigator = nav
     return navigate

@@ -5,7 +5,9 @@ The data flow, one module per stage::
     probability_map  M_p: Eqs. (1)-(3), the detection model with alpha and beta, the growing beta
     global_search    pan-tilt scan -> colour back-projection -> N_hist clusters -> sparse stereo -> M_p
     local_search     9 pan-tilt views -> SIFT + EKF (RANSAC start, ROI, gate) -> 6D pose or a miss
-    agent            the closed loop (paper / lawnmower / frontier), navigation injected, time budget
+    agent            the closed loop (paper / lawnmower / frontier), navigation injected
+    budget           the time budget: a Robot wrapper that stops the run at its deadline
+    baselines        where the lawnmower and frontier baselines look next
 
 Around it, in the layers above: the search's object databases are trained in
 :mod:`lab.training.search`; a trial (world, placement, agent, scoring against truth -> the ``lab
@@ -16,14 +18,13 @@ paper's Figs. 2, 5 and 6 are drawn in :mod:`lab.viz` (the algorithms never plot)
 from lab.search.agent import (
     AgentConfig,
     AgentResult,
-    BudgetedRobot,
     MapSnapshot,
-    NavOutcome,
+    NavigationResult,
     SearchAgent,
-    SearchBudgetExceeded,
     SearchEvent,
     Strategy,
 )
+from lab.search.budget import BudgetedRobot, SearchBudgetExceeded
 from lab.search.global_search import ColourPeak, GlobalSearchConfig, GlobalSearchResult, global_search
 from lab.search.local_search import LocalSearchConfig, LocalSearchResult, local_search
 from lab.search.probability_map import (
@@ -51,7 +52,7 @@ __all__ = [
     "LocalSearchConfig",
     "LocalSearchResult",
     "MapSnapshot",
-    "NavOutcome",
+    "NavigationResult",
     "ProbabilityMap",
     "SearchAgent",
     "SearchBudgetExceeded",

@@ -27,18 +27,20 @@ covered (nearest-frontier exploration). Both still update ``M_p`` after each fai
 **Navigation** is any callable ``navigate(target_xy, min_distance, max_distance)`` that drives the
 robot to a pose whose distance to ``target_xy`` [m] is within the band, facing it, and returns an
 object with ``arrived`` (bool), ``reason`` (str) and ``pose`` (:class:`~lab.geometry.Pose2D`), like
-:class:`NavOutcome` (an optional ``path_xy`` is kept for the figures). It must bound its own run time.
+:class:`NavigationResult` (an optional ``path_xy`` is kept for the figures). It must bound its own run
+time. (Not :class:`lab.navigation.NavOutcome`, the navigator's enum of how a request ended.)
 
-**The budget.** :class:`BudgetedRobot` wraps the robot: once its clock passes the deadline, the next
-``step`` raises :class:`SearchBudgetExceeded` -- inside the navigator, a pan-tilt wait or a drive --
-and the agent ends the run there ("time budget"). A wall-clock limit can be added the same way. It also
-measures the odometry path length and keeps the trajectory for the figures.
+**The budget.** :class:`~lab.search.budget.BudgetedRobot` wraps the robot: once its clock passes the
+deadline, the next ``step`` raises :class:`~lab.search.budget.SearchBudgetExceeded` -- inside the
+navigator, a pan-tilt wait or a drive -- and the agent ends the run there ("time budget").
+
+The baselines' target choice (:func:`~lab.search.baselines.lawnmower_targets`,
+:func:`~lab.search.baselines.frontier_cells`) is in :mod:`lab.search.baselines`.
 """
 
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
@@ -59,6 +61,8 @@ from lab.errors import (
 )
 from lab.geometry import Pose2D, wrap_angle
 from lab.robot import Robot
+from lab.search.baselines import frontier_cells, lawnmower_targets
+from lab.search.budget import SearchBudgetExceeded
 from lab.search.global_search import GlobalSearchConfig, GlobalSearchResult, global_search
 from lab.search.local_search import LocalSearchConfig, LocalSearchResult, local_search, make_matcher
 from lab.search.probability_map import ProbabilityMap
@@ -67,16 +71,12 @@ from lab.vision.database import FeatureDatabase
 __all__ = [
     "AgentConfig",
     "AgentResult",
-    "BudgetedRobot",
     "MapSnapshot",
-    "NavOutcome",
+    "NavigationResult",
     "Navigate",
     "SearchAgent",
-    "SearchBudgetExceeded",
     "SearchEvent",
     "Strategy",
-    "frontier_cells",
-    "lawnmower_targets",
 ]
 
 
@@ -112,8 +112,8 @@ class Strategy(Enum):
 
 
 @dataclass(frozen=True)
-class NavOutcome:
-    """What a navigation call reports (any object with these attributes will do).
+class NavigationResult:
+    """What the agent's ``navigate`` call reports (any object with these attributes will do).
 
     Attributes
     ----------
@@ -135,114 +135,6 @@ class NavOutcome:
 
 class Navigate(Protocol):
     def __call__(self, target_xy: tuple[float, float], min_distance: float, max_distance: float): ...
-
-
-class SearchBudgetExceeded(LabError):
-    """The search's time budget ran out (raised from :meth:`BudgetedRobot.step`)."""
-
-
-class BudgetedRobot(Robot):
-    """A :class:`~lab.robot.Robot` that refuses to step past a deadline, and measures the path.
-
-    Parameters
-    ----------
-    base : Robot
-        The robot to drive (every call is passed on to it).
-    max_time_s : float [s]
-        Robot-clock budget from now.
-    max_wall_s : float [s], optional
-        Wall-clock budget from now.
-    record_every_s : float [s]
-        Spacing of the recorded odometry trajectory.
-    """
-
-    def __init__(self, base: Robot, max_time_s: float, max_wall_s: float | None = None, record_every_s=0.2):
-        if not (math.isfinite(max_time_s) and max_time_s > 0):
-            raise ConfigError(f"the time budget must be a finite number > 0 s, got {max_time_s!r}")
-        self.base = base
-        self.t_start = base.now()
-        self.deadline = self.t_start + float(max_time_s)
-        self.wall_deadline = None if max_wall_s is None else time.perf_counter() + float(max_wall_s)
-        self.path_length_m = 0.0
-        p = base.odometry()
-        self._last = p
-        self.trajectory: list[tuple[float, float, float, float]] = [(self.t_start, p.x, p.y, p.theta)]
-        self._record_every = record_every_s
-
-    # budget and bookkeeping
-    def step(self, dt: float) -> None:
-        if self.base.now() >= self.deadline:
-            raise SearchBudgetExceeded(f"time budget of {self.deadline - self.t_start:.0f} s used up")
-        if self.wall_deadline is not None and time.perf_counter() >= self.wall_deadline:
-            raise SearchBudgetExceeded("wall-clock budget used up")
-        self.base.step(dt)
-        p = self.base.odometry()
-        self.path_length_m += math.hypot(p.x - self._last.x, p.y - self._last.y)
-        self._last = p
-        t = self.base.now()
-        if t - self.trajectory[-1][0] >= self._record_every:
-            self.trajectory.append((t, p.x, p.y, p.theta))
-
-    @property
-    def remaining_s(self) -> float:
-        return self.deadline - self.base.now()
-
-    # the Robot interface, passed on
-    @property
-    def camera(self):
-        return self.base.camera
-
-    @property
-    def pan_tilt_limits(self):
-        return self.base.pan_tilt_limits
-
-    @property
-    def base_limits(self):
-        return self.base.base_limits
-
-    @property
-    def cmd_timeout_s(self):  # type: ignore[override]
-        return self.base.cmd_timeout_s
-
-    def now(self) -> float:
-        return self.base.now()
-
-    def enable(self) -> None:
-        self.base.enable()
-
-    def disable(self) -> None:
-        self.base.disable()
-
-    @property
-    def enabled(self) -> bool:
-        return self.base.enabled
-
-    def capture_stereo(self, after=None):
-        return self.base.capture_stereo(after)
-
-    def odometry(self) -> Pose2D:
-        return self.base.odometry()
-
-    def pan_tilt(self):
-        return self.base.pan_tilt()
-
-    def command_pan_tilt(self, pan, tilt, speed=None) -> None:
-        self.base.command_pan_tilt(pan, tilt, speed)
-
-    def drive(self, v, omega) -> None:
-        self.base.drive(v, omega)
-
-    def stop(self) -> None:
-        self.base.stop()
-
-    def estop(self) -> None:
-        self.base.estop()
-
-    def clear_estop(self) -> None:
-        self.base.clear_estop()
-
-    def close(self) -> None:
-        self.base.close()
 
 
 @dataclass(frozen=True)
@@ -373,41 +265,6 @@ class AgentResult:
     t_end: float = 0.0
 
 
-# --- the baselines' target choice ------------------------------------------------------------------
-
-
-def lawnmower_targets(spec, spacing_m: float, start_xy) -> list[tuple[float, float]]:
-    """A boustrophedon lattice over the map: rows along x, ``spacing_m`` apart, starting with the row
-    and the end nearest ``start_xy`` [m]."""
-    x0, x1, y0, y1 = spec.extent
-    nx = max(1, int(round((x1 - x0) / spacing_m)))
-    ny = max(1, int(round((y1 - y0) / spacing_m)))
-    xs = x0 + (np.arange(nx) + 0.5) * (x1 - x0) / nx
-    ys = y0 + (np.arange(ny) + 0.5) * (y1 - y0) / ny
-    if abs(ys[-1] - start_xy[1]) < abs(ys[0] - start_xy[1]):
-        ys = ys[::-1]
-    first_reversed = abs(xs[-1] - start_xy[0]) < abs(xs[0] - start_xy[0])
-    out = []
-    for k, y in enumerate(ys):
-        row = xs[::-1] if (k % 2 == 0) == first_reversed else xs
-        out.extend((float(x), float(y)) for x in row)
-    return out
-
-
-def frontier_cells(searched: np.ndarray) -> np.ndarray:
-    """Unsearched cells with a searched 8-neighbour, shape (k, 2) (all cells when nothing is searched)."""
-    if not searched.any():
-        return np.argwhere(~searched)
-    p = np.pad(searched, 1)
-    nx, ny = searched.shape
-    near = np.zeros_like(searched)
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            if di or dj:
-                near |= p[1 + di : 1 + di + nx, 1 + dj : 1 + dj + ny]
-    return np.argwhere(near & ~searched)
-
-
 # --- the agent ------------------------------------------------------------------------------------------
 
 
@@ -426,11 +283,11 @@ class SearchAgent:
     Parameters
     ----------
     robot : Robot
-        Enabled; usually a :class:`BudgetedRobot` (then the budget ends the run cleanly).
+        Enabled; usually a :class:`~lab.search.budget.BudgetedRobot` (then the budget ends the run cleanly).
     db : FeatureDatabase
         The searched object's database (features and colour model).
     navigate : callable
-        ``navigate(target_xy, min_distance, max_distance) -> NavOutcome``-like.
+        ``navigate(target_xy, min_distance, max_distance) -> NavigationResult``-like.
     pmap : ProbabilityMap
         The map ``M_p`` with its prior ``P_0`` (updated in place).
     config : AgentConfig, optional
@@ -720,7 +577,7 @@ class SearchAgent:
         except (SearchBudgetExceeded, *_DEVICE_FAULTS):
             raise
         except LabError as e:  # a navigator's clear refusal (outside the map, ...) is a failure to arrive
-            return NavOutcome(False, f"navigation error: {e}", self.robot.odometry())
+            return NavigationResult(False, f"navigation error: {e}", self.robot.odometry())
 
     def _mark_searched(self, target_xy) -> None:
         """Cells within the coverage radius in front of the robot (the local search's hemisphere)."""

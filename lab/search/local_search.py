@@ -290,66 +290,90 @@ def local_search(
     LocalSearchResult
     """
     cfg = config or LocalSearchConfig()
-    matcher = matcher or make_matcher(db)
-    detector = sift()
-    t_start = robot.now()
-    odom = robot.odometry()
-    bearing = wrap_angle(math.atan2(target_xy[1] - odom.y, target_xy[0] - odom.x) - odom.theta)
-    limits = robot.pan_tilt_limits
-    records: list[ViewRecord] = []
-    ekf_cfg = EKFConfig(chart=OrientationChart.ROTATION_VECTOR, process=cfg.process)
-    # the reason of the view that came closest: the most RANSAC inliers (a refined track beats a start)
-    best_reason, best_rank = "no view had enough matches", (-1, -1)
-    for pan, tilt in local_views(cfg, bearing, limits):
+    return _LocalSearch(robot, db, rng, cfg, matcher or make_matcher(db)).run(target_xy)
+
+
+class _LocalSearch:
+    """One :func:`local_search`: the views in turn, each matched, started by RANSAC and tracked, until
+    one finds the object; it keeps a record of every view and the reason of the one that came closest
+    (the most RANSAC inliers; a refined track beats a start)."""
+
+    def __init__(self, robot: Robot, db: FeatureDatabase, rng, cfg: LocalSearchConfig, matcher: Matcher):
+        self.robot, self.db, self.rng, self.cfg, self.matcher = robot, db, rng, cfg, matcher
+        self.detector = sift()
+        self.ekf_cfg = EKFConfig(chart=OrientationChart.ROTATION_VECTOR, process=cfg.process)
+        self.records: list[ViewRecord] = []
+        self.best_reason, self.best_rank = "no view had enough matches", (-1, -1)
+
+    def run(self, target_xy) -> LocalSearchResult:
+        """Search the views centred on the bearing of ``target_xy`` [m] (world) from the robot."""
+        robot = self.robot
+        t_start = robot.now()
+        odom = robot.odometry()
+        bearing = wrap_angle(math.atan2(target_xy[1] - odom.y, target_xy[0] - odom.x) - odom.theta)
+        for pan, tilt in local_views(self.cfg, bearing, robot.pan_tilt_limits):
+            track = self._search_view(pan, tilt)
+            if track is not None and track.found:
+                return self._found(track, t_start)
+        return LocalSearchResult(
+            False,
+            f"not found in {len(self.records)} views: {self.best_reason}",
+            views=tuple(self.records),
+            t_start=t_start,
+            t_end=robot.now(),
+        )
+
+    def _search_view(self, pan: float, tilt: float) -> _Track | None:
+        """Look at ``(pan, tilt)`` [rad], match, start the EKF by RANSAC and track; record the view.
+        None when the view has too few matches or too weak a start."""
+        cfg = self.cfg
+        frame, f, corr = self._look(pan, tilt)
+        rec = {"pan": pan, "tilt": tilt, "t": frame.t, "n_features": len(f), "n_matched": corr.n_matched}
+        if corr.n_matched < cfg.min_matches:
+            outcome = f"{corr.n_matched} matches < {cfg.min_matches}"
+            self.records.append(ViewRecord(**rec, n_inliers=0, outcome=outcome))
+            return None
+        ekf = PoseEKF(self.ekf_cfg, rng=self.rng)
+        res = ekf.update(*corr.pairs(f, self.db))  # RANSAC start
+        n_start = res.n_used if ekf.initialized else 0
+        if n_start < cfg.min_inliers:
+            outcome = f"RANSAC start with {n_start} inliers: {res.reason}"
+            self.records.append(ViewRecord(**rec, n_inliers=n_start, outcome=outcome))
+            self._came_closer((0, n_start), f"best start had {n_start} inliers < {cfg.min_inliers}")
+            return None
+        track = _refine(self.robot, self.db, self.matcher, self.detector, ekf, frame, cfg)
+        self.records.append(ViewRecord(**rec, n_inliers=n_start, outcome=track.reason))
+        if not track.found:
+            self._came_closer((1, n_start), f"best track ({n_start} inliers at the start): {track.reason}")
+        return track
+
+    def _look(self, pan: float, tilt: float):
+        """Turn the head to ``(pan, tilt)``, capture, and match the frame's stereo features."""
+        robot = self.robot
         robot.command_pan_tilt(pan, tilt)
         robot.wait_pan_tilt()
         frame = robot.capture_stereo()
-        f = stereo_features(frame.left, frame.right, frame.camera, t=frame.t, detector=detector)
-        corr = matcher.match(f)
-        rec = {"pan": pan, "tilt": tilt, "t": frame.t, "n_features": len(f), "n_matched": corr.n_matched}
-        if corr.n_matched < cfg.min_matches:
-            records.append(
-                ViewRecord(**rec, n_inliers=0, outcome=f"{corr.n_matched} matches < {cfg.min_matches}")
-            )
-            continue
-        ekf = PoseEKF(ekf_cfg, rng=rng)
-        res = ekf.update(*corr.pairs(f, db))  # RANSAC start
-        n_start = res.n_used if ekf.initialized else 0
-        if n_start < cfg.min_inliers:
-            records.append(
-                ViewRecord(
-                    **rec, n_inliers=n_start, outcome=f"RANSAC start with {n_start} inliers: {res.reason}"
-                )
-            )
-            if (0, n_start) > best_rank:
-                best_reason, best_rank = f"best start had {n_start} inliers < {cfg.min_inliers}", (0, n_start)
-            continue
-        track = _refine(robot, db, matcher, detector, ekf, frame, cfg)
-        records.append(ViewRecord(**rec, n_inliers=n_start, outcome=track.reason))
-        if track.found:
-            return LocalSearchResult(
-                True,
-                track.reason,
-                track.G_WO,
-                track.estimate,
-                track.frame,
-                track.n_inliers,
-                track.position_std_m,
-                track.rotation_std_deg,
-                tuple(records),
-                t_start,
-                robot.now(),
-            )
-        if (1, n_start) > best_rank:
-            best_reason = f"best track ({n_start} inliers at the start): {track.reason}"
-            best_rank = (1, n_start)
-    return LocalSearchResult(
-        False,
-        f"not found in {len(records)} views: {best_reason}",
-        views=tuple(records),
-        t_start=t_start,
-        t_end=robot.now(),
-    )
+        f = stereo_features(frame.left, frame.right, frame.camera, t=frame.t, detector=self.detector)
+        return frame, f, self.matcher.match(f)
+
+    def _came_closer(self, rank: tuple[int, int], reason: str) -> None:
+        if rank > self.best_rank:
+            self.best_reason, self.best_rank = reason, rank
+
+    def _found(self, track: _Track, t_start: float) -> LocalSearchResult:
+        return LocalSearchResult(
+            True,
+            track.reason,
+            track.G_WO,
+            track.estimate,
+            track.frame,
+            track.n_inliers,
+            track.position_std_m,
+            track.rotation_std_deg,
+            tuple(self.records),
+            t_start,
+            self.robot.now(),
+        )
 
 
 def _refine(robot, db, matcher, detector, ekf: PoseEKF, frame: StereoFrame, cfg: LocalSearchConfig):

@@ -1,0 +1,127 @@
+"""The search's time budget: a :class:`~lab.robot.Robot` wrapper that refuses to step past a deadline.
+
+:class:`BudgetedRobot` wraps the robot the :class:`~lab.search.agent.SearchAgent` drives: once its
+clock passes the deadline, the next ``step`` raises :class:`SearchBudgetExceeded` -- inside the
+navigator, a pan-tilt wait or a drive -- and the agent ends the run there ("time budget"). A
+wall-clock limit can be added the same way. It also measures the odometry path length and keeps the
+trajectory for the figures.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+from lab.errors import ConfigError, LabError
+from lab.geometry import Pose2D
+from lab.robot import Robot
+
+__all__ = ["BudgetedRobot", "SearchBudgetExceeded"]
+
+
+class SearchBudgetExceeded(LabError):
+    """The search's time budget ran out (raised from :meth:`BudgetedRobot.step`)."""
+
+
+class BudgetedRobot(Robot):
+    """A :class:`~lab.robot.Robot` that refuses to step past a deadline, and measures the path.
+
+    Parameters
+    ----------
+    base : Robot
+        The robot to drive (every call is passed on to it).
+    max_time_s : float [s]
+        Robot-clock budget from now.
+    max_wall_s : float [s], optional
+        Wall-clock budget from now.
+    record_every_s : float [s]
+        Spacing of the recorded odometry trajectory.
+    """
+
+    def __init__(self, base: Robot, max_time_s: float, max_wall_s: float | None = None, record_every_s=0.2):
+        if not (math.isfinite(max_time_s) and max_time_s > 0):
+            raise ConfigError(f"the time budget must be a finite number > 0 s, got {max_time_s!r}")
+        self.base = base
+        self.t_start = base.now()
+        self.deadline = self.t_start + float(max_time_s)
+        self.wall_deadline = None if max_wall_s is None else time.perf_counter() + float(max_wall_s)
+        self.path_length_m = 0.0
+        p = base.odometry()
+        self._last = p
+        self.trajectory: list[tuple[float, float, float, float]] = [(self.t_start, p.x, p.y, p.theta)]
+        self._record_every = record_every_s
+
+    # budget and bookkeeping
+    def step(self, dt: float) -> None:
+        if self.base.now() >= self.deadline:
+            raise SearchBudgetExceeded(f"time budget of {self.deadline - self.t_start:.0f} s used up")
+        if self.wall_deadline is not None and time.perf_counter() >= self.wall_deadline:
+            raise SearchBudgetExceeded("wall-clock budget used up")
+        self.base.step(dt)
+        p = self.base.odometry()
+        self.path_length_m += math.hypot(p.x - self._last.x, p.y - self._last.y)
+        self._last = p
+        t = self.base.now()
+        if t - self.trajectory[-1][0] >= self._record_every:
+            self.trajectory.append((t, p.x, p.y, p.theta))
+
+    @property
+    def remaining_s(self) -> float:
+        return self.deadline - self.base.now()
+
+    # the Robot interface, passed on
+    @property
+    def camera(self):
+        return self.base.camera
+
+    @property
+    def pan_tilt_limits(self):
+        return self.base.pan_tilt_limits
+
+    @property
+    def base_limits(self):
+        return self.base.base_limits
+
+    @property
+    def cmd_timeout_s(self):  # type: ignore[override]
+        return self.base.cmd_timeout_s
+
+    def now(self) -> float:
+        return self.base.now()
+
+    def enable(self) -> None:
+        self.base.enable()
+
+    def disable(self) -> None:
+        self.base.disable()
+
+    @property
+    def enabled(self) -> bool:
+        return self.base.enabled
+
+    def capture_stereo(self, after=None):
+        return self.base.capture_stereo(after)
+
+    def odometry(self) -> Pose2D:
+        return self.base.odometry()
+
+    def pan_tilt(self):
+        return self.base.pan_tilt()
+
+    def command_pan_tilt(self, pan, tilt, speed=None) -> None:
+        self.base.command_pan_tilt(pan, tilt, speed)
+
+    def drive(self, v, omega) -> None:
+        self.base.drive(v, omega)
+
+    def stop(self) -> None:
+        self.base.stop()
+
+    def estop(self) -> None:
+        self.base.estop()
+
+    def clear_estop(self) -> None:
+        self.base.clear_estop()
+
+    def close(self) -> None:
+        self.base.close()
