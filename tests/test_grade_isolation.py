@@ -5,7 +5,6 @@ real assignments.
 """
 
 import json
-import os
 import sys
 import textwrap
 
