@@ -1,6 +1,8 @@
 """Wall time of grading one submission (`lab grade`), per assignment: the reference solution with one
 and two tests at a time, the untouched template, and the slowest realistic case (A* that never ends,
-which waits out four time limits). Prints medians of a few runs measured side by side.
+which waits out four time limits). Prints medians of a few runs measured side by side, and which
+sandbox the children ran in (each test's child starts inside bubblewrap: compare with a checkout from
+before the sandbox by running this script from it, interleaved with this one).
 
 Run: ``python benchmarks/bench_grade.py [--repeat N]``
 """
@@ -37,7 +39,14 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
+    try:
+        from lab.grading.isolation import find_sandbox
+
+        sandbox = find_sandbox().describe()
+    except ImportError:  # before the sandbox existed
+        sandbox = "none (resource limits only)"
     print(f"CPUs: {os.cpu_count()}; {args.repeat} runs each; median wall time of one submission")
+    print(f"sandbox: {sandbox}; load average {os.getloadavg()[0]:.1f}")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         assignments = list_assignments()
