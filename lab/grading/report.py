@@ -166,6 +166,8 @@ class GradeReport:
     def summary(self) -> str:
         """A readable summary for the terminal: one line per test, the message under each failure."""
         lines = [f"{self.assignment.name} ({self.assignment.title})", f"submission: {self.submission}"]
+        if self.sandbox == "none":
+            lines.insert(0, INSECURE)
         width = max(len(r.test.name) for r in self.tests) if self.tests else 0
         width = min(width, 70)
         for r in self.tests:

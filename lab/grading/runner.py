@@ -498,6 +498,8 @@ def find_module(assignment: Assignment, submission: str | Path) -> Path | None:
     ``SUBMISSION/<module>`` (also one folder down, as Gradescope sometimes nests uploads). None when it
     is not there. Links are not followed: :func:`read_module` refuses what is not a regular file."""
     p = Path(submission)
+    if not os.path.lexists(p):
+        return None
     if not p.is_dir() or p.is_symlink():
         return p
     direct = p / assignment.module
