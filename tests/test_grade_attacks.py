@@ -408,3 +408,38 @@ def test_check_sandbox_reports_every_attempt_stopped(capsys):
     assert "sandbox active" in out and "BAD" not in out
     for what in ("network connection", "hidden_tests.py", "the grader", "not dumpable"):
         assert what in out
+
+
+def test_an_assignment_inside_the_python_installation_is_masked(tmp_path):
+    """A non-editable install puts the course's files inside site-packages, which the child is given:
+    the assignment's folder is masked there (the course library likewise)."""
+    import shutil
+    import tempfile
+
+    inside = Path(tempfile.mkdtemp(prefix="lab-test-assignments-", dir=sys.prefix))
+    inside.chmod(0o755)  # readable by anyone, as an installed package is: only the mask hides it
+    try:
+        (inside / "toy").mkdir()
+        (inside / "toy" / "assignment.toml").write_text(
+            'title = "toy"\nmodule = "toy.py"\nrelease = ["toy.py"]\n[limits]\ntimeout_s = 5\n'
+        )
+        (inside / "toy" / "toy.py").write_text("def double(x):\n    return [2 * v for v in x]\n")
+        (inside / "toy" / "hidden_tests.py").write_text(
+            "from lab.grading.suite import TestSuite, check_close\n"
+            "suite = TestSuite('toy')\n"
+            "@suite.test('double doubles', points=1, target='double')\n"
+            "def doubles(sub):\n"
+            "    check_close(sub.double([1.0, 2.0]), [2.0, 4.0], 'double([1, 2])')\n"
+        )
+        toy = get_assignment("toy", inside)
+        sub = tmp_path / "student"
+        sub.mkdir()
+        (sub / "toy.py").write_text(
+            f"try:\n    exec(open({str(inside / 'toy' / 'toy.py')!r}).read())\n"
+            "except OSError as e:\n    print('hidden:', e)\n"
+        )
+        assert grade_submission(toy, sub, sandbox=INSECURE).score == 1  # readable without the sandbox
+        report = grade_submission(toy, sub)
+        assert report.score == 0 and "hidden: [Errno 2]" in report.tests[0].output, report.summary()
+    finally:
+        shutil.rmtree(inside)

@@ -112,11 +112,15 @@ class Sandbox:
             if not processes_of_uid(uid):
                 return uid
 
-    def command(self, python_args: list[str], scratch: Path, entry: Path, uid: int | None) -> list[str]:
-        """The full command line running ``python python_args`` in the sandbox (or bare, if none)."""
+    def command(
+        self, python_args: list[str], scratch: Path, entry: Path, uid: int | None, hide: tuple[str, ...] = ()
+    ) -> list[str]:
+        """The full command line running ``python python_args`` in the sandbox (or bare, if none):
+        ``scratch`` is seen as ``/submission``, ``entry`` as ``/grader/sandbox.py``; folders in ``hide``
+        (an assignment's) are masked if they lie inside what the child is given."""
         if self.kind == "none":
             return [sys.executable, *python_args]
-        return [*_bwrap_args(self, scratch, entry), "--", sys.executable, *python_args]
+        return [*_bwrap_args(self, scratch, entry, hide), "--", sys.executable, *python_args]
 
 
 def _secrets() -> list[Path]:
@@ -149,9 +153,17 @@ def _python_roots() -> tuple[str, ...]:
     return tuple(kept)
 
 
-def _bwrap_args(sb: Sandbox, scratch: Path, entry: Path) -> list[str]:
+def _bwrap_args(sb: Sandbox, scratch: Path, entry: Path, hide: tuple[str, ...] = ()) -> list[str]:
+    return [*_bwrap_fixed(sb, str(entry), hide), "--ro-bind", str(scratch), SUBMISSION_DIR]
+
+
+@functools.lru_cache(maxsize=16)
+def _bwrap_fixed(sb: Sandbox, entry: str, hide: tuple[str, ...]) -> tuple[str, ...]:
+    """Everything of the bwrap command but the submission's folder (the same for every child)."""
     args = [sb.bwrap]
-    made: set[str] = {"/"}
+    # first the private mounts, so that a Python installation under /tmp is bound over them, not hidden
+    args.extend(["--proc", "/proc", "--dev", "/dev", "--perms", "1777", "--tmpfs", "/tmp"])
+    made: set[str] = {"/", "/proc", "/dev", "/tmp"}
 
     def parents(target: str) -> None:
         # bwrap makes missing folders 0700 (root-only) when it runs as root: make them readable
@@ -169,27 +181,28 @@ def _bwrap_args(sb: Sandbox, scratch: Path, entry: Path) -> list[str]:
         elif os.path.isdir(p):
             args.extend(["--ro-bind", p, p])
         made.add(p)
-    for r in _python_roots():
+    roots = _python_roots()
+    for r in roots:
         if r in made:
             continue
         parents(r)
         args.extend(["--ro-bind", r, r])
         made.add(r)
     if os.path.exists("/etc/ld.so.cache"):
-        args.extend(["--perms", "0755", "--dir", "/etc", "--ro-bind", "/etc/ld.so.cache", "/etc/ld.so.cache"])
-    for s in _secrets():  # mask, over the binds, what the child must not read
-        if any(str(s) == r or str(s).startswith(r.rstrip("/") + "/") for r in _python_roots()):
-            args.extend(["--tmpfs", str(s)])
-    args.extend(["--perms", "0755", "--dir", "/grader", "--ro-bind", str(entry), ENTRY])
-    args.extend(["--ro-bind", str(scratch), SUBMISSION_DIR])
-    args.extend(["--proc", "/proc", "--dev", "/dev", "--perms", "1777", "--tmpfs", "/tmp"])
+        parents("/etc/ld.so.cache")
+        args.extend(["--ro-bind", "/etc/ld.so.cache", "/etc/ld.so.cache"])
+    for s in sorted({*map(str, _secrets()), *hide}):  # masked over the binds: never readable
+        if any(s == r or s.startswith(r.rstrip("/") + "/") for r in roots):
+            args.extend(["--tmpfs", s])
+    parents(ENTRY)
+    args.extend(["--ro-bind", entry, ENTRY])
     args.extend(["--unshare-ipc", "--unshare-pid", "--unshare-net", "--unshare-uts", "--unshare-cgroup-try"])
     if sb.kind == "bwrap-userns":
-        args.extend(["--unshare-user", "--disable-userns", "--cap-drop", "ALL"])
+        args.extend(["--unshare-user", "--cap-drop", "ALL"])
     else:  # root: keep only what the child needs to become its throwaway uid, then it has nothing
         args.extend(["--cap-drop", "ALL", "--cap-add", "CAP_SETUID", "--cap-add", "CAP_SETGID"])
     args.extend(["--die-with-parent", "--new-session", "--chdir", SUBMISSION_DIR])
-    return args
+    return tuple(args)
 
 
 # ---------------------------------------------------------------------------------- processes

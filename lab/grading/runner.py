@@ -144,7 +144,9 @@ class _Timeout(Exception):
 class _Child:
     """A running ``sandbox.py`` (in the sandbox) with its private request and answer pipes."""
 
-    def __init__(self, source: bytes, module: str, memory_mb: int, cpu_s: int, sandbox: Sandbox):
+    def __init__(
+        self, source: bytes, module: str, memory_mb: int, cpu_s: int, sandbox: Sandbox, hide: tuple[str, ...]
+    ):
         self.dir = Path(tempfile.mkdtemp(prefix="lab-grade-"))
         os.chmod(self.dir, 0o755)  # the child's throwaway uid reads it (read-only, in the sandbox)
         self.module_file = self.dir / module  # under the assignment's name, whatever the upload was called
@@ -180,7 +182,7 @@ class _Child:
             str(cpu_s),
             str(-1 if self.uid is None else self.uid),
         ]
-        cmd = sandbox.command(args, self.dir, _SANDBOX, self.uid)
+        cmd = sandbox.command(args, self.dir, _SANDBOX, self.uid, hide)
         if sandbox.secure:
             cmd[1:1] = ["--info-fd", str(info_w)]  # bwrap says there the pid of the namespace's first process
         fds = (req_r, resp_w) + ((info_w,) if sandbox.secure else ())
@@ -409,13 +411,16 @@ class _Limits:
     memory_mb: int
     import_timeout_s: float
     sandbox: Sandbox
+    hide: tuple[str, ...] = ()  # folders the child must not see (the assignment's)
 
 
 def _start(limits: _Limits, cpu_s: float, import_deadline: float) -> tuple[_Child, list[str]]:
     """A child with the module imported; raises ImportFailed (and closes the child) otherwise.
 
     ``cpu_s`` is the child's CPU-time backstop (``RLIMIT_CPU``), above every wall-clock limit it has."""
-    child = _Child(limits.source, limits.module, limits.memory_mb, int(cpu_s) + 2, limits.sandbox)
+    child = _Child(
+        limits.source, limits.module, limits.memory_mb, int(cpu_s) + 2, limits.sandbox, limits.hide
+    )
     try:
         hello = child.receive(import_deadline)
         child.take_notes(hello)
@@ -614,7 +619,12 @@ def grade_submission(
     except Refused as e:
         return nothing_runs(str(e))
     limits = _Limits(
-        source, assignment.module, assignment.memory_mb, assignment.import_timeout_s * timeout_scale, sb
+        source,
+        assignment.module,
+        assignment.memory_mb,
+        assignment.import_timeout_s * timeout_scale,
+        sb,
+        (str(Path(assignment.folder).resolve()),),
     )
 
     # One import probe: a module that cannot be imported fails every test with the same message,
