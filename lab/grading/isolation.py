@@ -70,6 +70,7 @@ SUBMISSION_DIR = "/submission"  # where the child sees its copy of the submissio
 ENTRY = "/grader/sandbox.py"  # where the child sees its entry point
 _UID_LOW, _UID_HIGH = 1 << 30, (1 << 31) - 2  # throwaway uids: far above any real account
 _PR_SET_DUMPABLE, _PR_GET_DUMPABLE = 4, 3
+_handed_out: set[int] = set()
 
 
 class SandboxUnavailable(LabError):
@@ -104,12 +105,14 @@ class Sandbox:
         }[self.kind]
 
     def new_uid(self) -> int | None:
-        """A uid no process has now (root only); None when the child keeps the grader's uid."""
+        """A fresh throwaway uid (root only: one of 2**30, drawn at random, never one handed out before
+        by this process); None when the child keeps the grader's uid."""
         if self.kind != "bwrap-uid":
             return None
         while True:
             uid = _UID_LOW + secrets.randbelow(_UID_HIGH - _UID_LOW)
-            if not processes_of_uid(uid):
+            if uid not in _handed_out:
+                _handed_out.add(uid)
                 return uid
 
     def command(
@@ -253,13 +256,22 @@ def _alive(pid: int) -> bool:
 
 def end_all(init_pid: int | None, uid: int | None, timeout_s: float = 10.0) -> None:
     """Kill the sandbox's PID namespace (its first process) and, as root, every process of ``uid``;
-    return once none is left (the kernel kills a namespace's processes before its first one exits)."""
+    return once none is left.
+
+    The kernel kills every process of a PID namespace before its first process has finished exiting,
+    so once that one is gone (or a zombie) the namespace is empty; the sweep of ``uid`` after it is
+    a second, independent check."""
     deadline = time.monotonic() + timeout_s
-    while True:
-        pids = [init_pid] if init_pid is not None and _alive(init_pid) else []
-        if uid is not None:
-            pids += processes_of_uid(uid)
-        pids = [p for p in pids if _alive(p)]
+    while init_pid is not None and _alive(init_pid):
+        try:
+            os.kill(init_pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"the sandbox's first process {init_pid} did not end after SIGKILL")
+        time.sleep(0.001)
+    while uid is not None:
+        pids = [p for p in processes_of_uid(uid) if _alive(p)]
         if not pids:
             return
         for p in pids:
@@ -268,8 +280,8 @@ def end_all(init_pid: int | None, uid: int | None, timeout_s: float = 10.0) -> N
             except (ProcessLookupError, PermissionError):
                 pass
         if time.monotonic() > deadline:
-            raise RuntimeError(f"processes {pids} of a sandbox did not end after SIGKILL")
-        time.sleep(0.005)
+            raise RuntimeError(f"processes {pids} of uid {uid} did not end after SIGKILL")
+        time.sleep(0.001)
 
 
 # ------------------------------------------------------------------------------------ the grader
@@ -296,7 +308,9 @@ def _probe(sb: Sandbox) -> str | None:
         code = "import os, sys; "
         if uid is not None:
             code += f"os.setgroups([]); os.setgid({uid}); os.setuid({uid}); "
-        code += "import numpy; sys.stdout.write(str(os.getuid()))"
+        # NumPy found (not imported: that would take longer than the rest) proves the packages are there
+        code += "import importlib.util as u; assert u.find_spec('numpy'), 'no numpy in the sandbox'; "
+        code += "sys.stdout.write(str(os.getuid()))"
         try:
             r = subprocess.run(
                 sb.command(["-I", "-c", code], Path(d), entry, uid),
