@@ -393,8 +393,9 @@ def check_sandbox(results_path: str | Path | None = None) -> tuple[bool, list[st
         return False, [*lines, f"BAD no sandbox: {e}"]
     lines.append(f"ok  sandbox: {sb.describe()} ({sb.bwrap})")
     from lab.grading.assignments import assignments_dir
+    from lab.paths import repo_root
 
-    repo = _secrets()[1] if len(_secrets()) > 1 else None  # holds the venv's folder, if the venv is in it
+    repo = repo_root().resolve()  # not a target: it holds the venv's folder when the venv is inside it
     targets = [str(p) for p in _secrets() if p != repo]
     a_dir = assignments_dir()
     for name in ("ekf/ekf.py", "ekf/hidden_tests.py"):

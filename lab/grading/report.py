@@ -64,8 +64,9 @@ class GradeReport:
         Set when no test could run (no module, a refused file, or it does not import); every test
         then carries it.
     sandbox : str
-        How the student's code was isolated (:class:`~lab.grading.isolation.Sandbox` ``kind``);
-        ``"none"`` means graded with ``--insecure``, which every test's output says.
+        How the student's code was isolated (:class:`~lab.grading.isolation.Sandbox` ``kind``:
+        ``"bwrap-uid"``, ``"bwrap-userns"``); ``"none"`` means graded with ``--insecure``, which every
+        test's output says.
     """
 
     assignment: Assignment
@@ -73,7 +74,7 @@ class GradeReport:
     tests: list[TestResult]
     execution_time_s: float
     error: str | None
-    sandbox: str = "none"
+    sandbox: str = "unknown"
 
     @property
     def refused(self) -> list[str]:
