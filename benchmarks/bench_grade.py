@@ -77,7 +77,7 @@ def _against(other: Path, rounds: int, repeat: int) -> int:
     this = Path(__file__).resolve().parent.parent
     print(f"this checkout: {this}; against: {other}; {rounds} alternating rounds of {repeat} runs each")
     print(f"load average {os.getloadavg()[0]:.1f}; CPUs: {os.cpu_count()}")
-    head = f"{'what':28s} {'against':>9s} {'this':>9s} {'ratio':>6s}"
+    head = f"{'what':32s} {'against':>9s} {'this':>9s} {'ratio':>6s}"
     print(head)
     cases = [
         (a.name, kind, jobs)
@@ -92,7 +92,7 @@ def _against(other: Path, rounds: int, repeat: int) -> int:
                 assert out["score"] == (100.0 if kind == "reference" else 0.0), (checkout, name, out)
                 t[checkout] += out["times"]
         a, b = statistics.median(t[other]), statistics.median(t[this])
-        print(f"{f'{name} {kind} j={jobs}':28s} {a:8.2f}s {b:8.2f}s {b / a:6.2f}", flush=True)
+        print(f"{f'{name} {kind} j={jobs}':32s} {a:8.2f}s {b:8.2f}s {b / a:6.2f}", flush=True)
     for name in [a.name for a in list_assignments()]:  # the whole command: start-up, sandbox probe, grading
         t = {this: [], other: []}
         for _ in range(rounds * repeat):
@@ -102,7 +102,7 @@ def _against(other: Path, rounds: int, repeat: int) -> int:
                 _in(checkout, "-m", "lab", "grade", name, str(ref), "--quiet")
                 t[checkout].append(time.perf_counter() - t0)
         a, b = statistics.median(t[other]), statistics.median(t[this])
-        print(f"{f'lab grade {name} (reference)':28s} {a:8.2f}s {b:8.2f}s {b / a:6.2f}", flush=True)
+        print(f"{f'lab grade {name} (reference)':32s} {a:8.2f}s {b:8.2f}s {b / a:6.2f}", flush=True)
     return 0
 
 
