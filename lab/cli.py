@@ -268,10 +268,13 @@ def build_parser() -> argparse.ArgumentParser:
         "subfolder per student and write one CSV of scores.",
     )
     g.add_argument(
-        "assignment", help="assignment name (see `lab assignments list`); with --batch also a,b or all"
+        "assignment",
+        nargs="?",
+        help="assignment name (see `lab assignments list`); with --batch also a,b or all",
     )
     g.add_argument(
         "submission",
+        nargs="?",
         type=Path,
         help="folder holding the module (or the module file); with --batch, a folder of student folders",
     )
@@ -287,6 +290,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--assignments", type=Path, help="assignments folder (default: $LAB_ASSIGNMENTS or assignments/)"
     )
     g.add_argument("--quiet", action="store_true", help="print nothing")
+    g.add_argument(
+        "--check-sandbox",
+        action="store_true",
+        help="check that the sandbox isolating students' code works here (exit 0) and stop",
+    )
+    g.add_argument(
+        "--insecure",
+        action="store_true",
+        help="grade even without a working sandbox (practice only: every result says so)",
+    )
 
     a = sub.add_parser(
         "assignments",

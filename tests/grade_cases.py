@@ -18,12 +18,17 @@ class WrongSubmission:
     new: str
     fails: frozenset[str]  # graded test ids that must fail; every other test must pass
     says: dict[str, str] = field(default_factory=dict)  # test id -> words its message must contain
+    more: tuple[tuple[str, str], ...] = ()  # further (old, new) edits, for mistakes made together
 
     def source(self, reference: str) -> str:
-        n = reference.count(self.old)
-        if n != 1:
-            raise AssertionError(f"case {self.name}: the edit matches {n} times in the reference, not once")
-        return reference.replace(self.old, self.new)
+        for old, new in ((self.old, self.new), *self.more):
+            n = reference.count(old)
+            if n != 1:
+                raise AssertionError(
+                    f"case {self.name}: an edit matches {n} times in the reference, not once"
+                )
+            reference = reference.replace(old, new)
+        return reference
 
 
 ALL = "*"  # every test of the assignment
@@ -54,6 +59,68 @@ CASES = [
             }
         ),
         {"jacobian_shape_and_translation": "returned shape (1, 3, 6); expected shape (3, 6)"},
+    ),
+    WrongSubmission(
+        "kalman_returns_the_prior_covariance",
+        "ekf",
+        "    return mu, 0.5 * (Sigma + Sigma.T)\n",
+        "    return mu, Sigma_bar  # the covariance update: later\n",
+        frozenset(
+            {
+                "kalman_update_matches_equations",
+                "kalman_update_covariance",
+                "ekf_update_one_step",
+                "ekf_consistency",
+            }
+        ),
+        {"kalman_update_covariance": "equals Sigma_bar"},
+    ),
+    WrongSubmission(
+        "jacobian_rotation_columns_left_zero",
+        "ekf",
+        "        C[:, :, 3 + k] = b @ dR[k].T  # d d_j / d theta_k = (dR/dtheta_k) b_j\n",
+        "        pass  # the rotation columns: later\n",
+        frozenset(
+            {
+                "jacobian_shape_and_translation",
+                "jacobian_finite_differences",
+                "ekf_update_one_step",
+                "ekf_consistency",
+            }
+        ),
+        {"jacobian_shape_and_translation": "rotation columns"},
+    ),
+    WrongSubmission(
+        # both wrong at once: each hides the other in a round trip
+        "triangulate_homogeneous_and_project_drops_depth",
+        "stereo",
+        "    out[ok, 0] = (uv[ok, 0] - cx) * Z / f\n"
+        "    out[ok, 1] = (uv[ok, 1] - cy) * Z / f\n"
+        "    out[ok, 2] = Z\n",
+        "    out[ok, 0] = uv[ok, 0]\n    out[ok, 1] = uv[ok, 1]\n    out[ok, 2] = 1.0\n",
+        frozenset(
+            {
+                "triangulate_matches_opencv",
+                "triangulate_invalid_disparity",
+                "project_matches_opencv",
+                "round_trip",
+            }
+        ),
+        {"triangulate_invalid_disparity": "disparities 8 and 25", "round_trip": "triangulate(project("},
+        more=(
+            (
+                "    out[ok, 0] = f * p[ok, 0] / p[ok, 2] + cx\n"
+                "    out[ok, 1] = f * p[ok, 1] / p[ok, 2] + cy\n",
+                "    out[ok, 0] = p[ok, 0]\n    out[ok, 1] = p[ok, 1]\n",
+            ),
+        ),
+    ),
+    WrongSubmission(
+        "depth_std_linear_in_depth",
+        "stereo",
+        "    return Z**2 * sigma_disparity / (f * baseline)\n",
+        "    return Z * sigma_disparity / (f * baseline)\n",
+        frozenset({"depth_std_monte_carlo"}),
     ),
     WrongSubmission(
         "unnormalised_posterior",

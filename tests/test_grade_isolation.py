@@ -5,7 +5,6 @@ real assignments.
 """
 
 import json
-import os
 import sys
 import textwrap
 
@@ -153,20 +152,19 @@ def test_each_misbehaviour_costs_its_own_test_and_says_what_happened(tmp_path):
 
 
 def test_the_scoring_process_never_runs_the_submission(tmp_path):
+    import builtins
+
     toy = _toy(tmp_path, ["good"])
-    marks = tmp_path / "marks"
-    marks.mkdir()
-    src = f"""
-    import os
+    src = """
+    import builtins
     import numpy as np
-    open(os.path.join({str(marks)!r}, str(os.getpid())), "w").close()  # an empty file: allowed
+    builtins.LAB_TEST_IMPORTED_HERE = True  # module-level code: where does it run?
     def good(x):
         return 2 * np.asarray(x)
     """
     report = grade_submission(toy, _submit(tmp_path, src))
     assert report.score == 1.0
-    pids = {int(p.name) for p in marks.iterdir()}
-    assert pids and os.getpid() not in pids  # the import probe and the test ran elsewhere
+    assert not hasattr(builtins, "LAB_TEST_IMPORTED_HERE")  # the import probe and the test ran elsewhere
     assert "toy" not in sys.modules
 
 
@@ -209,7 +207,8 @@ def test_printing_or_writing_fake_results_does_not_change_the_grade(tmp_path):
     assert data["score"] == 1.0 and [t["score"] for t in data["tests"]] == [0.0, 1.0]
     good = data["tests"][0]["output"]
     assert "good(x) is wrong" in good
-    assert "Your code printed" in good and "could not forge: [Errno 27] File too large" in good
+    assert "Your code printed" in good and "could not forge" in good
+    assert "sandbox refused" in good and "results.json: not in the sandbox" in good
 
 
 def test_a_module_that_hangs_on_import_fails_every_test_once(tmp_path):

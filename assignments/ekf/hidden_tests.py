@@ -122,7 +122,8 @@ def measurement_model_eq3(sub):
 
 # ------------------------------------------------------------------------------------------ jacobian
 @suite.test(
-    "measurement_jacobian: shape (3n, 6), identity blocks in the translation columns",
+    "measurement_jacobian: shape (3n, 6), identity blocks in the translation columns, the alpha column "
+    "e_z x R b_j",
     points=1,
     target="measurement_jacobian",
 )
@@ -137,6 +138,22 @@ def jacobian_shape_and_translation(sub):
             f"the translation columns C[:, :3] (n = {n})",
             atol=1e-9,
             hint="d d_j / d x_r is the 3x3 identity for every feature j (rows 3j..3j+2).",
+        )
+        Rb = b @ R_ref(*X[3:]).T  # R b_j, one row per feature
+        rot = C[:, 3:].reshape(n, 3, 3)
+        for j in range(n):
+            if np.abs(rot[j]).max() < 1e-6 * np.linalg.norm(b[j]):
+                fail(
+                    f"the rotation columns C[:, 3:] are zero for feature {j} (n = {n}): turning the object "
+                    "moves every feature off its centre, d d_j / d theta = (dR/dtheta) b_j"
+                )
+        # turning by alpha turns about the camera's z axis: Rz' Ry Rx b_j = e_z x (R b_j)
+        check_close(
+            rot[:, :, 0],
+            np.cross([0.0, 0.0, 1.0], Rb),
+            f"the alpha column C[:, 3] (n = {n})",
+            atol=1e-9,
+            hint="d d_j / d alpha = Rz'(alpha) Ry Rx b_j, which is e_z x (R b_j).",
         )
 
 
@@ -260,6 +277,21 @@ def kalman_update_covariance(sub):
                 "Sigma from kalman_update is larger than Sigma_bar in some direction: a measurement can only "
                 "reduce uncertainty"
             )
+        if np.allclose(Sigma, Sigma_bar, rtol=1e-6, atol=0.0):
+            fail(
+                f"Sigma from kalman_update equals Sigma_bar (with Sigma_m ~ {scale_m:g}): 24 measurements "
+                "must shrink it, Sigma = (I - K C) Sigma_bar (I - K C)^T + K Sigma_m K^T"
+            )
+        # the information form, another route to the same posterior: (Sigma_bar^-1 + C^T Sigma_m^-1 C)^-1
+        Sigma_info = np.linalg.inv(np.linalg.inv(Sigma_bar) + C.T @ np.linalg.solve(Sigma_m, C))
+        check_close(
+            Sigma,
+            Sigma_info,
+            f"Sigma from kalman_update with Sigma_m ~ {scale_m:g}",
+            rtol=1e-4,
+            atol=1e-4 * np.abs(Sigma_info).max(),
+            hint="It should equal the information form (Sigma_bar^-1 + C^T Sigma_m^-1 C)^-1.",
+        )
 
 
 # ----------------------------------------------------------------------------------- log likelihood

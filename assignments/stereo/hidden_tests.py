@@ -67,6 +67,16 @@ def triangulate_invalid_disparity(sub):
         )
     if not np.all(np.isfinite(got[2:])):
         fail(f"triangulate with disparities 8 and 25 returned {fmt(got[2:])}; expected finite points")
+    _, P_left, P_right, _, _ = _scene(np.random.default_rng(0), n=1)
+    right = uv[2:] - np.column_stack([d[2:], np.zeros(2)])  # the same points in the right image
+    X = cv2.triangulatePoints(P_left, P_right, uv[2:].T.copy(), right.T.copy())
+    check_close(
+        got[2:],
+        (X[:3] / X[3]).T,
+        "triangulate with disparities 8 and 25 (the valid rows, against OpenCV)",
+        rtol=1e-6,
+        atol=1e-9,
+    )
 
 
 @suite.test(
@@ -91,7 +101,12 @@ def project_matches_opencv(sub):
         fail(f"project of points with z = -1 and z = 0 returned {fmt(behind)}; expected NaN rows")
 
 
-@suite.test("project(triangulate(uv, d)) gives back uv", points=1, target="project", uses=("triangulate",))
+@suite.test(
+    "project(triangulate(uv, d)) gives back uv, and triangulate(project(p), f b / z) gives back p",
+    points=1,
+    target="project",
+    uses=("triangulate",),
+)
 def round_trip(sub):
     rng = np.random.default_rng(3)
     uv = rng.uniform([0, 0], [320, 240], (30, 2))
@@ -99,6 +114,17 @@ def round_trip(sub):
     p = as_array(sub.triangulate(uv, d, F, CX, CY, B), "triangulate", (30, 3))
     back = as_array(sub.project(p, F, CX, CY), "project", (30, 2))
     check_close(back, uv, "project(triangulate(uv, d))", atol=1e-9, rtol=1e-12)
+    points, *_ = _scene(rng, n=30)  # points at known depths: the way back must find them again
+    seen = as_array(sub.project(points, F, CX, CY), "project", (30, 2))
+    again = as_array(sub.triangulate(seen, F * B / points[:, 2], F, CX, CY, B), "triangulate", (30, 3))
+    check_close(
+        again,
+        points,
+        "triangulate(project(p), f b / z)",
+        rtol=1e-9,
+        atol=1e-9,
+        hint="The two must be inverses for points in front of the camera, depth included.",
+    )
 
 
 @suite.test(

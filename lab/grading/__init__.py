@@ -1,8 +1,9 @@
-"""Graded assignments: an autograder that runs each test's student code in a separate, limited process.
+"""Graded assignments: an autograder that runs each test's student code in a separate, sandboxed process.
 
 * :mod:`lab.grading.assignments`: where the assignments are and what each is made of;
 * :mod:`lab.grading.suite`: how graded tests are written (points, visibility, checks with messages);
 * :mod:`lab.grading.runner`: grading one submission (the isolation design is in its docstring);
+* :mod:`lab.grading.isolation`: the bubblewrap sandbox each child runs in, ``--check-sandbox``;
 * :mod:`lab.grading.sandbox`: the child process and its wire format;
 * :mod:`lab.grading.report`: Gradescope's results.json, the terminal summary, the class CSV;
 * :mod:`lab.grading.release`: the student release (solution blocks stripped, graded tests left out);

@@ -8,9 +8,9 @@ from pathlib import Path
 from lab.errors import ConfigError
 from lab.grading.assignments import Assignment, get_assignment, list_assignments
 from lab.grading.report import GradeReport, write_scores_csv
-from lab.grading.runner import grade_submission
+from lab.grading.runner import choose_sandbox, grade_submission
 
-__all__ = ["run_grade", "run_assignments"]
+__all__ = ["run_grade", "run_check_sandbox", "run_assignments"]
 
 
 def _pick(spec: str, root) -> list[Assignment]:
@@ -19,17 +19,37 @@ def _pick(spec: str, root) -> list[Assignment]:
     return [get_assignment(name.strip(), root) for name in spec.split(",") if name.strip()]
 
 
+def run_check_sandbox(args) -> int:
+    """``lab grade --check-sandbox``: try from inside a sandboxed child what a cheating submission would;
+    exit 0 when every attempt is stopped, 1 otherwise (or when there is no sandbox)."""
+    from lab.grading.isolation import check_sandbox
+
+    ok, lines = check_sandbox(getattr(args, "json", None))
+    if not args.quiet:
+        print("\n".join(lines))
+        print("sandbox active: grading is isolated" if ok else "sandbox NOT active: see the BAD lines above")
+    return 0 if ok else 1
+
+
 def run_grade(args) -> int:
     """``lab grade ASSIGNMENT SUBMISSION``: one submission, or a class with ``--batch``."""
+    if getattr(args, "check_sandbox", False):
+        return run_check_sandbox(args)
+    if args.assignment is None or args.submission is None:
+        raise ConfigError("lab grade needs ASSIGNMENT and SUBMISSION (or --check-sandbox)")
     chosen = _pick(args.assignment, args.assignments)
     sub = Path(args.submission)
-    if not sub.exists():
+    if not sub.exists() and not sub.is_symlink():
         raise ConfigError(f"submission {sub} does not exist")
+    insecure = getattr(args, "insecure", False)
+    choose_sandbox(insecure)  # refuses here, once, before any grading, when there is no sandbox
     if args.batch:
         return _batch(chosen, sub, args)
     if len(chosen) != 1:
         raise ConfigError("grade one assignment at a time (several, or 'all', only with --batch)")
-    report = grade_submission(chosen[0], sub, jobs=args.jobs, timeout_scale=args.timeout_scale)
+    report = grade_submission(
+        chosen[0], sub, jobs=args.jobs, timeout_scale=args.timeout_scale, insecure=insecure
+    )
     if args.json:
         report.write_json(args.json)
     if not args.quiet:
@@ -46,12 +66,24 @@ def _batch(chosen: list[Assignment], folder: Path, args) -> int:
         )
     if not folder.is_dir():
         raise ConfigError(f"with --batch, {folder} must be a folder with one subfolder per student")
-    students = sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith("."))
+    students = sorted(
+        p for p in folder.iterdir() if p.is_dir() and not p.is_symlink() and not p.name.startswith(".")
+    )
     if not students:
         raise ConfigError(f"{folder} has no student subfolders")
     rows: list[tuple[str, list[GradeReport]]] = []
     for s in students:
-        reports = [grade_submission(a, s, jobs=args.jobs, timeout_scale=args.timeout_scale) for a in chosen]
+        # each student's every test in a sandbox of its own that sees only that student's copy
+        reports = [
+            grade_submission(
+                a,
+                s,
+                jobs=args.jobs,
+                timeout_scale=args.timeout_scale,
+                insecure=getattr(args, "insecure", False),
+            )
+            for a in chosen
+        ]
         rows.append((s.name, reports))
         if args.out:
             for rep in reports:

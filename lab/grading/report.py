@@ -15,8 +15,11 @@ ignores and our scripts read.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
+import os
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -26,7 +29,9 @@ from lab.grading.suite import GradedTest
 if TYPE_CHECKING:
     from lab.grading.assignments import Assignment
 
-__all__ = ["TestResult", "GradeReport", "write_scores_csv"]
+__all__ = ["TestResult", "GradeReport", "write_scores_csv", "INSECURE"]
+
+INSECURE = "INSECURE: graded without a sandbox (--insecure), for practice only; this score does not count"
 
 
 @dataclass
@@ -38,6 +43,7 @@ class TestResult:
     status: str  # "passed" or "failed"
     output: str
     duration_s: float
+    refused: tuple[str, ...] = ()  # what the sandbox refused the student's code in this test
 
     __test__ = False
 
@@ -55,7 +61,12 @@ class GradeReport:
     execution_time_s : float
         Wall time of the whole grading run.
     error : str or None
-        Set when no test could run (no module, or it does not import); every test then carries it.
+        Set when no test could run (no module, a refused file, or it does not import); every test
+        then carries it.
+    sandbox : str
+        How the student's code was isolated (:class:`~lab.grading.isolation.Sandbox` ``kind``:
+        ``"bwrap-uid"``, ``"bwrap-userns"``); ``"none"`` means graded with ``--insecure``, which every
+        test's output says.
     """
 
     assignment: Assignment
@@ -63,6 +74,15 @@ class GradeReport:
     tests: list[TestResult]
     execution_time_s: float
     error: str | None
+    sandbox: str = "unknown"
+
+    @property
+    def refused(self) -> list[str]:
+        """Everything the sandbox refused, over all tests (each once)."""
+        seen: list[str] = []
+        for r in self.tests:
+            seen += [n for n in r.refused if n not in seen]
+        return seen
 
     @property
     def score(self) -> float:
@@ -90,11 +110,17 @@ class GradeReport:
                 "output": r.output,
                 "visibility": r.test.visibility.value,
                 "tags": sorted({r.test.target, *r.test.uses}),
-                "extra_data": {"id": r.test.id, "duration_s": round(r.duration_s, 3)},
+                "extra_data": {
+                    "id": r.test.id,
+                    "duration_s": round(r.duration_s, 3),
+                    **({"refused": list(r.refused)} if r.refused else {}),
+                },
             }
             for i, r in enumerate(self.tests)
         ]
         head = f"{self.assignment.name}: {self.score:g} / {self.max_score:g} points"
+        if self.sandbox == "none":
+            head = f"{INSECURE}\n{head}"
         if self.error:
             head += f"\n{self.error}"
         hidden = sum(1 for r in self.tests if r.test.visibility.value != "visible")
@@ -108,20 +134,41 @@ class GradeReport:
             "visibility": "visible",
             "stdout_visibility": "hidden",
             "tests": tests,
-            "extra_data": {"assignment": self.assignment.name, "submission": self.submission},
+            "extra_data": {
+                "assignment": self.assignment.name,
+                "submission": self.submission,
+                "sandbox": self.sandbox,
+                "refused": self.refused,
+            },
         }
 
     def write_json(self, path: str | Path) -> Path:
+        """Write results.json atomically (a temporary file, flushed to disk, renamed over the target),
+        then read it back: an error if what is there is not what was meant to be written."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(json.dumps(self.to_gradescope(), indent=2) + "\n")
-        tmp.replace(path)
+        data = self.to_gradescope()
+        text = json.dumps(data, indent=2) + "\n"
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+        try:
+            with os.fdopen(fd, "w") as f:
+                f.write(text)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
+        if json.loads(path.read_text()) != json.loads(text):
+            raise OSError(f"{path} does not hold the results just written to it")
         return path
 
     def summary(self) -> str:
         """A readable summary for the terminal: one line per test, the message under each failure."""
         lines = [f"{self.assignment.name} ({self.assignment.title})", f"submission: {self.submission}"]
+        if self.sandbox == "none":
+            lines.insert(0, INSECURE)
         width = max(len(r.test.name) for r in self.tests) if self.tests else 0
         width = min(width, 70)
         for r in self.tests:

@@ -1,10 +1,18 @@
 """Grade one submission: every graded test in its own child process, scored here.
 
-Isolation (see :mod:`lab.grading.sandbox` for the child's side):
+Isolation (see :mod:`lab.grading.isolation` for the sandbox, :mod:`lab.grading.sandbox` for the
+child's side):
 
-* **The scoring process never imports the submission.** Each test starts a fresh child
-  (``python -I sandbox.py``) that imports a private copy of the module in a scratch folder, under a
-  memory limit (``RLIMIT_AS``), a CPU-time backstop, no file writes (``RLIMIT_FSIZE = 0``) and no new
+* **The student's code runs in a sandbox, as another user.** Each test starts a fresh child inside
+  bubblewrap: a filesystem holding only the system, Python and a private copy of the submission (no
+  assignments, graded tests, reference solutions, other students' folders or grader files), no
+  network, its own PID namespace, and (when the grader is root) a throwaway uid of its own. The
+  grading process is not dumpable, so no process can read or write its memory.
+* **The submission is read once, as a regular file.** Its bytes are read when grading starts (a
+  classmate changing the file later changes nothing); a symbolic link, a device or a folder where the
+  module is expected is refused with a message.
+* **The scoring process never imports the submission.** The child imports its copy under a memory
+  limit (``RLIMIT_AS``), a CPU-time backstop, no file writes (``RLIMIT_FSIZE = 0``) and no new
   processes. The test itself (the oracle, the tolerances, the points) runs here and reaches the
   student's functions only through :class:`Submission`, whose calls come back as *values*.
 * **The channel is private.** Calls and answers go over two pipes opened for that child alone; the
@@ -12,26 +20,29 @@ Isolation (see :mod:`lab.grading.sandbox` for the child's side):
   results does nothing. A malformed answer is a failed call.
 * **Nothing the child sends is a score.** At worst a hostile child sends wrong values for its own
   functions, which is what it is graded on.
-* **Limits cost points, not the grading run.** An exception, a timeout (the child is killed with its
-  whole process group), running out of memory, a crash, wrong shapes or NaNs fail that test with a
-  message; the next test starts a new child. A module that fails to import fails every test with the
-  same message, found once by a first import probe. A total time budget bounds the whole run.
+* **Nothing outlives its test.** Before a test's result is recorded, every process it started is gone
+  (the sandbox's PID namespace is killed and, as root, every process of its uid), so nothing can
+  rewrite results after the grader.
+* **Limits cost points, not the grading run.** An exception, a timeout, running out of memory, a
+  crash, wrong shapes or NaNs fail that test with a message; the next test starts a new child. A
+  module that fails to import fails every test with the same message, found once by a first import
+  probe. A total time budget bounds the whole run.
 
-These limits protect the grade and the machine from mistakes and from casual tampering; they are not
-a security sandbox (the child can still read files the grading user can read). Grade untrusted code as
-an unprivileged user or in a container, as Gradescope does.
+Without a working sandbox :func:`grade_submission` refuses (``SandboxUnavailable``) unless asked to
+grade insecurely, and then every result says so.
 """
 
 from __future__ import annotations
 
 import functools
+import json
 import os
 import select
 import shutil
 import signal
+import stat
 import struct
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -41,7 +52,17 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lab.grading.assignments import Assignment
-from lab.grading.report import GradeReport, TestResult
+from lab.grading.isolation import (
+    ENTRY,
+    SUBMISSION_DIR,
+    Sandbox,
+    SandboxUnavailable,
+    end_all,
+    find_sandbox,
+    make_undumpable,
+    pid_namespace_members,
+)
+from lab.grading.report import INSECURE, GradeReport, TestResult
 from lab.grading.sandbox import MAX_MESSAGE_BYTES, WireError, decode, encode
 from lab.grading.suite import Fail, GradedTest
 
@@ -54,12 +75,15 @@ __all__ = [
     "ImportFailed",
     "grade_submission",
     "find_module",
+    "read_module",
+    "Refused",
 ]
 
 _SANDBOX = Path(__file__).with_name("sandbox.py")
 _HEADER = struct.Struct(">I")
 _OUTPUT_KEEP = 4000  # characters of the child's stdout/stderr kept for feedback
 _OUTPUT_SHOW = 1500
+_MAX_MODULE_BYTES = 2 << 20  # a submitted module larger than 2 MB is refused
 
 
 # ------------------------------------------------------------------------------------------ outcomes
@@ -97,7 +121,12 @@ class StudentCrash(SubmissionProblem):
 
 
 class ImportFailed(SubmissionProblem):
-    """The module could not be imported (or its import did not finish in time)."""
+    """The module could not be imported (or its import did not finish in time); ``notes`` holds what
+    the sandbox refused while it was imported."""
+
+    def __init__(self, message: str, notes: list[str] | None = None):
+        super().__init__(message)
+        self.notes = list(notes or [])
 
 
 def _where(info: dict, module: str) -> str:
@@ -113,19 +142,28 @@ class _Timeout(Exception):
 
 
 class _Child:
-    """A running ``sandbox.py`` with its private request and answer pipes."""
+    """A running ``sandbox.py`` (in the sandbox) with its private request and answer pipes."""
 
-    def __init__(self, module_src: Path, module: str, memory_mb: int, cpu_s: int):
+    def __init__(
+        self, source: bytes, module: str, memory_mb: int, cpu_s: int, sandbox: Sandbox, hide: tuple[str, ...]
+    ):
         self.dir = Path(tempfile.mkdtemp(prefix="lab-grade-"))
+        os.chmod(self.dir, 0o755)  # the child's throwaway uid reads it (read-only, in the sandbox)
         self.module_file = self.dir / module  # under the assignment's name, whatever the upload was called
-        shutil.copyfile(module_src, self.module_file)
+        self.module_file.write_bytes(source)
+        os.chmod(self.module_file, 0o644)
+        self.sandbox = sandbox
+        self.uid = sandbox.new_uid()
+        self.notes: list[str] = []
         req_r, self.req_w = os.pipe()
         self.resp_r, resp_w = os.pipe()
+        info_r, info_w = os.pipe() if sandbox.secure else (-1, -1)
+        home = "/tmp" if sandbox.secure else str(self.dir)
         env = {
-            "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
-            "HOME": str(self.dir),
-            "TMPDIR": str(self.dir),
-            "MPLCONFIGDIR": str(self.dir),
+            "PATH": "/usr/bin:/bin" if sandbox.secure else os.environ.get("PATH", "/usr/bin:/bin"),
+            "HOME": home,
+            "TMPDIR": home,
+            "MPLCONFIGDIR": home,
             "MPLBACKEND": "Agg",
             "OPENBLAS_NUM_THREADS": "1",
             "OMP_NUM_THREADS": "1",
@@ -133,17 +171,21 @@ class _Child:
             "PYTHONHASHSEED": "0",
             "LC_ALL": "C.UTF-8",
         }
-        cmd = [
-            sys.executable,
+        args = [
             "-I",  # isolated: no PYTHON* variables, no user site, no script folder on sys.path
             "-u",  # unbuffered: what the student printed before a crash or a timeout is not lost
-            str(_SANDBOX),
+            ENTRY if sandbox.secure else str(_SANDBOX),
             str(req_r),
             str(resp_w),
-            str(self.module_file),
+            f"{SUBMISSION_DIR}/{module}" if sandbox.secure else str(self.module_file),
             str(memory_mb),
             str(cpu_s),
+            str(-1 if self.uid is None else self.uid),
         ]
+        cmd = sandbox.command(args, self.dir, _SANDBOX, self.uid, hide)
+        if sandbox.secure:
+            cmd[1:1] = ["--info-fd", str(info_w)]  # bwrap says there the pid of the namespace's first process
+        fds = (req_r, resp_w) + ((info_w,) if sandbox.secure else ())
         try:
             self.proc = subprocess.Popen(
                 cmd,
@@ -152,12 +194,14 @@ class _Child:
                 stdin=subprocess.DEVNULL,
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
-                pass_fds=(req_r, resp_w),
+                pass_fds=fds,
                 start_new_session=True,  # its own process group: a timeout kills everything it started
             )
         finally:
-            os.close(req_r)
-            os.close(resp_w)
+            for fd in fds:
+                os.close(fd)
+        self.info_r = info_r
+        self.init_pid: int | None = None
         os.set_blocking(self.req_w, False)
         self._buf = bytearray()
         self._out = bytearray()
@@ -166,6 +210,17 @@ class _Child:
         self._reader.start()
         self.memory_mb = memory_mb
         self._closed = False
+
+    def _namespace_init(self) -> int | None:
+        """The pid of the sandbox's first process, from bwrap's ``--info-fd`` (read once)."""
+        if self.init_pid is None and self.info_r >= 0:
+            os.set_blocking(self.info_r, False)
+            try:
+                data = os.read(self.info_r, 4096)
+                self.init_pid = int(json.loads(data)["child-pid"])
+            except (OSError, ValueError, KeyError, TypeError):
+                pass
+        return self.init_pid
 
     def _drain(self) -> None:
         """Keep the first few KB of what the child prints (never parsed); discard the rest."""
@@ -230,6 +285,8 @@ class _Child:
             code = self.proc.wait(timeout=2.0)
         except subprocess.TimeoutExpired:
             return "the process closed the grader's channel"
+        if self.sandbox.secure and 128 < code < 128 + 65 and code - 128 in signal.Signals._value2member_map_:
+            code = 128 - code  # bwrap reports a child killed by signal N as exit status 128 + N
         if code < 0:
             sig = signal.Signals(-code).name if -code in signal.Signals._value2member_map_ else str(-code)
             why = {
@@ -241,24 +298,44 @@ class _Child:
             return f"the process died with {sig}{why}"
         return f"the process exited with status {code} (sys.exit or os._exit in the submission?)"
 
+    def take_notes(self, answer) -> None:
+        """Keep what the child's audit hook noticed (feedback only; it never changes a score)."""
+        notes = answer.get("notes") if isinstance(answer, dict) else None
+        if isinstance(notes, list):
+            for n in notes[:8]:
+                if isinstance(n, str) and n not in self.notes:
+                    self.notes.append(n[:300])
+
     def close(self) -> None:
-        """Kill the child's process group and clean up; idempotent (fd numbers are reused)."""
+        """End every process of the child (its PID namespace; as root every process of its uid), wait
+        until none is left, and clean up; idempotent (fd numbers are reused)."""
         if self._closed:
             return
         self._closed = True
+        init = self._namespace_init()
+        if init is not None:
+            # the namespace's first process and the child it runs; anything more was left running
+            extra = len(pid_namespace_members(init)) - 2
+            if extra > 0:
+                self.notes.append(
+                    f"{extra} process(es) your code started were still running; the sandbox ended them"
+                )
         try:
             os.killpg(self.proc.pid, signal.SIGKILL)
         except (ProcessLookupError, PermissionError):
             pass
+        if self.sandbox.secure:
+            end_all(init, self.uid)
         try:
             self.proc.wait(timeout=5.0)
         except subprocess.TimeoutExpired:
             pass
-        for fd in (self.req_w, self.resp_r):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        for fd in (self.req_w, self.resp_r, self.info_r):
+            if fd >= 0:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
         self._reader.join(timeout=1.0)
         if self.proc.stdout:
             self.proc.stdout.close()
@@ -317,6 +394,7 @@ class Submission:
             raise StudentCrash(self._dead) from None
         finally:
             self._left_s -= time.monotonic() - t0
+        self._child.take_notes(answer)
         if not isinstance(answer, dict) or "ok" not in answer:
             raise StudentCrash(f"{name} sent an answer the grader cannot read")
         if answer["ok"]:
@@ -328,33 +406,41 @@ class Submission:
 # ------------------------------------------------------------------------------------------ grading
 @dataclass
 class _Limits:
-    module_src: Path
+    source: bytes  # the submitted module, read once
     module: str
     memory_mb: int
     import_timeout_s: float
+    sandbox: Sandbox
+    hide: tuple[str, ...] = ()  # folders the child must not see (the assignment's)
 
 
 def _start(limits: _Limits, cpu_s: float, import_deadline: float) -> tuple[_Child, list[str]]:
     """A child with the module imported; raises ImportFailed (and closes the child) otherwise.
 
     ``cpu_s`` is the child's CPU-time backstop (``RLIMIT_CPU``), above every wall-clock limit it has."""
-    child = _Child(limits.module_src, limits.module, limits.memory_mb, int(cpu_s) + 2)
+    child = _Child(
+        limits.source, limits.module, limits.memory_mb, int(cpu_s) + 2, limits.sandbox, limits.hide
+    )
     try:
         hello = child.receive(import_deadline)
+        child.take_notes(hello)
+        if not (isinstance(hello, dict) and hello.get("ready")):
+            info = hello.get("error", {}) if isinstance(hello, dict) else {}
+            t, m = info.get("type", "Exception"), info.get("message", "")
+            raise ImportFailed(f"importing {limits.module} failed: {t}: {m}" + _where(info, limits.module))
     except _Timeout:
         child.close()
         raise ImportFailed(
             f"importing {limits.module} did not finish within {limits.import_timeout_s:g} s "
-            "(code at module level runs on import: an infinite loop or a long computation there?)"
+            "(code at module level runs on import: an infinite loop or a long computation there?)",
+            child.notes,
         ) from None
     except (StudentCrash, WireError) as e:
         child.close()
-        raise ImportFailed(f"importing {limits.module} failed: {e}") from None
-    if not (isinstance(hello, dict) and hello.get("ready")):
-        info = hello.get("error", {}) if isinstance(hello, dict) else {}
+        raise ImportFailed(f"importing {limits.module} failed: {e}", child.notes) from None
+    except ImportFailed as e:
         child.close()
-        t, m = info.get("type", "Exception"), info.get("message", "")
-        raise ImportFailed(f"importing {limits.module} failed: {t}: {m}" + _where(info, limits.module))
+        raise ImportFailed(str(e), child.notes) from None
     return child, list(hello.get("functions", []))
 
 
@@ -362,6 +448,7 @@ def _run_one(test: GradedTest, limits: _Limits, timeout_s: float) -> TestResult:
     t0 = time.monotonic()
     child = None
     printed = ""
+    notes: list[str] = []
     try:
         child, functions = _start(limits, limits.import_timeout_s + timeout_s, t0 + limits.import_timeout_s)
         sub = Submission(child, limits.module, functions, timeout_s)
@@ -382,23 +469,96 @@ def _run_one(test: GradedTest, limits: _Limits, timeout_s: float) -> TestResult:
         if child is not None:
             child.close()  # ends the child and drains its output pipe to the end first:
             printed = child.printed()  # what it printed just before answering is not lost
+            notes = child.notes
     if printed.strip():
         shown = printed if len(printed) <= _OUTPUT_SHOW else printed[:_OUTPUT_SHOW] + "\n..."
         output = (output + "\n\n" if output else "") + "Your code printed:\n" + shown
-    return TestResult(test, score, status, output, time.monotonic() - t0)
+    if notes:
+        output = (
+            (output + "\n\n" if output else "")
+            + "The grader's sandbox refused:\n"
+            + "\n".join(f"  - {n}" for n in notes)
+        )
+    if not limits.sandbox.secure:
+        output = INSECURE + ("\n" + output if output else "")
+    return TestResult(test, score, status, output, time.monotonic() - t0, tuple(notes))
+
+
+class Refused(Exception):
+    """The submission is not a module the grader will run (a link, a device, a folder, too large)."""
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISLNK(mode):
+        return "a symbolic link"
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISREG(mode):
+        return "a file"
+    return "a device, pipe or socket"
 
 
 def find_module(assignment: Assignment, submission: str | Path) -> Path | None:
-    """The module file of a submission: the path itself if it is a file, else ``SUBMISSION/<module>``
-    (also one folder down, as Gradescope sometimes nests uploads). None when it is not there."""
+    """The module file of a submission: the path itself if it is not a folder, else
+    ``SUBMISSION/<module>`` (also one folder down, as Gradescope sometimes nests uploads). None when it
+    is not there. Links are not followed: :func:`read_module` refuses what is not a regular file."""
     p = Path(submission)
-    if p.is_file():
+    if not os.path.lexists(p):
+        return None
+    if not p.is_dir() or p.is_symlink():
         return p
     direct = p / assignment.module
-    if direct.is_file():
+    if os.path.lexists(direct):
         return direct
-    nested = sorted(p.glob(f"*/{assignment.module}"))
+    nested = sorted(q for q in p.glob(f"*/{assignment.module}") if os.path.lexists(q))
     return nested[0] if len(nested) == 1 else None
+
+
+def read_module(assignment: Assignment, path: Path) -> bytes:
+    """The bytes of the submitted module, read once; :class:`Refused` unless it is a regular file
+    reached without following a symbolic link."""
+    name = assignment.module
+    for q in (path, path.parent):
+        try:
+            st = os.lstat(q)
+        except OSError as e:
+            raise Refused(f"refused {path}: cannot read it ({e.strerror})") from None
+        if q == path and not stat.S_ISREG(st.st_mode):
+            raise Refused(
+                f"refused {path}: it is {_kind(st.st_mode)}, not a file; submit {name} itself "
+                "(links are not followed)"
+            )
+        if q != path and stat.S_ISLNK(st.st_mode):
+            raise Refused(f"refused {path}: its folder {q.name} is a symbolic link (links are not followed)")
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except OSError as e:
+        raise Refused(f"refused {path}: cannot open it without following a link ({e.strerror})") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise Refused(f"refused {path}: it is {_kind(st.st_mode)}, not a file; submit {name} itself")
+        if st.st_size > _MAX_MODULE_BYTES:
+            raise Refused(
+                f"refused {path}: {st.st_size >> 10} KB is more than a module of {name} needs (2 MB)"
+            )
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            return f.read(_MAX_MODULE_BYTES + 1)
+    finally:
+        os.close(fd)
+
+
+def choose_sandbox(insecure: bool = False) -> Sandbox:
+    """The machine's sandbox; without one, :class:`SandboxUnavailable` unless ``insecure`` (then none)."""
+    try:
+        return find_sandbox()
+    except SandboxUnavailable as e:
+        if insecure:
+            return Sandbox("none")
+        raise SandboxUnavailable(
+            f"refusing to grade without a sandbox: {e}; --insecure grades anyway, for practice only "
+            "(every result then says so)"
+        ) from None
 
 
 def grade_submission(
@@ -407,6 +567,8 @@ def grade_submission(
     *,
     jobs: int | None = None,
     timeout_scale: float = 1.0,
+    insecure: bool = False,
+    sandbox: Sandbox | None = None,
 ) -> GradeReport:
     """Run every graded test of ``assignment`` against ``submission`` (a folder or the module file).
 
@@ -419,22 +581,50 @@ def grade_submission(
         Tests run at once (each in its own child); default ``min(4, cpu count)``.
     timeout_scale : float
         Multiplies every per-test time limit (a slow grading machine).
+    insecure : bool
+        Without a working sandbox, grade anyway (practice only: every result says so).
+    sandbox : Sandbox, optional
+        The isolation to use (default: :func:`~lab.grading.isolation.find_sandbox`).
 
     Returns
     -------
     GradeReport
         Never raises for anything the submission does.
+
+    Raises
+    ------
+    SandboxUnavailable
+        No sandbox works on this machine and ``insecure`` is False.
     """
     t0 = time.monotonic()
+    sb = sandbox or choose_sandbox(insecure)
+    make_undumpable()
     suite = assignment.load_suite()
     jobs = jobs or max(1, min(4, os.cpu_count() or 1))
-    module_src = find_module(assignment, submission)
-    if module_src is None:
-        msg = f"no {assignment.module} found in {submission}: submit the file {assignment.module}"
-        results = [TestResult(t, 0.0, "failed", msg, 0.0) for t in suite.tests]
-        return GradeReport(assignment, str(submission), results, time.monotonic() - t0, msg)
+
+    def nothing_runs(msg: str, notes: list[str] = ()) -> GradeReport:
+        text = msg if sb.secure else f"{INSECURE}\n{msg}"
+        if notes:
+            text += "\n\nThe grader's sandbox refused:\n" + "\n".join(f"  - {n}" for n in notes)
+        results = [TestResult(t, 0.0, "failed", text, 0.0, tuple(notes)) for t in suite.tests]
+        return GradeReport(assignment, str(submission), results, time.monotonic() - t0, msg, sb.kind)
+
+    module_path = find_module(assignment, submission)
+    if module_path is None:
+        return nothing_runs(
+            f"no {assignment.module} found in {submission}: submit the file {assignment.module}"
+        )
+    try:
+        source = read_module(assignment, module_path)
+    except Refused as e:
+        return nothing_runs(str(e))
     limits = _Limits(
-        module_src, assignment.module, assignment.memory_mb, assignment.import_timeout_s * timeout_scale
+        source,
+        assignment.module,
+        assignment.memory_mb,
+        assignment.import_timeout_s * timeout_scale,
+        sb,
+        (str(Path(assignment.folder).resolve()),),
     )
 
     # One import probe: a module that cannot be imported fails every test with the same message,
@@ -443,8 +633,7 @@ def grade_submission(
         child, _ = _start(limits, limits.import_timeout_s, t0 + limits.import_timeout_s)
         child.close()
     except ImportFailed as e:
-        results = [TestResult(t, 0.0, "failed", str(e), 0.0) for t in suite.tests]
-        return GradeReport(assignment, str(submission), results, time.monotonic() - t0, str(e))
+        return nothing_runs(str(e), e.notes)
 
     budget_end = t0 + assignment.budget_s
 
@@ -465,7 +654,7 @@ def grade_submission(
     with ThreadPoolExecutor(max_workers=jobs) as pool:
         results = list(pool.map(run, suite.tests))
     _point_at_dependencies(results)
-    return GradeReport(assignment, str(submission), results, time.monotonic() - t0, None)
+    return GradeReport(assignment, str(submission), results, time.monotonic() - t0, None, sb.kind)
 
 
 def _point_at_dependencies(results: list[TestResult]) -> None:

@@ -3,11 +3,17 @@
 The grader never imports a submission. For every graded test it starts this file as a fresh Python
 process (``python -I sandbox.py ...``) which
 
-1. lowers its own resource limits (address space, CPU time, file size, processes), before any
+1. becomes the throwaway uid it is given, when the grader runs it as root inside the bubblewrap
+   sandbox of :mod:`lab.grading.isolation` (that sandbox gives it a filesystem holding only the
+   system, Python and the copy of the submission, and no network);
+2. lowers its own resource limits (address space, CPU time, file size, processes), before any
    student code runs;
-2. imports the submitted module from a private scratch folder (``lab`` itself cannot be imported:
-   the assignments are to be written, not borrowed);
-3. answers *calls*: the grading process sends ``{"call": name, "args": [...]}`` and gets back the
+3. imports the submitted module from its private folder (``lab`` itself cannot be imported: the
+   assignments are to be written, not borrowed; in the sandbox it is not even there);
+4. notes what the student's code tried that the sandbox forbids (files outside the submission,
+   network connections, new processes, ``import lab``) with an audit hook, and sends the notes with
+   each answer for the feedback (they never change a score: the sandbox, not the hook, stops them);
+5. answers *calls*: the grading process sends ``{"call": name, "args": [...]}`` and gets back the
    function's return value, or a description of the exception it raised.
 
 Requests and answers travel over two pipes that the grader opened for this process only (their file
@@ -159,6 +165,20 @@ def read_message(fd: int):
 
 
 # ---------------------------------------------------------------------------------------------- child
+def _drop_to(uid: int) -> None:
+    """Become ``uid`` (and gid ``uid``, no supplementary groups) for good; fail loudly otherwise."""
+    os.setgroups([])
+    os.setgid(uid)
+    os.setuid(uid)
+    if os.getuid() != uid or os.geteuid() != uid or os.getgid() != uid or os.getgroups():
+        raise SystemExit(f"sandbox: could not become uid {uid}")
+    try:
+        os.setuid(0)
+    except PermissionError:
+        return
+    raise SystemExit("sandbox: root could be regained after dropping it")
+
+
 def _apply_limits(memory_mb: int, cpu_s: int) -> None:
     import resource
     import signal
@@ -193,6 +213,46 @@ class _NoLab:
         return None
 
 
+_MAX_NOTES = 8
+_notes: list[str] = []
+
+
+def _note(text: str) -> None:
+    if text not in _notes and len(_notes) < _MAX_NOTES:
+        _notes.append(text)
+
+
+def _watch(allowed: tuple[str, ...]):
+    """An audit hook noting what the sandbox forbids (it observes; the sandbox refuses)."""
+    procs = {
+        "os.fork",
+        "os.forkpty",
+        "os.posix_spawn",
+        "os.exec",
+        "os.spawn",
+        "os.system",
+        "subprocess.Popen",
+    }
+
+    def hook(event: str, args: tuple) -> None:
+        if event == "open":
+            path = args[0]
+            if isinstance(path, (str, bytes)):
+                p = os.path.normpath(os.path.join(os.getcwd(), os.fsdecode(path)))
+                if not any(p == a or p.startswith(a + "/") for a in allowed):
+                    _note(f"open {p}: outside the submission")
+                elif p.startswith("/tmp/") and not os.path.exists(os.path.dirname(p)):
+                    _note(f"open {p}: not in the sandbox (its /tmp is its own)")
+        elif event in ("socket.connect", "socket.sendto", "socket.sendmsg"):
+            _note(f"a network connection to {args[1]!r}: no network while grading")
+        elif event in procs:
+            _note(f"starting a process ({event}): not allowed while grading")
+        elif event == "import" and args[0].split(".")[0] == "lab":
+            _note("import lab: the course library is not available to a submission")
+
+    return hook
+
+
 def _describe(exc: BaseException, module_file: str) -> dict:
     """Type, message and the innermost frame of the submission's own file where it was raised."""
     import linecache
@@ -223,18 +283,23 @@ def _serve(req_fd: int, resp_fd: int, module_path: str) -> int:
 
     sys.meta_path.insert(0, _NoLab())
     name = os.path.splitext(os.path.basename(module_path))[0]
+    allowed = {os.path.dirname(module_path), "/tmp", "/dev/null", "/dev/urandom", "/proc/self", "/sys"}
+    allowed |= {"/proc/cpuinfo", "/proc/meminfo", "/usr", "/etc/ld.so.cache", "/proc/" + str(os.getpid())}
+    allowed |= {os.path.realpath(p) for p in (sys.prefix, sys.base_prefix, sys.exec_prefix) if p}
+    allowed |= {p for p in (sys.prefix, sys.base_prefix, sys.exec_prefix) if p}
     try:
         import numpy  # noqa: F401  (before the student's code, so its import time is not theirs)
 
+        sys.addaudithook(_watch(tuple(sorted(allowed))))
         spec = importlib.util.spec_from_file_location(name, module_path)
         module = importlib.util.module_from_spec(spec)
         sys.modules[name] = module
         spec.loader.exec_module(module)
     except BaseException as e:  # noqa: BLE001 - SystemExit and KeyboardInterrupt at import too
-        write_message(resp_fd, {"ready": False, "error": _describe(e, module_path)})
+        write_message(resp_fd, {"ready": False, "error": _describe(e, module_path), "notes": _notes})
         return 0
     functions = sorted(k for k, v in vars(module).items() if callable(v) and not k.startswith("_"))
-    write_message(resp_fd, {"ready": True, "functions": functions})
+    write_message(resp_fd, {"ready": True, "functions": functions, "notes": _notes})
     while True:
         try:
             req = read_message(req_fd)
@@ -258,13 +323,16 @@ def _serve(req_fd: int, resp_fd: int, module_path: str) -> int:
                     "ok": False,
                     "error": {"type": "UnsendableResult", "message": str(e), "where": [], "memory": False},
                 }
+        answer["notes"] = _notes
         write_message(resp_fd, answer)
 
 
 def main(argv: list[str]) -> int:
-    """``sandbox.py REQ_FD RESP_FD MODULE_PATH MEMORY_MB CPU_S``."""
+    """``sandbox.py REQ_FD RESP_FD MODULE_PATH MEMORY_MB CPU_S [UID]`` (UID: become it first)."""
     req_fd, resp_fd = int(argv[0]), int(argv[1])
     module_path, memory_mb, cpu_s = argv[2], int(argv[3]), int(argv[4])
+    if len(argv) > 5 and int(argv[5]) >= 0:
+        _drop_to(int(argv[5]))
     _apply_limits(memory_mb, cpu_s)
     sys.dont_write_bytecode = True
     return _serve(req_fd, resp_fd, module_path)
