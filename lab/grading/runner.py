@@ -34,423 +34,59 @@ grade insecurely, and then every result says so.
 
 from __future__ import annotations
 
-import functools
-import json
 import os
-import select
-import shutil
-import signal
 import stat
-import struct
-import subprocess
-import tempfile
-import threading
 import time
 import traceback
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from pathlib import Path
 
 from lab.grading.assignments import Assignment
+from lab.grading.child import (
+    ChildLimits,
+    ImportFailed,
+    StudentCrash,
+    StudentError,
+    StudentTimeout,
+    Submission,
+    SubmissionProblem,
+    start_child,
+)
 from lab.grading.isolation import (
-    ENTRY,
-    SUBMISSION_DIR,
     Sandbox,
     SandboxUnavailable,
-    end_all,
     find_sandbox,
     make_undumpable,
-    pid_namespace_members,
 )
 from lab.grading.report import INSECURE, GradeReport, TestResult
-from lab.grading.sandbox import MAX_MESSAGE_BYTES, WireError, decode, encode
 from lab.grading.suite import Fail, GradedTest
 
 __all__ = [
+    "Refused",
     "Submission",
     "SubmissionProblem",
     "StudentError",
     "StudentTimeout",
     "StudentCrash",
     "ImportFailed",
-    "grade_submission",
+    "choose_sandbox",
     "find_module",
+    "grade_submission",
     "read_module",
-    "Refused",
 ]
 
-_SANDBOX = Path(__file__).with_name("sandbox.py")
-_HEADER = struct.Struct(">I")
-_OUTPUT_KEEP = 4000  # characters of the child's stdout/stderr kept for feedback
-_OUTPUT_SHOW = 1500
+_OUTPUT_SHOW = 1500  # characters of what the child printed shown in a test's feedback
 _MAX_MODULE_BYTES = 2 << 20  # a submitted module larger than 2 MB is refused
 
 
-# ------------------------------------------------------------------------------------------ outcomes
-class SubmissionProblem(Exception):
-    """The student's code did not produce a value: raised, timed out, crashed or failed to import."""
-
-
-class StudentError(SubmissionProblem):
-    """A student function raised; ``info`` holds the type, message and the lines of their file."""
-
-    def __init__(self, function: str, module: str, info: dict):
-        self.function, self.module, self.info = function, module, info
-        self.type = str(info.get("type", "Exception"))
-        super().__init__(self._message())
-
-    def _message(self) -> str:
-        t, m = self.type, str(self.info.get("message", ""))
-        if t == "NotImplementedError":
-            head = f"{self.function} is not implemented yet (it raises NotImplementedError)"
-        elif t == "UnsendableResult":
-            head = f"{self.function} returned a value the grader cannot use: {m}"
-        elif self.info.get("memory"):
-            head = f"{self.function} ran out of memory (MemoryError{': ' + m if m else ''})"
-        else:
-            head = f"{self.function} raised {t}" + (f": {m}" if m else "")
-        return head + _where(self.info, self.module)
-
-
-class StudentTimeout(SubmissionProblem):
-    """The student's code did not answer within the test's time limit (the child was killed)."""
-
-
-class StudentCrash(SubmissionProblem):
-    """The child process died while running the student's code."""
-
-
-class ImportFailed(SubmissionProblem):
-    """The module could not be imported (or its import did not finish in time); ``notes`` holds what
-    the sandbox refused while it was imported."""
-
-    def __init__(self, message: str, notes: list[str] | None = None):
-        super().__init__(message)
-        self.notes = list(notes or [])
-
-
-def _where(info: dict, module: str) -> str:
-    lines = [
-        f"\n  at {module} line {w['line']}, in {w['function']}: {w['code']}" for w in info.get("where", [])
-    ]
-    return "".join(lines)
-
-
-# ------------------------------------------------------------------------------------------ child
-class _Timeout(Exception):
-    pass
-
-
-class _Child:
-    """A running ``sandbox.py`` (in the sandbox) with its private request and answer pipes."""
-
-    def __init__(
-        self, source: bytes, module: str, memory_mb: int, cpu_s: int, sandbox: Sandbox, hide: tuple[str, ...]
-    ):
-        self.dir = Path(tempfile.mkdtemp(prefix="lab-grade-"))
-        os.chmod(self.dir, 0o755)  # the child's throwaway uid reads it (read-only, in the sandbox)
-        self.module_file = self.dir / module  # under the assignment's name, whatever the upload was called
-        self.module_file.write_bytes(source)
-        os.chmod(self.module_file, 0o644)
-        self.sandbox = sandbox
-        self.uid = sandbox.new_uid()
-        self.notes: list[str] = []
-        req_r, self.req_w = os.pipe()
-        self.resp_r, resp_w = os.pipe()
-        info_r, info_w = os.pipe() if sandbox.secure else (-1, -1)
-        home = "/tmp" if sandbox.secure else str(self.dir)
-        env = {
-            "PATH": "/usr/bin:/bin" if sandbox.secure else os.environ.get("PATH", "/usr/bin:/bin"),
-            "HOME": home,
-            "TMPDIR": home,
-            "MPLCONFIGDIR": home,
-            "MPLBACKEND": "Agg",
-            "OPENBLAS_NUM_THREADS": "1",
-            "OMP_NUM_THREADS": "1",
-            "MKL_NUM_THREADS": "1",
-            "PYTHONHASHSEED": "0",
-            "LC_ALL": "C.UTF-8",
-        }
-        args = [
-            "-I",  # isolated: no PYTHON* variables, no user site, no script folder on sys.path
-            "-u",  # unbuffered: what the student printed before a crash or a timeout is not lost
-            ENTRY if sandbox.secure else str(_SANDBOX),
-            str(req_r),
-            str(resp_w),
-            f"{SUBMISSION_DIR}/{module}" if sandbox.secure else str(self.module_file),
-            str(memory_mb),
-            str(cpu_s),
-            str(-1 if self.uid is None else self.uid),
-        ]
-        cmd = sandbox.command(args, self.dir, _SANDBOX, self.uid, hide)
-        if sandbox.secure:
-            cmd[1:1] = ["--info-fd", str(info_w)]  # bwrap says there the pid of the namespace's first process
-        fds = (req_r, resp_w) + ((info_w,) if sandbox.secure else ())
-        try:
-            self.proc = subprocess.Popen(
-                cmd,
-                cwd=self.dir,
-                env=env,
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.STDOUT,
-                pass_fds=fds,
-                start_new_session=True,  # its own process group: a timeout kills everything it started
-            )
-        finally:
-            for fd in fds:
-                os.close(fd)
-        self.info_r = info_r
-        self.init_pid: int | None = None
-        os.set_blocking(self.req_w, False)
-        self._buf = bytearray()
-        self._out = bytearray()
-        self._out_total = 0
-        self._reader = threading.Thread(target=self._drain, daemon=True)
-        self._reader.start()
-        self.memory_mb = memory_mb
-        self._closed = False
-
-    def _namespace_init(self) -> int | None:
-        """The pid of the sandbox's first process, from bwrap's ``--info-fd`` (read once)."""
-        if self.init_pid is None and self.info_r >= 0:
-            os.set_blocking(self.info_r, False)
-            try:
-                data = os.read(self.info_r, 4096)
-                self.init_pid = int(json.loads(data)["child-pid"])
-            except (OSError, ValueError, KeyError, TypeError):
-                pass
-        return self.init_pid
-
-    def _drain(self) -> None:
-        """Keep the first few KB of what the child prints (never parsed); discard the rest."""
-        f = self.proc.stdout
-        while True:
-            chunk = f.read1(65536) if hasattr(f, "read1") else f.read(65536)
-            if not chunk:
-                return
-            self._out_total += len(chunk)
-            room = _OUTPUT_KEEP - len(self._out)
-            if room > 0:
-                self._out += chunk[:room]
-
-    def printed(self) -> str:
-        text = self._out.decode("utf-8", errors="replace")
-        if self._out_total > len(self._out):
-            text += f"\n... ({self._out_total - len(self._out)} more bytes not shown)"
-        return text
-
-    def send(self, obj, deadline: float) -> None:
-        data = encode(obj)
-        view = memoryview(_HEADER.pack(len(data)) + data)
-        while view:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise _Timeout
-            _, w, _ = select.select([], [self.req_w], [], left)
-            if not w:
-                raise _Timeout
-            try:
-                n = os.write(self.req_w, view)
-            except BlockingIOError:
-                continue
-            except BrokenPipeError:
-                raise StudentCrash(self.death()) from None
-            view = view[n:]
-
-    def receive(self, deadline: float):
-        while True:
-            if len(self._buf) >= _HEADER.size:
-                (n,) = _HEADER.unpack_from(self._buf)
-                if n > MAX_MESSAGE_BYTES:
-                    raise WireError("answer too large")
-                if len(self._buf) >= _HEADER.size + n:
-                    data = bytes(self._buf[_HEADER.size : _HEADER.size + n])
-                    del self._buf[: _HEADER.size + n]
-                    return decode(data)
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise _Timeout
-            r, _, _ = select.select([self.resp_r], [], [], left)
-            if not r:
-                raise _Timeout
-            chunk = os.read(self.resp_r, 1 << 20)
-            if not chunk:
-                raise StudentCrash(self.death())
-            self._buf += chunk
-
-    def death(self) -> str:
-        """Why the child is gone, in words."""
-        try:
-            code = self.proc.wait(timeout=2.0)
-        except subprocess.TimeoutExpired:
-            return "the process closed the grader's channel"
-        if self.sandbox.secure and 128 < code < 128 + 65 and code - 128 in signal.Signals._value2member_map_:
-            code = 128 - code  # bwrap reports a child killed by signal N as exit status 128 + N
-        if code < 0:
-            sig = signal.Signals(-code).name if -code in signal.Signals._value2member_map_ else str(-code)
-            why = {
-                "SIGSEGV": " (segmentation fault: e.g. unbounded recursion)",
-                "SIGXCPU": " (CPU time limit)",
-                "SIGKILL": " (killed: e.g. out of memory)",
-                "SIGABRT": " (aborted: e.g. out of memory in a C library)",
-            }.get(sig, "")
-            return f"the process died with {sig}{why}"
-        return f"the process exited with status {code} (sys.exit or os._exit in the submission?)"
-
-    def take_notes(self, answer) -> None:
-        """Keep what the child's audit hook noticed (feedback only; it never changes a score)."""
-        notes = answer.get("notes") if isinstance(answer, dict) else None
-        if isinstance(notes, list):
-            for n in notes[:8]:
-                if isinstance(n, str) and n not in self.notes:
-                    self.notes.append(n[:300])
-
-    def close(self) -> None:
-        """End every process of the child (its PID namespace; as root every process of its uid), wait
-        until none is left, and clean up; idempotent (fd numbers are reused)."""
-        if self._closed:
-            return
-        self._closed = True
-        init = self._namespace_init()
-        if init is not None:
-            # the namespace's first process and the child it runs; anything more was left running
-            extra = len(pid_namespace_members(init)) - 2
-            if extra > 0:
-                self.notes.append(
-                    f"{extra} process(es) your code started were still running; the sandbox ended them"
-                )
-        try:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-        if self.sandbox.secure:
-            end_all(init, self.uid)
-        try:
-            self.proc.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:
-            pass
-        for fd in (self.req_w, self.resp_r, self.info_r):
-            if fd >= 0:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
-        self._reader.join(timeout=1.0)
-        if self.proc.stdout:
-            self.proc.stdout.close()
-        shutil.rmtree(self.dir, ignore_errors=True)
-
-
-# ------------------------------------------------------------------------------------- the proxy
-class Submission:
-    """The student's module as the graded tests see it: ``sub.f(*args)`` runs ``f`` in the child.
-
-    Arguments are sent by value (numbers, lists, tuples, str-keyed dicts, NumPy arrays); the return
-    value comes back the same way (tuples as lists). The time the student's code takes is charged to
-    the test's limit; exceeding it kills the child and raises :class:`StudentTimeout`.
-    """
-
-    def __init__(self, child: _Child, module: str, functions: list[str], timeout_s: float):
-        self._child = child
-        self._module = module
-        self._functions = set(functions)
-        self._timeout_s = timeout_s
-        self._left_s = timeout_s
-        self._dead: str | None = None
-
-    def __getattr__(self, name: str):
-        if name.startswith("_"):
-            raise AttributeError(name)
-        return functools.partial(self.call, name)
-
-    def defines(self, name: str) -> bool:
-        return name in self._functions
-
-    def call(self, name: str, *args, **kwargs):
-        if self._dead:
-            raise StudentCrash(self._dead)
-        if name not in self._functions:
-            raise Fail(
-                f"{self._module} does not define the function {name}() (it is one of the functions to write)"
-            )
-        t0 = time.monotonic()
-        deadline = t0 + max(self._left_s, 0.0)
-        try:
-            self._child.send({"op": "call", "call": name, "args": list(args), "kwargs": kwargs}, deadline)
-            answer = self._child.receive(deadline)
-        except _Timeout:
-            self._dead = f"{name} did not return within this test's limit of {self._timeout_s:g} s"
-            self._child.close()
-            raise StudentTimeout(
-                self._dead + " (an infinite loop? a loop that never ends its search?)"
-            ) from None
-        except StudentCrash as e:
-            self._dead = f"while running {name}: {e}"
-            raise StudentCrash(self._dead) from None
-        except WireError as e:
-            self._dead = f"{name} sent an answer the grader cannot read ({e})"
-            self._child.close()
-            raise StudentCrash(self._dead) from None
-        finally:
-            self._left_s -= time.monotonic() - t0
-        self._child.take_notes(answer)
-        if not isinstance(answer, dict) or "ok" not in answer:
-            raise StudentCrash(f"{name} sent an answer the grader cannot read")
-        if answer["ok"]:
-            return answer.get("value")
-        err = answer.get("error") if isinstance(answer.get("error"), dict) else {}
-        raise StudentError(name, self._module, err)
-
-
-# ------------------------------------------------------------------------------------------ grading
-@dataclass
-class _Limits:
-    source: bytes  # the submitted module, read once
-    module: str
-    memory_mb: int
-    import_timeout_s: float
-    sandbox: Sandbox
-    hide: tuple[str, ...] = ()  # folders the child must not see (the assignment's)
-
-
-def _start(limits: _Limits, cpu_s: float, import_deadline: float) -> tuple[_Child, list[str]]:
-    """A child with the module imported; raises ImportFailed (and closes the child) otherwise.
-
-    ``cpu_s`` is the child's CPU-time backstop (``RLIMIT_CPU``), above every wall-clock limit it has."""
-    child = _Child(
-        limits.source, limits.module, limits.memory_mb, int(cpu_s) + 2, limits.sandbox, limits.hide
-    )
-    try:
-        hello = child.receive(import_deadline)
-        child.take_notes(hello)
-        if not (isinstance(hello, dict) and hello.get("ready")):
-            info = hello.get("error", {}) if isinstance(hello, dict) else {}
-            t, m = info.get("type", "Exception"), info.get("message", "")
-            raise ImportFailed(f"importing {limits.module} failed: {t}: {m}" + _where(info, limits.module))
-    except _Timeout:
-        child.close()
-        raise ImportFailed(
-            f"importing {limits.module} did not finish within {limits.import_timeout_s:g} s "
-            "(code at module level runs on import: an infinite loop or a long computation there?)",
-            child.notes,
-        ) from None
-    except (StudentCrash, WireError) as e:
-        child.close()
-        raise ImportFailed(f"importing {limits.module} failed: {e}", child.notes) from None
-    except ImportFailed as e:
-        child.close()
-        raise ImportFailed(str(e), child.notes) from None
-    return child, list(hello.get("functions", []))
-
-
-def _run_one(test: GradedTest, limits: _Limits, timeout_s: float) -> TestResult:
+def _run_one(test: GradedTest, limits: ChildLimits, timeout_s: float) -> TestResult:
     t0 = time.monotonic()
     child = None
     printed = ""
     notes: list[str] = []
     try:
-        child, functions = _start(limits, limits.import_timeout_s + timeout_s, t0 + limits.import_timeout_s)
+        cpu_s, import_deadline = limits.import_timeout_s + timeout_s, t0 + limits.import_timeout_s
+        child, functions = start_child(limits, cpu_s, import_deadline)
         sub = Submission(child, limits.module, functions, timeout_s)
         note = test.func(sub)
         score, status, output = test.points, "passed", (str(note) if note else "")
@@ -603,11 +239,7 @@ def grade_submission(
     jobs = jobs or max(1, min(4, os.cpu_count() or 1))
 
     def nothing_runs(msg: str, notes: list[str] = ()) -> GradeReport:
-        text = msg if sb.secure else f"{INSECURE}\n{msg}"
-        if notes:
-            text += "\n\nThe grader's sandbox refused:\n" + "\n".join(f"  - {n}" for n in notes)
-        results = [TestResult(t, 0.0, "failed", text, 0.0, tuple(notes)) for t in suite.tests]
-        return GradeReport(assignment, str(submission), results, time.monotonic() - t0, msg, sb.kind)
+        return _nothing_runs(assignment, submission, suite, sb, t0, msg, notes)
 
     module_path = find_module(assignment, submission)
     if module_path is None:
@@ -618,7 +250,7 @@ def grade_submission(
         source = read_module(assignment, module_path)
     except Refused as e:
         return nothing_runs(str(e))
-    limits = _Limits(
+    limits = ChildLimits(
         source,
         assignment.module,
         assignment.memory_mb,
@@ -626,16 +258,29 @@ def grade_submission(
         sb,
         (str(Path(assignment.folder).resolve()),),
     )
-
     # One import probe: a module that cannot be imported fails every test with the same message,
     # without paying its import timeout once per test.
     try:
-        child, _ = _start(limits, limits.import_timeout_s, t0 + limits.import_timeout_s)
+        child, _ = start_child(limits, limits.import_timeout_s, t0 + limits.import_timeout_s)
         child.close()
     except ImportFailed as e:
         return nothing_runs(str(e), e.notes)
+    results = _run_tests(suite.tests, assignment, limits, t0 + assignment.budget_s, timeout_scale, jobs)
+    _point_at_dependencies(results)
+    return GradeReport(assignment, str(submission), results, time.monotonic() - t0, None, sb.kind)
 
-    budget_end = t0 + assignment.budget_s
+
+def _nothing_runs(assignment, submission, suite, sb: Sandbox, t0: float, msg: str, notes=()) -> GradeReport:
+    """Every test failed with one message (no module, a refused file, a failed import)."""
+    text = msg if sb.secure else f"{INSECURE}\n{msg}"
+    if notes:
+        text += "\n\nThe grader's sandbox refused:\n" + "\n".join(f"  - {n}" for n in notes)
+    results = [TestResult(t, 0.0, "failed", text, 0.0, tuple(notes)) for t in suite.tests]
+    return GradeReport(assignment, str(submission), results, time.monotonic() - t0, msg, sb.kind)
+
+
+def _run_tests(tests, assignment, limits: ChildLimits, budget_end: float, timeout_scale: float, jobs: int):
+    """Each test in its own child, ``jobs`` at once, until the grading's time budget ends."""
 
     def run(test: GradedTest) -> TestResult:
         left = budget_end - time.monotonic()
@@ -652,9 +297,7 @@ def grade_submission(
         return _run_one(test, limits, timeout)
 
     with ThreadPoolExecutor(max_workers=jobs) as pool:
-        results = list(pool.map(run, suite.tests))
-    _point_at_dependencies(results)
-    return GradeReport(assignment, str(submission), results, time.monotonic() - t0, None, sb.kind)
+        return list(pool.map(run, tests))
 
 
 def _point_at_dependencies(results: list[TestResult]) -> None:

@@ -1,7 +1,7 @@
 """How an assignment's graded tests are written: a registry with points and visibility, and checks
 whose failure messages say what is wrong and where to look.
 
-A graded test is a plain function of one argument, the :class:`~lab.grading.runner.Submission` proxy.
+A graded test is a plain function of one argument, the :class:`~lab.grading.child.Submission` proxy.
 It calls the student's functions through the proxy (each call runs in the child process and comes back
 as a value), compares what comes back against an independent oracle (SciPy, networkx, OpenCV, finite
 differences, the paper's equation written out in the test) and either returns (pass: full points, an
