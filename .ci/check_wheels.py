@@ -25,10 +25,11 @@ INDEX = "https://pypi.org/simple/"
 PYTHONS = ("3.11", "3.12", "3.13")  # pyproject's requires-python
 PLATFORMS = {  # uv's --python-platform names, with the oldest OS a wheel must run on
     "Linux x86_64": "x86_64-manylinux_2_28",  # glibc 2.28: Debian 10, Ubuntu 20.04, RHEL 8
-    "macOS arm64": "aarch64-apple-darwin",  # macOS 14 (MACOSX_DEPLOYMENT_TARGET below): every Apple silicon Mac runs it
+    "macOS arm64": "aarch64-apple-darwin",  # macOS 14 (MACOS below), which every Apple silicon Mac runs
     "Windows x86_64": "x86_64-pc-windows-msvc",
 }
-MACOS = "14.0"  # pybullet-arm64 3.2.8's cp313 wheel is macosx_14_0_arm64 (cp311/cp312: universal2 from 10.9/10.13)
+# pybullet-arm64 3.2.8's cp313 wheel is macosx_14_0_arm64 (its cp311/cp312 wheels: universal2, 10.9/10.13)
+MACOS = "14.0"
 TARGETS = [(name, plat, py) for name, plat in PLATFORMS.items() for py in PYTHONS]
 
 
@@ -51,7 +52,10 @@ def main() -> int:
     try:
         urllib.request.urlopen(INDEX + "pip/", timeout=30).close()
     except OSError as e:
-        print(f"check_wheels: cannot reach the package index {INDEX} ({e}); this check needs it", file=sys.stderr)
+        print(
+            f"check_wheels: cannot reach the package index {INDEX} ({e}); this check needs it",
+            file=sys.stderr,
+        )
         return 2
 
     lock = run(["uv", "lock", "--check"])
@@ -69,14 +73,14 @@ def main() -> int:
         if exp.returncode != 0:
             print(f"FAIL uv export: {last_error(exp)}")
             return 1
-        failed = []
+        failed, out = [], Path(tmp) / "resolved.txt"
         for name, plat, py in TARGETS:
             p = run(
                 ["uv", "pip", "compile", str(pins), "--only-binary", ":all:", "--python-platform", plat,
-                 "--python-version", py, "--index-url", INDEX, "--no-header", "--quiet", "-o", str(Path(tmp) / "out.txt")]
+                 "--python-version", py, "--index-url", INDEX, "--no-header", "--quiet", "-o", str(out)]
             )  # fmt: skip
             if p.returncode == 0:
-                n = sum(1 for ln in (Path(tmp) / "out.txt").read_text().splitlines() if "==" in ln)
+                n = sum(1 for ln in out.read_text().splitlines() if "==" in ln)
                 print(f"ok   {name:15s} Python {py}: {n} packages, all wheels")
             else:
                 failed.append((name, py))
