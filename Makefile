@@ -4,7 +4,10 @@
 # none is there); nothing is compiled (pyproject.toml: [tool.uv] no-build).
 UV      ?= uv
 RUN     := $(UV) run --locked
-# pytest-xdist on the machine's cores (make test JOBS=0: one process); --durations: the slowest tests
+# pytest-xdist on the machine's cores (make test JOBS=0: one process); --durations: the slowest tests.
+# Measured on a fresh clone, 2 shared cores: 604 tests in 1046 s with one process, 623 s with -n auto.
+# Workers share the test cache (.lab-cache-test): a database or table is written to a per-process
+# temporary file and renamed, so two workers building the same one at once waste time, never a file.
 JOBS    ?= auto
 PYTEST  := $(RUN) pytest -q -n $(JOBS) --durations=15
 
