@@ -1,35 +1,48 @@
-# The two commands a new user runs (README): `make demo` and `make test`.
-# Each creates .venv with pip when it is missing; nothing needs a compiler.
-PYTHON ?= python3
-VENV   ?= .venv
-PY     := $(VENV)/bin/python
-STAMP  := $(VENV)/.installed-dev
+# The two commands a new user runs (README): `make demo` and `make test`. Without make (Windows,
+# PowerShell): `uv run lab demo` and `uv run pytest -n auto --durations=15`, the same commands.
+# uv makes .venv from uv.lock, the versions CI tested, with a Python 3.11-3.13 (it installs one when
+# none is there); nothing is compiled (pyproject.toml: [tool.uv] no-build).
+UV      ?= uv
+RUN     := $(UV) run --locked
+# pytest-xdist on the machine's cores (make test JOBS=0: one process); --durations: the slowest tests.
+# Measured on a fresh clone, 2 shared cores: 604 tests in 1046 s with one process, 623 s with -n auto.
+# Workers share the test cache (.lab-cache-test): a database or table is written to a per-process
+# temporary file and renamed, so two workers building the same one at once waste time, never a file.
+JOBS    ?= auto
+PYTEST  := $(RUN) pytest -q -n $(JOBS) --durations=15
 
-.PHONY: demo test test-fast notebooks bench lint clean
+.PHONY: demo test test-fast notebooks bench lint lock check-wheels clean setup
 
-$(STAMP): pyproject.toml
-	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[dev]'
-	@touch $(STAMP)
+# Before uv: uv itself, and a Python in the supported range (else one line saying what to install).
+setup:
+	@command -v $(UV) >/dev/null 2>&1 || { echo "make: uv is not installed; install it: python3 -m pip install uv (or see https://docs.astral.sh/uv/getting-started/installation/)" >&2; exit 1; }
+	@$(UV) python find >/dev/null 2>&1 || $(UV) python install --quiet 2>/dev/null || { echo "make: lab needs Python 3.11-3.13 and found $$(python3 --version 2>/dev/null || echo no python3), and uv could not download one; install Python 3.12 (python.org, your package manager, or uv python install 3.12 where downloads work)" >&2; exit 1; }
 
-demo: $(STAMP)
-	$(VENV)/bin/lab demo --out out/demo
+demo: setup
+	$(RUN) lab demo --out out/demo
 
-test: $(STAMP)
-	$(PY) -m pytest -q --durations=15
+test: setup
+	$(PYTEST)
 
-test-fast: $(STAMP)
-	$(PY) -m pytest -q -m "not slow"
+test-fast: setup
+	$(PYTEST) -m "not slow"
 
-notebooks: $(STAMP)
-	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[dev,notebooks]'
-	$(VENV)/bin/jupyter lab notebooks/
+notebooks: setup
+	$(RUN) --extra notebooks lab notebooks
 
-bench: $(STAMP)
-	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+bench: setup
+	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(RUN) python $$b || exit 1; done
 
-lint: $(STAMP)
-	$(VENV)/bin/ruff check lab tests benchmarks
+lint: setup
+	$(RUN) ruff check lab tests benchmarks
+
+# Refresh the pins (then `make check-wheels`, run the tests, commit uv.lock).
+lock:
+	$(UV) lock --upgrade
+
+# What CI checks: every supported platform and Python resolves to wheels (needs https://pypi.org).
+check-wheels:
+	python3 .ci/check_wheels.py
 
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf .venv out .pytest_cache

@@ -3,9 +3,6 @@ end to end in the simulator with the ground-truth stand-in navigator, scored aga
 
 import json
 import math
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +10,7 @@ from nav_fakes import KinematicRobot
 from search_standin import truth_navigator
 
 import lab.search.agent as agent_mod
+from lab.contract import problems
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
 from lab.navigation import GridSpec, drive_to
@@ -220,37 +218,14 @@ def test_strategy_names():
 
 # --- end to end in the lab room -------------------------------------------------------------------------
 SCENE = load_scene("lab_room")
-CONTRACT = {
-    "object": str,
-    "found": bool,
-    "true_pose": (list, dict),
-    "estimated_pose": (list, dict, type(None)),
-    "position_error_m": (int, float, type(None)),
-    "orientation_error_deg": (int, float, type(None)),
-    "path_length_m": (int, float),
-    "global_searches": int,
-    "local_searches": int,
-    "collisions": int,
-    "sim_time_s": (int, float),
-    "wall_time_s": (int, float),
-    "seed": int,
-}
 
 
-def check_contract(d: dict, tmp_path: Path) -> None:
-    """The fields of design.md's ``lab search`` contract; and the shared checker when it is there."""
-    d = json.loads(json.dumps(d))  # what a reader of the file gets
-    for k, typ in CONTRACT.items():
-        assert k in d and isinstance(d[k], typ) and not (typ is int and isinstance(d[k], bool)), k
-    tool = Path(__file__).resolve().parents[2] / "shared" / "tools" / "check_contract.py"
-    if tool.is_file():
-        f = tmp_path / "search.json"
-        f.write_text(json.dumps(d))
-        r = subprocess.run([sys.executable, str(tool), "search", str(f)], capture_output=True, text=True)
-        assert r.returncode == 0, r.stdout
+def check_contract(d: dict) -> None:
+    """design.md's ``lab search`` contract (lab/schemas/search.schema.json), as the file reads."""
+    assert problems("search", json.loads(json.dumps(d))) == []
 
 
-def test_closed_loop_finds_the_toy_block(tmp_path):
+def test_closed_loop_finds_the_toy_block():
     res = run_search(
         "toy_block", seed=0, place=SCENE.body("toy_block").pose, max_time=120.0, navigate=truth_navigator
     )
@@ -261,14 +236,14 @@ def test_closed_loop_finds_the_toy_block(tmp_path):
     assert res.sim_time_s <= 120.0
     assert res.camera_frame_error["position_m"] <= 0.02 and res.camera_frame_error["orientation_deg"] <= 10.0
     assert res.odometry_error_m < 0.05
-    check_contract(res.to_json(), tmp_path)
+    check_contract(res.to_json())
 
 
-def test_glossy_cup_ends_not_found_at_its_budget_and_the_mass_moves_on(tmp_path):
+def test_glossy_cup_ends_not_found_at_its_budget_and_the_mass_moves_on():
     res = run_search("glossy_cup", seed=1, max_time=100.0, navigate=truth_navigator)
     assert not res.found and "budget" in res.reason
     assert 100.0 <= res.sim_time_s <= 100.5 and res.collisions == 0
-    check_contract(res.to_json(), tmp_path)
+    check_contract(res.to_json())
     snaps = res.trace.agent.snapshots
     failed = [k for k, s in enumerate(snaps) if s.label == "local search failed"]
     assert len(failed) >= 3

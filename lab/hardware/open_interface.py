@@ -1,7 +1,7 @@
 """The iRobot Create 2's Open Interface (OI): opcodes, sensor packets, and the byte codec (no I/O).
 
-The protocol (see ``/work/shared/reference/hardware-protocols.md`` section 2 and the Create 2 OI spec),
-binary, 115200 8N1:
+The protocol (iRobot, *Create 2 Open Interface (OI) Specification based on the iRobot Roomba 600*, the
+public 2016/2018 editions), binary, 115200 8N1:
 
 * mode opcodes Start 128 (-> Passive), Safe 131, Full 132, Stop 173; leave >= 20 ms between them;
 * Drive Direct 145: ``[145][right hi][right lo][left hi][left lo]``, big-endian int16 mm/s, **right wheel

@@ -1,7 +1,7 @@
 """Directed Perception / FLIR PTU-D46 pan-tilt unit driver: the ASCII protocol over a serial port.
 
-The protocol (PTU-D46 User's Manual v2.14.0, section 4; notes in
-``/work/shared/reference/hardware-protocols.md`` section 1):
+The protocol (Directed Perception, *Pan-Tilt Unit-D46 Series User's Manual*, v2.14.0, section 4, "the
+ASCII command protocol"; FLIR's D48E/E-series manuals use the same command set):
 
 * a command is letters plus an optional signed integer, ended by a space or CR (``PP-500 ``);
 * replies: ``*`` (done), ``* <value>`` (query), ``! <message>`` (refused), each ended by CR LF;

@@ -1,0 +1,1 @@
+"""JSON Schema files of the command-line contract (read through :mod:`lab.contract`)."""
