@@ -155,9 +155,6 @@ def test_identification_agent_unchanged_on_the_emulators_with_rendered_frames():
     from lab.identification.agent import AgentConfig, IdentificationAgent
     from lab.training import get_database
 
-    class Enough(Exception):
-        pass
-
     true_model = 1
     with rehearsal(REHEARSAL_TOML, true_model=true_model, mover="static", seed=0) as r:
         robot, create, ptu = r.robot, r.emulators.create, r.emulators.ptu
@@ -166,22 +163,12 @@ def test_identification_agent_unchanged_on_the_emulators_with_rendered_frames():
             [get_database(n, progress=False) for n in ("M0", "M1", "M2", "M3")],
             planner="lut",
             seed=0,
-            config=AgentConfig(max_actions=2, max_time_s=120.0),
+            config=AgentConfig(max_actions=2, max_time_s=300.0),  # wall clock: room for a loaded machine
             evaluator=_small_lookup_tables(robot.camera),
         )
-        after_second = []
-
-        def on_step(a, frame):  # end the test a few steps after the second decision
-            if len(a.decisions) >= 2:
-                after_second.append(frame.t)
-                if len(after_second) >= 3:
-                    raise Enough
-
-        agent.on_step = on_step
-        try:
-            agent.run()
-        except Enough:
-            pass
+        # the whole episode: two goals, then the final look from the last one with the base at rest (the
+        # wall-clock rehearsal's frames lag the head under load while it moves: the pose is checked at rest)
+        agent.run()
         truth = r.truth()
         moved = math.hypot(create.x, create.y)
         head_moves = [c for c in ptu.command_names() if re.match(r"^[PT]P[-+]?\d+$", c, re.IGNORECASE)]
