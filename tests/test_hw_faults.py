@@ -135,7 +135,7 @@ def test_unplug_the_base_during_a_run(rig, record_property):
     assert wait_until(
         lambda: "H" in [c for t, c in ptu.commands if t >= t_ptu], 2.0
     )  # what can still be reached is stopped
-    assert wait_until(lambda: not ptu._busy and ptu.position_steps()["P"] == ptu.target["P"], 0.2)
+    assert wait_until(lambda: not ptu._busy and ptu.position_steps()["P"] == ptu.target["P"], 2.0)
     for call in (lambda: robot.drive(0.1, 0.0), lambda: robot.command_pan_tilt(0.0, 0.0), robot.enable):
         with pytest.raises(ConnectionLost):
             call()
@@ -168,7 +168,7 @@ def test_unplug_the_ptu_during_a_run(rig):
     ptu.unplug()
     with pytest.raises(ConnectionLost, match=r"PTU-D46 on .*ttyPTU went away"):
         robot.command_pan_tilt(0.2, 0.0)
-    assert wait_until(lambda: create.first_zero_drive_after(t_c) is not None, 0.2)  # base commanded to stop
+    assert wait_until(lambda: create.first_zero_drive_after(t_c) is not None, 2.0)  # base commanded to stop
     assert create.wheel_speeds() == (0, 0)
     assert robot.state == "disconnected"
     with pytest.raises(ConnectionLost):
@@ -244,7 +244,7 @@ def test_silent_stream_stops_the_base(rig, record_property):
         robot.drive(0.1, 0.0)
     assert "stale_stream" in robot.read_state().faults
     create.mute_stream = False
-    assert wait_until(lambda: not robot.read_state().stale, 0.5)
+    assert wait_until(lambda: not robot.read_state().stale, 2.0)
     robot.drive(0.1, 0.0)
 
 
@@ -287,7 +287,7 @@ def test_cliff_trip_in_safe_mode(rig, record_property):
     assert create.trips and create.trips[0][0] - t_cliff < 0.02 + 2 * create.max_lateness_s
     assert create.wheel_speeds() == (0, 0)
     assert robot.state == "faulted" and not robot.enabled
-    assert any(e.kind == "safety_stop" for e in rig.events)
+    assert wait_until(lambda: any(e.kind == "safety_stop" for e in rig.events), 2.0)  # from the reader thread
     time.sleep(0.3)
     with pytest.raises(SafetyStop):
         robot.drive(0.1, 0.0)
