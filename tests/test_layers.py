@@ -68,3 +68,11 @@ def test_importing_the_algorithms_starts_neither_pybullet_nor_matplotlib():
     assert "lab.identification" in loaded and "lab.search" in loaded  # the check sees the imports
     assert not [m for m in loaded if m.split(".")[0] in ("pybullet", "matplotlib", "serial")]
     assert not [m for m in loaded if m.startswith(("lab.sim", "lab.viz", "lab.training", "lab.runs"))]
+
+
+def test_the_command_line_imports_numpy_only_after_its_blas_setting():
+    """``lab`` keeps OpenBLAS to one thread (``lab.cli._one_blas_thread``), which takes effect only
+    before numpy is first imported: importing the command imports neither numpy nor the library."""
+    code = "import sys, lab.cli; print(sorted(m for m in sys.modules if m == 'numpy' or m == 'lab.robot'))"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert r.stdout.strip() == "[]"

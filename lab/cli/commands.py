@@ -1,0 +1,273 @@
+"""What each ``lab`` command does: it checks its arguments and calls a run (:mod:`lab.runs`), the
+training (:mod:`lab.training`), the hardware's bring-up or the grader; imports happen inside each, so
+that ``lab --help`` starts fast and numpy is imported after the BLAS setting."""
+
+from __future__ import annotations
+
+import sys
+
+from lab.errors import LabError
+
+__all__ = ["HANDLERS"]
+
+
+def _cmd_worlds(args) -> int:
+    from lab.scene import list_worlds, load_scene
+
+    for name in list_worlds():
+        s = load_scene(name)
+        print(f"{name}: {s.description}")
+        for b in s.bodies:
+            print(f"  {b.name:20s} {b.shape:13s} {b.role}")
+        for m in s.models:
+            print(f"  {m.name:20s} box model     unique face {m.unique_face}")
+    return 0
+
+
+def _cmd_render(args) -> int:
+    import math
+
+    from lab.geometry import Pose2D
+    from lab.robot import SIM_CAMERA, CameraSpec
+    from lab.sim import RenderSettings, SimRobot, SimWorld, load_box_models
+    from lab.viz import disparity_picture, save_rgb
+
+    w, h = args.size
+    with SimWorld(args.world, RenderSettings(supersample=args.supersample)) as world:
+        spec = CameraSpec(w, h, args.fov, SIM_CAMERA.baseline)
+        cam = spec.camera(mount_R=(0.0, 0.0, world.scene.robot_mast_height))
+        if args.model:
+            models = {m.name: m for m in load_box_models()}
+            if args.model not in models:
+                raise LabError(f"unknown model {args.model!r}; models: {', '.join(models)}")
+            world.add_carrier(models[args.model], Pose2D(0, 0, 0), math.radians(args.model_yaw))
+        start = None if args.at is None else Pose2D(args.at[0], args.at[1], math.radians(args.at[2]))
+        robot = SimRobot(world, cam, start=start)
+        pan, tilt = (math.radians(v) for v in args.pan_tilt)
+        robot.pan_tilt_limits.check(pan, tilt)
+        robot.enable()
+        robot.command_pan_tilt(pan, tilt)
+        robot.wait_pan_tilt(timeout=10.0)
+        frame = robot.capture_stereo()
+        args.out.mkdir(parents=True, exist_ok=True)
+        save_rgb(args.out / "left.png", frame.left)
+        save_rgb(args.out / "right.png", frame.right)
+        save_rgb(args.out / "disparity.png", disparity_picture(frame.left, frame.right))
+    print(f"wrote {args.out / 'left.png'}, {args.out / 'right.png'}, {args.out / 'disparity.png'}")
+    return 0
+
+
+def _cmd_train(args) -> int:
+    import time
+
+    from lab.training.databases import TrainingParams, database_path, get_database, trainable_objects
+
+    names = list(trainable_objects())
+    if args.list:
+        print("\n".join(names))
+        return 0
+    unknown = [n for n in args.objects if n not in names]
+    if unknown:
+        raise LabError(f"unknown object(s) {', '.join(unknown)}; trainable objects: {', '.join(names)}")
+    folder = args.cache / "databases" if args.cache else None
+    params = TrainingParams(step_deg=args.step_deg)
+    for name in args.objects or names:
+        t0 = time.perf_counter()
+        db = get_database(name, folder, params, rebuild=args.force)
+        print(
+            f"{name}: {len(db)} features from {db.seen_from.shape[1]} views "
+            f"({time.perf_counter() - t0:.1f} s) -> {database_path(name, folder)}"
+        )
+    return 0
+
+
+def _cmd_identify(args) -> int:
+    import json as _json
+
+    if args.max_actions < 0:
+        raise LabError(f"--max-actions must be >= 0, got {args.max_actions}")
+    from lab.runs.identify import run_identify
+
+    res = run_identify(
+        args.true_model,
+        args.seed,
+        args.mover,
+        args.planner,
+        args.max_actions,
+        None if args.robot is not None else args.out,
+        args.json,
+        args.max_time,
+        record=args.record,
+        keep_direction=args.keep_direction,
+        robot_config=args.robot,
+        progress=print if args.robot is not None else None,
+    )
+    keys = ["true_model", "identified_model", "success", "actions", "sim_time_s", "wall_time_s"]
+    keys += ["final_posterior", "pose_error"] + (["watchdog_stops"] if args.robot is not None else [])
+    summary = {k: res[k] for k in keys}
+    print(_json.dumps(summary, indent=2))
+    return 0
+
+
+def _cmd_search(args) -> int:
+    import json as _json
+
+    from lab.runs.placement import searchable_objects
+
+    names = searchable_objects()
+    if args.list_objects:
+        print("\n".join(names))
+        return 0
+    if args.object not in names:
+        raise LabError(f"unknown object {args.object!r}; searchable objects: {', '.join(names)}")
+    if args.robot is not None:
+        raise LabError("`lab search --robot` is not supported yet: the search runs in the simulator only")
+    from lab.io import write_json_atomic
+    from lab.runs.search import navigator_factory, run_search
+
+    navigators = []
+
+    def navigate(robot, spec):  # keeps the Navigator for its costmap (the figures)
+        nav = navigator_factory(robot, spec)
+        navigators.append(nav.navigator)
+        return nav
+
+    res = run_search(
+        args.object,
+        args.seed,
+        place=args.place,
+        strategy=args.strategy,
+        max_time=args.max_time,
+        navigate=navigate,
+        obstacles=args.obstacles,
+        progress=True,
+        record=args.record,
+    )
+    data = res.to_json()
+    if args.json is not None:
+        write_json_atomic(args.json, data)
+    if args.out is not None:
+        from lab.viz.search import write_figures
+
+        cm = navigators[0].costmap if navigators else None
+        files = write_figures(
+            res, args.out, None if cm is None else cm.state, None if cm is None else cm.spec
+        )
+        write_json_atomic(args.out / "search.json", data)
+        print(f"wrote {len(files)} figures and search.json into {args.out}", file=sys.stderr)
+    keys = ("object", "found", "position_error_m", "orientation_error_deg", "path_length_m", "sim_time_s")
+    print(_json.dumps({k: data.get(k) for k in keys}, indent=2))
+    return 0
+
+
+def _cmd_hardware(args) -> int:
+    from lab.hardware import cli as hw
+
+    if args.hw_command == "emulate":
+        return hw.emulate(args.dir)
+    return hw.check(args.config, emulate=args.emulate)
+
+
+def _cmd_tables(args) -> int:
+    import time
+
+    from lab.training.databases import get_database
+    from lab.training.tables import TableParams, box_model_names, get_model_tables, tables_path
+
+    names = box_model_names()
+    unknown = [n for n in args.models if n not in names]
+    if unknown:
+        raise LabError(f"unknown model(s) {', '.join(unknown)}; box models: {', '.join(names)}")
+    if args.repeats < 1:
+        raise LabError(f"--repeats must be at least 1, got {args.repeats}")
+    db_folder = args.cache / "databases" if args.cache else None
+    folder = args.cache / "tables" if args.cache else None
+    dbs = [get_database(n, db_folder) for n in names]
+    params = TableParams(repeats=args.repeats)
+    t0 = time.perf_counter()
+    for n in args.models or names:  # one file per true model, built only when missing or stale
+        t1 = time.perf_counter()
+        t = get_model_tables(n, dbs, folder, params, rebuild=args.force)
+        V = len(t.viewpoints)
+        print(
+            f"{n}: {len(t.names)} tables x {V} training poses against {', '.join(t.names)} "
+            f"({time.perf_counter() - t1:.1f} s) -> {tables_path(n, folder)}"
+        )
+    print(f"done in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _cmd_notebooks(args) -> int:
+    import importlib.util
+    import os
+    import subprocess
+
+    from lab.paths import repo_root
+
+    folder = repo_root() / "notebooks"
+    notebooks = sorted(folder.glob("*.ipynb"))
+    if not notebooks:
+        raise LabError(f"no notebooks in {folder}: `lab notebooks` needs a checkout of the repository")
+    if args.list:
+        for p in notebooks:
+            print(p.name)
+        return 0
+    if importlib.util.find_spec("jupyterlab") is None:
+        raise LabError("JupyterLab is not installed: pip install -e '.[notebooks]' (or run `make notebooks`)")
+    env = dict(os.environ, **({"LAB_FAST": "1"} if args.fast else {}))
+    cmd = [sys.executable, "-m", "jupyterlab", *(["--no-browser"] if args.no_browser else [])]
+    return subprocess.call(cmd, cwd=folder, env=env)
+
+
+def _cmd_demo(args) -> int:
+    from lab.runs.demo import run_demo
+
+    if args.max_actions < 0:
+        raise LabError(f"--max-actions must be >= 0, got {args.max_actions}")
+    if not args.max_time > 0:
+        raise LabError(f"--max-time must be > 0 s, got {args.max_time}")
+    report = run_demo(
+        args.out,
+        seed=args.seed,
+        true_model=args.true_model,
+        planner=args.planner,
+        mover=args.mover,
+        max_actions=args.max_actions,
+        max_time_s=args.max_time,
+        record=args.record,
+        robot=args.robot,
+    )
+    print(f"demo: figures, identify.json and the report are in {report.parent}/ (open {report})")
+    return 0
+
+
+def _cmd_grade(args) -> int:
+    from lab.grading.cli import run_grade
+
+    return run_grade(args)
+
+
+def _cmd_assignments(args) -> int:
+    from lab.grading.cli import run_assignments
+
+    if args.action == "release" and args.out_dir is None:
+        raise LabError(
+            "`lab assignments release` needs OUT_DIR, the folder to write the student release into"
+        )
+    return run_assignments(args)
+
+
+#: The function of each command.
+HANDLERS = {
+    "assignments": _cmd_assignments,
+    "demo": _cmd_demo,
+    "grade": _cmd_grade,
+    "hardware": _cmd_hardware,
+    "identify": _cmd_identify,
+    "notebooks": _cmd_notebooks,
+    "render": _cmd_render,
+    "search": _cmd_search,
+    "tables": _cmd_tables,
+    "train": _cmd_train,
+    "worlds": _cmd_worlds,
+}
