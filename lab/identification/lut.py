@@ -154,7 +154,8 @@ class LookupTableEvaluator:
         Frames the robot observes at the goal; their evidence adds up.
     constants : Eq15Constants, optional
     shared : sequence of ndarray (N_j,) bool, optional
-        The models' shared features (default: ``tables.shared``, which :func:`get_tables` fills in).
+        The models' shared features (default: ``tables.shared``, which
+        :func:`lab.training.get_tables` fills in).
         Where the scoring pools shared evidence
         (:func:`~lab.identification.shared.pools_shared_evidence`), those features count
         alike for every model and cancel in Eq. (7), so ``W_ij`` counts only the others

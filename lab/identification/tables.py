@@ -199,7 +199,8 @@ class LookupTables:
     shared : sequence of ndarray (N_j,) bool, optional
         The shared features of the databases the tables were built from
         (:func:`~lab.identification.shared.shared_features`): what the lookup-table evaluator
-        leaves out of ``W`` where the scoring pools shared evidence. :func:`get_tables` fills it in.
+        leaves out of ``W`` where the scoring pools shared evidence; :func:`lab.training.get_tables`
+        fills it in.
 
     Attributes
     ----------

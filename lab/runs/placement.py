@@ -1,6 +1,6 @@
 """Where a searchable object may stand in a scene: on the floor, on a table or on a shelf.
 
-Used by the trials (:func:`lab.search.run_search`) to place the object by seed, and to refuse a
+Used by the trials (:func:`lab.runs.search.run_search`) to place the object by seed, and to refuse a
 placement that puts it inside a wall, outside the room, inside furniture or in mid-air. Footprints are
 the bodies' rectangles (boxes, tables, shelves, turned by their yaw) and circles (cylinders) on the
 floor; a placement's pose is the scene file's ``(x, y, z_underside, yaw_deg)``.
