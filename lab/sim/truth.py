@@ -37,10 +37,11 @@ class Truth:
         return r._true_pose
 
     def G_WC(self) -> np.ndarray:
-        """True pose of the robot's left camera frame C in the world."""
+        """True pose of the robot's left camera frame C in the world (the pan-tilt axes' true angles)."""
         r = self._w.robot
-        s = r.pan_tilt()
-        return r._true_pose.G() @ r.camera.G_RC(s.pan, s.tilt)
+        if r is None:
+            raise ConfigError("this world has no robot")
+        return r._true_G_WC()
 
     @property
     def collisions(self) -> int:
