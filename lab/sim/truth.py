@@ -44,6 +44,15 @@ class Truth:
         return r._true_G_WC()
 
     @property
+    def sensing(self):
+        """The robot's sensing draws of this episode (:class:`lab.sim.sensing.EpisodeSensing`): the
+        cameras the renderer uses, the light, the odometry's systematic errors, the pan-tilt's zeros."""
+        r = self._w.robot
+        if r is None:
+            raise ConfigError("this world has no robot")
+        return r._episode
+
+    @property
     def collisions(self) -> int:
         r = self._w.robot
         return 0 if r is None else r._collisions

@@ -405,17 +405,14 @@ class SimWorld:
         )
         return P.T.reshape(-1).tolist()  # column-major, as pybullet expects
 
-    def render_stereo(self, G_WC: np.ndarray, camera, right_camera=None, light_direction=None):
+    def render_stereo(self, G_WC: np.ndarray, camera, light_direction=None):
         """Left and right images of a rectified pair whose left optical frame is at ``G_WC``.
 
-        ``right_camera`` (default ``camera``) renders the right image from ``camera.baseline`` along
-        the left camera's x axis: the sensing profiles give it a shifted principal point (a
-        rectification residual). ``light_direction`` is passed to :meth:`render`.
+        ``light_direction`` (default ``RenderSettings.light_direction``) is passed to :meth:`render`.
         """
-        right_camera = camera if right_camera is None else right_camera
         left, _, _ = self.render(G_WC, camera, light_direction=light_direction)
         G_WC_right = G_WC @ translation(camera.baseline, 0.0, 0.0)
-        right, _, _ = self.render(G_WC_right, right_camera, light_direction=light_direction)
+        right, _, _ = self.render(G_WC_right, camera, light_direction=light_direction)
         return left, right
 
     def close(self) -> None:
