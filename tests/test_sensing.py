@@ -116,7 +116,8 @@ def test_odometry_drift_after_30_m_is_about_3_percent():
 
 
 def test_odometry_random_error_grows_with_the_square_root_of_distance():
-    errors = dataclasses.replace(OdometryErrors.none(), wheel_noise=0.007)
+    noise = OdometryErrors().wheel_noise
+    errors = dataclasses.replace(OdometryErrors.none(), wheel_noise=noise)
     draw = errors.draw(np.random.default_rng(0))  # all zero
     rng = np.random.default_rng(1)
     n, step = 4000, 0.05
@@ -129,8 +130,8 @@ def test_odometry_random_error_grows_with_the_square_root_of_distance():
             )
             s += ds_m
         stds.append(np.std(s - distance))
-    # the mean of two wheels: 0.007 * sqrt(d) / sqrt(2)
-    assert stds[0] == pytest.approx(0.007 / math.sqrt(2), rel=0.06)
+    # the mean of two wheels: wheel_noise * sqrt(d) / sqrt(2)
+    assert stds[0] == pytest.approx(noise / math.sqrt(2), rel=0.06)
     assert stds[1] / stds[0] == pytest.approx(2.0, rel=0.06)
 
 
@@ -152,20 +153,23 @@ def test_odometry_systematic_errors_have_their_stated_spread():
 
 
 def test_the_robot_integrates_the_odometry_errors():
+    # the systematic errors alone (no random wheel error), so that they can be checked exactly
+    sensing = {"profile": "realistic", "odometry": {"wheel_noise": 0.0}}
     with SimWorld("arena") as w:
-        r = SimRobot(w, start=Pose2D(-3.0, 0.0, 0.0), seed=5, sensing="realistic")
+        r = SimRobot(w, start=Pose2D(-3.0, 0.0, 0.0), seed=5, sensing=sensing)
         r.enable()
         for _ in range(40):
             r.drive(0.4, 0.0)
             r.step(0.1)
         d, true = w.truth.sensing.odometry, w.truth.robot_pose()
-        travelled = true.x + 3.0
-        odo = r.odometry()
-        scale = 1.0 + 0.5 * (d.e_left + d.e_right)
-        # the distance is scaled by the mean wheel error, up to the random error (7 mm / sqrt(m))
-        assert math.hypot(odo.x + 3.0, odo.y) == pytest.approx(travelled * scale, abs=0.01)
-        # and the heading curves by the wheels' difference over the track
-        assert odo.theta == pytest.approx(travelled * (d.e_right - d.e_left) / WHEEL_BASE, abs=0.03)
+    travelled, odo = true.x + 3.0, r.odometry()
+    assert travelled > 1.4 and true.y == 0.0 and true.theta == 0.0
+    # the heading curves by the wheels' difference over the track, the arc is scaled by their mean
+    assert odo.theta == pytest.approx(travelled * (d.e_right - d.e_left) / WHEEL_BASE, rel=1e-9)
+    arc = travelled * (1.0 + 0.5 * (d.e_left + d.e_right))
+    chord = arc * np.sinc(0.5 * odo.theta / np.pi)
+    assert math.hypot(odo.x + 3.0, odo.y) == pytest.approx(chord, rel=1e-9)
+    assert abs(arc / travelled - 1.0) > 1e-4  # this seed's scale error is visible
 
 
 # --- camera ---------------------------------------------------------------------------------------
