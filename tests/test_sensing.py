@@ -228,6 +228,17 @@ def test_gain_and_offset_mismatch_and_their_spread():
     assert tilt.max() <= 20.0 + 1e-9 and tilt.max() > 19.0
 
 
+def test_the_episode_light_reaches_the_renderer():
+    with SimWorld("lab_room") as w:
+        r = SimRobot(w, seed=2, sensing="realistic")
+        G_WC, camera = w.truth.G_WC(), r.camera
+        default, _, _ = w.render(G_WC, camera)
+        same, _, _ = w.render(G_WC, camera, light_direction=w.settings.light_direction)
+        moved, _, _ = w.render(G_WC, camera, light_direction=w.truth.sensing.camera.light_direction)
+    assert np.array_equal(default, same)
+    assert np.abs(default.astype(float) - moved).mean() > 0.5  # the shading changed
+
+
 def test_blur_is_a_gaussian_of_the_stated_width():
     errors = dataclasses.replace(CameraErrors.none(), blur_sigma_px=0.5)
     img = np.zeros((64, 64, 3), dtype=np.uint8)
