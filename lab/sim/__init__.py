@@ -7,18 +7,30 @@ truth is reached only through ``SimWorld.truth``.
 
 from lab.scene import Scene, list_worlds, load_scene
 from lab.sim.robot import OdometryNoise, SimRobot
+from lab.sim.sensing import (
+    CameraErrors,
+    OdometryErrors,
+    PanTiltErrors,
+    SensingProfile,
+    sensing_profile,
+)
 from lab.sim.world import Carrier, RenderSettings, SimWorld, box_model, load_box_models, viewpoint_G_WC
 
 __all__ = [
+    "CameraErrors",
     "Carrier",
+    "OdometryErrors",
     "OdometryNoise",
+    "PanTiltErrors",
     "RenderSettings",
     "Scene",
+    "SensingProfile",
     "SimRobot",
     "SimWorld",
     "box_model",
     "list_worlds",
     "load_box_models",
     "load_scene",
+    "sensing_profile",
     "viewpoint_G_WC",
 ]

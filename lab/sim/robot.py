@@ -8,14 +8,16 @@ same on both. Simulated time advances only in :meth:`SimRobot.step`, in sub-step
 2. the base's velocity slews towards its target within the acceleration limits;
 3. the base moves (exact unicycle arc); if its footprint would touch a body, it stays where it was, its
    velocity is zeroed and a collision is counted (the bump sensor's view of it);
-4. wheel odometry integrates the same motion with seeded noise (:class:`OdometryNoise`);
-5. the pan-tilt moves towards its targets at its speed;
+4. wheel odometry integrates the same motion with seeded noise (:class:`OdometryNoise` under the
+   ``ideal`` sensing profile, :class:`~lab.sim.sensing.OdometryErrors` under ``realistic``);
+5. the pan-tilt moves towards its targets at its speed (its axes through the profile's backlash);
 6. the world's clock and carriers advance.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +34,7 @@ from lab.robot import (
     StereoFrame,
     check_finite,
 )
+from lab.sim.sensing import EpisodeSensing, SensingProfile, backlash, sensing_profile
 from lab.sim.world import SimWorld, pybullet
 
 __all__ = ["OdometryNoise", "SimRobot"]
@@ -74,12 +77,20 @@ class SimRobot(Robot):
     start : Pose2D, optional
         Default: the scene's ``[robot] start``.
     seed : int
-        Seeds the odometry noise.
-    odometry_noise, base_limits, pan_tilt_limits : optional
+        Seeds the odometry noise and every draw of the sensing profile.
+    odometry_noise : OdometryNoise, optional
+        The odometry's noise under a profile without odometry errors (``ideal``); a profile with
+        odometry errors (``realistic``) has its own, and passing both is a ConfigError.
+    base_limits, pan_tilt_limits : optional
     pan_tilt_speed : float [rad/s]
         The unit's default slew speed.
     dt_physics : float [s]
         Sub-step of :meth:`step`.
+    sensing : SensingProfile, str or mapping
+        The sensing errors (:func:`lab.sim.sensing.sensing_profile`): ``"ideal"`` (the default, exact
+        images and pan-tilt) or ``"realistic"``. Under either the robot reports the nominal ``camera``,
+        the commanded pan-tilt angles and its odometry; only the renders and ``world.truth`` see the
+        perturbed calibration, the axes' true angles and the true pose.
     """
 
     HEIGHT = 0.3  # base height [m] (the mast above it is thin and has no collision shape)
@@ -95,6 +106,7 @@ class SimRobot(Robot):
         pan_tilt_limits: PanTiltLimits | None = None,
         pan_tilt_speed: float = math.radians(60.0),
         dt_physics: float = 0.02,
+        sensing: SensingProfile | str | Mapping = "ideal",
     ):
         if world.robot is not None:
             raise ConfigError("this world already has a robot")
@@ -107,8 +119,15 @@ class SimRobot(Robot):
         if not 0 < dt_physics <= 0.1:
             raise ConfigError(f"dt_physics must be within (0, 0.1] s, got {dt_physics}")
         self.dt_physics = dt_physics
+        self._sensing = sensing_profile(sensing)
+        if odometry_noise is not None and not self._sensing.odometry.is_none:
+            raise ConfigError(
+                f"odometry_noise applies only without odometry errors (sensing 'ideal'); sensing "
+                f"{self._sensing.name!r} has its own (its odometry section)"
+            )
         self._noise = odometry_noise or OdometryNoise()
         self._rng = np.random.default_rng(seed)
+        self._episode = EpisodeSensing(self._sensing, seed, self._camera, world.settings.light_direction)
         if start is None:
             x, y, h = world.scene.robot_start
             start = Pose2D(x, y, math.radians(h))
@@ -119,6 +138,7 @@ class SimRobot(Robot):
         self._last_cmd_t = -math.inf
         self._pan = self._tilt = 0.0
         self._pan_target = self._tilt_target = 0.0
+        self._pan_axis = self._tilt_axis = 0.0  # the geared axes (backlash), before the zero offsets
         self._pt_speed = pan_tilt_speed
         self._enabled = False
         self._estop = False
@@ -170,6 +190,11 @@ class SimRobot(Robot):
         return self._camera
 
     @property
+    def sensing(self) -> SensingProfile:
+        """The sensing profile this robot's sensors follow."""
+        return self._sensing
+
+    @property
     def pan_tilt_limits(self) -> PanTiltLimits:
         return self._pt_limits
 
@@ -212,12 +237,23 @@ class SimRobot(Robot):
         self._check_open()
         if after is not None and after >= self.world.t:
             self.step(after - self.world.t + self.dt_physics)
-        G_WC = self._true_pose.G() @ self._camera.G_RC(self._pan, self._tilt)
-        left, right = self.world.render_stereo(G_WC, self._camera)
+        G_WC = self._true_G_WC()
+        if self._sensing.camera.is_none:
+            left, right = self.world.render_stereo(G_WC, self._camera)
+        else:
+            left, right = self._episode.render_stereo(self.world, G_WC)
         return StereoFrame(self.world.t, left, right, self._camera, self.pan_tilt(), self._odom)
 
     def odometry(self) -> Pose2D:
         return self._odom
+
+    def _true_G_WC(self) -> np.ndarray:
+        """The left camera's true pose: the true base, the axes' true angles (``world.truth.G_WC``)."""
+        if self._sensing.pan_tilt.is_none:
+            return self._true_pose.G() @ self._camera.G_RC(self._pan, self._tilt)
+        d = self._episode.pan_tilt
+        pan, tilt = self._pan_axis + d.pan_offset, self._tilt_axis + d.tilt_offset
+        return self._true_pose.G() @ self._camera.G_RC(pan, tilt)
 
     def pan_tilt(self) -> PanTiltState:
         moving = abs(self._pan - self._pan_target) > 1e-9 or abs(self._tilt - self._tilt_target) > 1e-9
@@ -304,18 +340,28 @@ class SimRobot(Robot):
                 self._in_contact = self._in_contact and self._collides(margin=0.02)
                 ds = v_mid * h
                 dth = w_mid * h
-                n = self._noise
-                ds_m = ds * (1.0 + n.scale * self._rng.standard_normal())
-                dth_m = (
-                    dth * (1.0 + n.turn * self._rng.standard_normal())
-                    + n.drift * abs(ds) * self._rng.standard_normal()
-                )
+                ds_m, dth_m = self._measure_motion(ds, dth)
                 self._odom = _unicycle_increment(self._odom, ds_m, dth_m)
                 self._true_pose = new
         step = self._pt_speed * h
         self._pan += float(np.clip(self._pan_target - self._pan, -step, step))
         self._tilt += float(np.clip(self._tilt_target - self._tilt, -step, step))
+        width = math.radians(self._sensing.pan_tilt.backlash_deg)
+        self._pan_axis = backlash(self._pan_axis, self._pan, width)
+        self._tilt_axis = backlash(self._tilt_axis, self._tilt, width)
         self.world.step(h)
+
+    def _measure_motion(self, ds: float, dth: float) -> tuple[float, float]:
+        """The odometry's distance [m] and heading change [rad] for a true arc ``ds``, ``dth``."""
+        if not self._sensing.odometry.is_none:
+            return self._episode.odometry_increment(ds, dth, self._base_limits.wheel_base)
+        n = self._noise
+        ds_m = ds * (1.0 + n.scale * self._rng.standard_normal())
+        dth_m = (
+            dth * (1.0 + n.turn * self._rng.standard_normal())
+            + n.drift * abs(ds) * self._rng.standard_normal()
+        )
+        return ds_m, dth_m
 
 
 def _unicycle_increment(p: Pose2D, ds: float, dth: float) -> Pose2D:

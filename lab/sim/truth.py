@@ -37,10 +37,20 @@ class Truth:
         return r._true_pose
 
     def G_WC(self) -> np.ndarray:
-        """True pose of the robot's left camera frame C in the world."""
+        """True pose of the robot's left camera frame C in the world (the pan-tilt axes' true angles)."""
         r = self._w.robot
-        s = r.pan_tilt()
-        return r._true_pose.G() @ r.camera.G_RC(s.pan, s.tilt)
+        if r is None:
+            raise ConfigError("this world has no robot")
+        return r._true_G_WC()
+
+    @property
+    def sensing(self):
+        """The robot's sensing draws of this episode (:class:`lab.sim.sensing.EpisodeSensing`): the
+        cameras the renderer uses, the light, the odometry's systematic errors, the pan-tilt's zeros."""
+        r = self._w.robot
+        if r is None:
+            raise ConfigError("this world has no robot")
+        return r._episode
 
     @property
     def collisions(self) -> int:

@@ -317,6 +317,7 @@ class SimWorld:
         want_depth: bool = False,
         want_seg: bool = False,
         supersample: int | None = None,
+        light_direction=None,
     ):
         """Render the view of a pinhole camera whose optical frame C is at ``G_WC``.
 
@@ -329,6 +330,8 @@ class SimWorld:
         want_depth, want_seg : bool
             Also return metric depth [m] along the optical axis and the body id per pixel
             (both at the rendered resolution, so use ``supersample=1`` for ground truth).
+        light_direction : tuple of 3 floats, optional
+            Direction towards the light, world frame; default ``RenderSettings.light_direction``.
 
         Returns
         -------
@@ -355,7 +358,7 @@ class SimWorld:
             view,
             proj,
             shadow=int(self.settings.shadows),
-            lightDirection=self.settings.light_direction,
+            lightDirection=self.settings.light_direction if light_direction is None else light_direction,
             renderer=renderer,
             flags=flags,
         )
@@ -402,10 +405,14 @@ class SimWorld:
         )
         return P.T.reshape(-1).tolist()  # column-major, as pybullet expects
 
-    def render_stereo(self, G_WC: np.ndarray, camera):
-        """Left and right images of a rectified pair whose left optical frame is at ``G_WC``."""
-        left, _, _ = self.render(G_WC, camera)
-        right, _, _ = self.render(G_WC @ translation(camera.baseline, 0.0, 0.0), camera)
+    def render_stereo(self, G_WC: np.ndarray, camera, light_direction=None):
+        """Left and right images of a rectified pair whose left optical frame is at ``G_WC``.
+
+        ``light_direction`` (default ``RenderSettings.light_direction``) is passed to :meth:`render`.
+        """
+        left, _, _ = self.render(G_WC, camera, light_direction=light_direction)
+        G_WC_right = G_WC @ translation(camera.baseline, 0.0, 0.0)
+        right, _, _ = self.render(G_WC_right, camera, light_direction=light_direction)
         return left, right
 
     def close(self) -> None:
