@@ -17,6 +17,10 @@ the median actions of ``lut`` to ``random`` over the seeds both ran. It writes t
 
 An episode that did not identify its model counts ``max_actions`` actions (a lower bound: the budget
 ran out), and the report lists every failure with its final probabilities.
+
+**Which seeds.** By default the report split (:mod:`lab.evaluation`: seeds 100000-100024) under the
+``realistic`` sensing profile; the report prints the split and gives every success rate with its Wilson
+95 % interval. Parameters are tuned on seeds below 1000 (``--seeds 0-19``), never on the report split.
 """
 
 from __future__ import annotations
@@ -30,6 +34,8 @@ import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+
+from lab.evaluation import report_seeds, split_of, wilson_interval
 
 
 def _range(text: str) -> list[int]:
@@ -74,6 +80,7 @@ def run_episode(out: Path, planner: str, model: int, seed: int, args) -> dict | 
     ]
     if args.keep_direction is not None:
         cmd += ["--keep-direction", str(args.keep_direction)]
+    cmd += ["--sensing", args.sensing]
     t0 = time.perf_counter()
     r = subprocess.run(cmd, capture_output=True, text=True)
     load = os.getloadavg()[0]
@@ -116,7 +123,7 @@ def reached(res: dict, threshold: float = 0.95) -> bool:
 
 
 def summarise(out: Path, planners, models, seeds, max_actions: int) -> dict:
-    summary: dict = {"planners": {}, "models": models, "seeds": seeds}
+    summary: dict = {"planners": {}, "models": models, "seeds": seeds, "split": split_of(seeds)}
     for planner in planners:
         rows = []
         for m in models:
@@ -149,6 +156,8 @@ def summarise(out: Path, planners, models, seeds, max_actions: int) -> dict:
         summary["planners"][planner] = {
             "episodes": len(rows),
             "success": len(ok),
+            "success_wilson95": list(wilson_interval(len(ok), len(rows))) if rows else None,
+            "sensing": sorted({r.get("sensing", "ideal") for r in rows}),
             "actions": _dist(actions),
             "actions_identified": _dist([r["actions"] for r in ok]),
             "sim_time_s": _dist([r["sim_time_s"] for r in rows]),
@@ -194,9 +203,12 @@ def print_table(summary: dict) -> None:
         return "-" if d.get("n", 0) == 0 else fmt.format(d[key])
 
     print()
+    seeds = summary["seeds"]
+    print(f"split: {summary['split']} (seeds {min(seeds)}-{max(seeds)}, {len(seeds)} seeds)")
     print(
-        f"{'planner':8s} {'ok/n':>7s} {'actions med [q1,q3] max':>25s} {'sim s med [max]':>17s} "
-        f"{'pose err med cm / deg':>22s} {'RTF med':>8s} {'loop/wall':>9s} {'loop/cpu':>8s} {'load':>5s}"
+        f"{'planner':8s} {'ok/n':>7s} {'Wilson 95 %':>13s} {'actions med [q1,q3] max':>25s} "
+        f"{'sim s med [max]':>17s} {'pose err med cm / deg':>22s} {'RTF med':>8s} {'loop/wall':>9s} "
+        f"{'loop/cpu':>8s} {'load':>5s}"
     )
     for planner, s in summary["planners"].items():
         a, t = s["actions"], s["sim_time_s"]
@@ -204,8 +216,10 @@ def print_table(summary: dict) -> None:
         sim = "-" if t["n"] == 0 else f"{t['median']:.1f} [{t['max']:.1f}]"
         pe_t, pe_r = s["pose_error_translation_m"], s["pose_error_rotation_deg"]
         pe = "-" if pe_t["n"] == 0 else f"{100 * pe_t['median']:.1f} / {pe_r['median']:.1f}"
+        ci = s["success_wilson95"]
+        ci = "-" if ci is None else f"[{100 * ci[0]:.1f},{100 * ci[1]:.1f}] %"
         print(
-            f"{planner:8s} {s['success']:>3d}/{s['episodes']:<3d} {acts:>25s} {sim:>17s} {pe:>22s} "
+            f"{planner:8s} {s['success']:>3d}/{s['episodes']:<3d} {ci:>13s} {acts:>25s} {sim:>17s} {pe:>22s} "
             f"{f(s['real_time_factor']):>8s} {f(s.get('real_time_factor_wall', {})):>9s} "
             f"{f(s.get('real_time_factor_loop_cpu', {})):>8s} {f(s['load_avg_1min'], fmt='{:.1f}'):>5s}"
         )
@@ -225,7 +239,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("out/eval_identify"))
     ap.add_argument("--models", type=_range, default=[0, 1, 2, 3], help="e.g. 0-3 (default)")
-    ap.add_argument("--seeds", type=_range, default=list(range(10)), help="e.g. 0-9 (default) or 0,3,5")
+    ap.add_argument(
+        "--seeds",
+        type=_range,
+        default=report_seeds(25),
+        help="e.g. 100000-100024 (default: the report split's first 25) or 0-9 (the tuning split)",
+    )
+    ap.add_argument(
+        "--sensing", default="realistic", choices=("realistic", "ideal"), help="the simulator's sensor errors"
+    )
     ap.add_argument("--planners", default="lut,random", help="comma-separated (default lut,random)")
     ap.add_argument("--mover", default="evasive")
     ap.add_argument("--max-actions", type=int, default=8)

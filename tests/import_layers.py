@@ -62,7 +62,7 @@ RULES = (
     ),
     Rule(
         "the ground floor imports nothing above it",
-        ("lab.robot", "lab.geometry", "lab.errors", "lab.io", "lab.paths", "lab.scene"),
+        ("lab.robot", "lab.geometry", "lab.errors", "lab.io", "lab.paths", "lab.scene", "lab.evaluation"),
         ("lab.sim", "lab.hardware", "lab.viz", "lab.training", "lab.runs", "lab.cli", *ALGORITHMS),
     ),
 )

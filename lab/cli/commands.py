@@ -101,9 +101,12 @@ def _cmd_identify(args) -> int:
         keep_direction=args.keep_direction,
         robot_config=args.robot,
         progress=print if args.robot is not None else None,
+        sensing=args.sensing,
     )
     keys = ["true_model", "identified_model", "success", "actions", "sim_time_s", "wall_time_s"]
-    keys += ["final_posterior", "pose_error"] + (["watchdog_stops"] if args.robot is not None else [])
+    keys += ["final_posterior", "pose_error", "sensing"] + (
+        ["watchdog_stops"] if args.robot is not None else []
+    )
     summary = {k: res[k] for k in keys}
     print(_json.dumps(summary, indent=2))
     return 0
@@ -142,6 +145,7 @@ def _cmd_search(args) -> int:
         obstacles=args.obstacles,
         progress=True,
         record=args.record,
+        sensing=args.sensing,
     )
     data = res.to_json()
     if args.json is not None:
@@ -236,6 +240,7 @@ def _cmd_demo(args) -> int:
         max_time_s=args.max_time,
         record=args.record,
         robot=args.robot,
+        sensing=args.sensing,
     )
     print(f"demo: figures, identify.json and the report are in {report.parent}/ (open {report})")
     return 0

@@ -8,6 +8,17 @@ from pathlib import Path
 __all__ = ["build_parser"]
 
 
+def _sensing_argument(p: argparse.ArgumentParser) -> None:
+    """``--sensing``: the simulator's sensing profile (``lab/sim/sensing.py``)."""
+    p.add_argument(
+        "--sensing",
+        default="realistic",
+        choices=("realistic", "ideal"),
+        help="the simulator's sensor errors (default: realistic: camera noise, calibration error, odometry "
+        "drift, pan-tilt backlash; ideal: exact sensors, for teaching the mathematics)",
+    )
+
+
 def _episode_arguments(p: argparse.ArgumentParser, movers: tuple[str, ...], max_time: float) -> None:
     """The arguments of one identification episode, shared by ``lab demo`` and ``lab identify``."""
     p.add_argument(
@@ -31,6 +42,7 @@ def _episode_arguments(p: argparse.ArgumentParser, movers: tuple[str, ...], max_
         "--max-time", type=float, default=max_time, help=f"time budget in seconds (default {max_time:g})"
     )
     p.add_argument("--record", type=Path, help="write an animation of the run (.gif, or .mp4 with ffmpeg)")
+    _sensing_argument(p)
     p.add_argument(
         "--robot",
         type=Path,
@@ -198,6 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="write an animation of the run (.gif, or .mp4 with ffmpeg): one frame per event",
     )
     se.add_argument("--robot", type=Path, help="real robot: not supported for the search yet")
+    _sensing_argument(se)
 
     hw = sub.add_parser(
         "hardware",

@@ -101,6 +101,7 @@ def run_demo(
     record: Path | None = None,
     robot: Path | None = None,
     say: Callable[[str], None] = print,
+    sensing="realistic",
 ) -> Path:
     """Run the identification demo and return the path of its Markdown report.
 
@@ -119,6 +120,8 @@ def run_demo(
         uses ``true_model`` and ``mover`` for the rendered scene.
     say : callable
         Where progress lines go (the terminal).
+    sensing : str or mapping
+        The simulator's sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic).
     """
     from lab.training.tables import box_model_names
 
@@ -157,6 +160,7 @@ def run_demo(
         record=record,
         robot_config=robot,
         progress=say if robot is not None else None,
+        sensing=sensing,
     )
     figures = [(f, c) for f, c in FIGURES if (out / f).is_file()]
     res["demo_wall_time_s"] = time.perf_counter() - t0

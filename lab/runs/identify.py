@@ -110,21 +110,19 @@ def run_identify(
     keep_direction: float | None = None,
     robot_config=None,
     progress=None,
+    sensing="realistic",
 ) -> dict:
     """Run one episode and return the ``lab identify`` JSON (also written to ``json_path``).
 
     Parameters
     ----------
-    true_model : int
-        Index of the box on the carrier (0..3); on the real robot, ignored (no truth).
-    seed : int
-        Seeds the start poses' jitter, the odometry noise, RANSAC and the random movers/planners.
-    mover : str
-        static, scripted, random, evasive or teleop (simulator and rehearsal).
-    planner : str
-        lut, mc, random or circle.
+    true_model, seed : int
+        The box on the carrier (0..3; ignored on the real robot); seeds the start poses' jitter, the
+        sensor errors, RANSAC and the random movers/planners.
+    mover, planner : str
+        static, scripted, random, evasive or teleop (simulator and rehearsal); lut, mc, random or circle.
     record : Path, optional
-        Write an animation of the run there: the live view (:mod:`lab.viz.live`) at every step.
+        Write an animation of the live view (:mod:`lab.viz.live`) there, one frame per step.
     keep_direction : float, optional
         :attr:`AgentConfig.keep_direction <lab.identification.agent.AgentConfig>` (default 0.5; 1.0 is
         the plain argmax of Eq. (6)).
@@ -133,9 +131,12 @@ def run_identify(
         and teleoperation panel, e.g. ``display(LiveView.for_identification(agent).widget)`` and
         ``display(TeleopPanel(carrier.mover).widget)`` (with ``mover="teleop"``).
     robot_config : path or HardwareConfig, optional
-        Run on the robot it describes (:func:`~lab.runs.robots.make_robot`); None: the simulator.
+        Run on its robot (:func:`~lab.runs.robots.make_robot`); None: the simulator.
     progress : callable(str), optional
         One line per decision (the robot's console).
+    sensing : str or mapping
+        The simulator's sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic,
+        or ideal), recorded as the JSON's ``sensing``.
     """
     from lab.sim import box_model
 
@@ -145,7 +146,7 @@ def run_identify(
         config = dataclasses.replace(config, keep_direction=keep_direction)
     t_wall, t_cpu = time.perf_counter(), time.process_time()  # CPU: the episode's cost whatever the load
     with contextlib.ExitStack() as stack:
-        session = _start(stack, robot_config, true_model, mover, seed)
+        session = _start(stack, robot_config, true_model, mover, seed, sensing)
         world = session.world
         plan = None
         if session.kind is RobotKind.SIM and world.scene.room is not None:
@@ -187,7 +188,7 @@ def _write(result: dict, json_path, out, agent, session: RobotSession, true_pose
         write_json_atomic(Path(out) / "identify.json", result)
 
 
-def _start(stack: contextlib.ExitStack, robot_config, true_model: int, mover: str, seed: int) -> RobotSession:
+def _start(stack: contextlib.ExitStack, robot_config, true_model, mover, seed, sensing) -> RobotSession:
     """The robot of the episode, with the box in front of it (in the simulator: the arena, the box on
     a carrier 1.2 m ahead, its unique face (+X) pointing away so that the robot sees shared faces first)."""
     if robot_config is not None:
@@ -201,7 +202,7 @@ def _start(stack: contextlib.ExitStack, robot_config, true_model: int, mover: st
     yaw = float(rng.uniform(-0.3, 0.3))
     carrier = world.add_carrier(models[true_model], Pose2D(0.0, 0.0, 0.0), box_yaw=yaw)
     start = Pose2D(-1.2, float(rng.uniform(-0.1, 0.1)), 0.0)
-    session = stack.enter_context(make_robot(None, world=world, start=start, seed=seed))
+    session = stack.enter_context(make_robot(None, world=world, start=start, seed=seed, sensing=sensing))
     carrier.mover = make_mover(mover, carrier, observer_pose=world.truth.robot_pose, seed=seed)
     session.carrier = carrier
     return session
@@ -291,6 +292,7 @@ def _episode_json(agent, session, true_model, identified, planner, seed, mover, 
         ],
         "planner": planner,
         "seed": seed,
+        "sensing": session.sensing,
         "mover": mover if has_truth else None,
         "keep_direction": agent.config.keep_direction,
         "decisions": [d.to_json(t0) for d in agent.decisions],

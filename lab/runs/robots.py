@@ -67,6 +67,12 @@ class RobotSession:
     rehearsal: object = None
 
     @property
+    def sensing(self) -> str:
+        """The ``sensing`` field of a result: the simulator's profile, or the robot kind's name (a
+        rehearsal's and a real robot's errors are their devices')."""
+        return self.robot.sensing.name if self.kind is RobotKind.SIM else self.kind.value
+
+    @property
     def name(self) -> str:
         """The robot config's path or name; ``"sim"`` in the simulator."""
         if self.config is None:
@@ -94,6 +100,7 @@ def make_robot(
     seed: int = 0,
     true_model: int = 1,
     mover: str = "static",
+    sensing="ideal",
 ) -> Iterator[RobotSession]:
     """The robot a run drives, closed (devices stopped, emulators ended) on exit.
 
@@ -109,6 +116,9 @@ def make_robot(
         Seeds the simulated odometry noise, or a rehearsal's box yaw and mover.
     true_model, mover :
         A rehearsal's box (index into the box models) and what moves its carrier.
+    sensing : str or mapping
+        The simulated robot's sensing profile (:func:`lab.sim.sensing.sensing_profile`); devices and a
+        rehearsal's emulators have their own errors.
 
     Raises
     ------
@@ -120,7 +130,7 @@ def make_robot(
             raise ConfigError("make_robot needs a world for the simulator (or a robot config)")
         from lab.sim import SimRobot
 
-        robot = SimRobot(world, start=start, seed=seed)
+        robot = SimRobot(world, start=start, seed=seed, sensing=sensing)
         yield RobotSession(RobotKind.SIM, robot, world)
         return
     cfg = _load(config)

@@ -172,6 +172,8 @@ class SearchResult:
     trace : SearchTrace
     recording : str or None
         The animation written (``record``): one frame per event.
+    sensing : str
+        The simulator's sensing profile the trial ran under.
     """
 
     object: str
@@ -198,6 +200,7 @@ class SearchResult:
     events: tuple[SearchEvent, ...] = field(default=(), repr=False)
     trace: SearchTrace | None = field(default=None, repr=False, compare=False)
     recording: str | None = None
+    sensing: str = "ideal"
 
     def to_json(self) -> dict:
         """The JSON ``lab search --json`` writes (plain types only)."""
@@ -226,6 +229,7 @@ class SearchResult:
             "odometry_error_m": round(float(self.odometry_error_m), 4),
             "events": [e.as_dict() for e in self.events],
             "recording": self.recording,
+            "sensing": self.sensing,
             "map_snapshots": [
                 {
                     "t": round(s.t, 3),
@@ -254,6 +258,7 @@ def run_search(
     progress: bool = False,
     record=None,
     attach: Callable | None = None,
+    sensing="realistic",
 ) -> SearchResult:
     """Run one search trial in the simulator and score it: the :class:`SearchResult`.
 
@@ -262,31 +267,25 @@ def run_search(
     object : str
         A searchable object (:func:`lab.runs.placement.searchable_objects`).
     seed : int
-        Seeds the placement (when ``place`` is None), the obstacles, the odometry noise and RANSAC.
+        Seeds the placement (when ``place`` is None), the obstacles, the sensor errors and RANSAC.
     place : (x, y, z_underside, yaw_deg), optional
-        Where to put the object; checked (inside the room, standing on the floor, a table or a shelf,
-        clear of other bodies and of the robot). Default: a seeded random valid placement on a random
-        surface.
-    strategy : {"paper", "lawnmower", "frontier"}
-    max_time, max_wall_time : float [s]
+        Where to put the object (checked: in the room, on a surface, clear of the other bodies and the
+        robot). Default: a seeded random valid placement.
+    strategy : {"paper", "lawnmower", "frontier"}; max_time, max_wall_time : float [s]
         Simulated-time budget (the run ends "not found" when it is used up); and, optionally, wall time.
     navigate : callable ``(robot, spec) -> navigate``
-        Builds the navigation callable (see :mod:`lab.search.agent`) for the robot the search drives
-        (a :class:`~lab.search.budget.BudgetedRobot`) and the map's grid. Required.
+        Required: the navigation callable (:mod:`lab.search.agent`) for the budgeted robot and the
+        map's grid (:func:`navigator_factory`).
     obstacles : bool
         Add boxes on the straight line from the start to the object (:func:`path_obstacles`).
-    world : str or Scene
-    config : AgentConfig, optional
-        Its ``strategy`` is replaced by ``strategy``.
-    supersample : int
-        Render supersampling (2: twice the SIFT matches on the small objects as 1; test_search_local).
-    progress : bool
-        Say on stderr when a database is being built.
-    record : str or Path, optional
-        Write an animation of the live view (:mod:`lab.viz.live`) there, one frame per event.
-    attach : callable, optional
-        ``attach(agent)`` once the agent is built, before it runs: e.g. a notebook's live view,
-        ``attach=lambda agent: display(LiveView.for_search(agent).widget)``.
+    world, config, supersample :
+        The scene; the agent's config (its ``strategy`` replaced); render supersampling (2: twice the
+        SIFT matches on the small objects as 1).
+    progress, record, attach :
+        Say when a database is built; write an animation of the live view (one frame per event);
+        ``attach(agent)`` before the run (a notebook's ``LiveView.for_search(agent).widget``).
+    sensing : str or mapping
+        The sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic).
     """
     wall0 = time.perf_counter()
     strategy = Strategy.parse(strategy)
@@ -299,9 +298,13 @@ def run_search(
     spec = map_spec(scene)
     from lab.sim import RenderSettings, SimWorld
 
-    with SimWorld(scene, RenderSettings(supersample=supersample)) as w, make_robot(world=w, seed=seed) as run:
+    with (
+        SimWorld(scene, RenderSettings(supersample=supersample)) as w,
+        make_robot(world=w, seed=seed, sensing=sensing) as run,
+    ):
         parts = (db, navigate, spec, cfg, seed, recorder, attach, (max_time, max_wall_time))
         out, truth, budget, odom = _search(run.robot, w, object, *parts)
+        profile = run.sensing
     return SearchResult(
         **_scored(object, out, truth, odom),
         path_length_m=budget.path_length_m,
@@ -317,6 +320,7 @@ def run_search(
         events=out.events,
         trace=SearchTrace(out, spec, np.array(budget.trajectory), scene, db),
         recording=None if recorder is None or (p := recorder.close()) is None else str(p),
+        sensing=profile,
     )
 
 

@@ -1,0 +1,28 @@
+"""The report split and the Wilson intervals, against SciPy's binomial test."""
+
+import pytest
+from scipy.stats import binomtest
+
+from lab.errors import ConfigError
+from lab.evaluation import REPORT_SEEDS_START, report_seeds, split_of, wilson_interval
+
+
+@pytest.mark.parametrize("k, n", [(0, 5), (3, 7), (97, 100), (100, 100), (39, 40), (1, 1)])
+def test_wilson_interval_matches_scipy(k, n):
+    ci = binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
+    assert wilson_interval(k, n) == pytest.approx((ci.low, ci.high), abs=1e-12)
+
+
+def test_the_splits_are_named_and_far_apart():
+    seeds = report_seeds(25)
+    assert seeds[0] == REPORT_SEEDS_START == 100000 and len(seeds) == 25
+    assert split_of(seeds) == "report"
+    assert split_of(range(20)) == "tuning"
+    assert split_of([3, 100001]) == "mixed"
+
+
+def test_bad_counts_are_refused():
+    with pytest.raises(ConfigError, match="0 <= k <= n and n >= 1, got k=5, n=4"):
+        wilson_interval(5, 4)
+    with pytest.raises(ConfigError, match="positive integer"):
+        report_seeds(0)
