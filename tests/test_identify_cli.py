@@ -39,6 +39,7 @@ def test_short_identify_episode_keeps_the_contract(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     res = json.loads((tmp_path / "r.json").read_text())
     assert res["true_model"] == 2 and res["planner"] == "circle" and res["seed"] == 3
+    assert res["sensing"] == "realistic"  # the default profile, without being asked
     assert abs(sum(res["final_posterior"]) - 1) < 1e-9
     assert res["history"] and all(h["ptu_state"] in ("tracking", "scanning") for h in res["history"])
     assert res["actions"] <= 1 and res["collisions"] == 0
@@ -109,3 +110,22 @@ def test_the_agent_is_handed_its_parts_and_refuses_to_plan_without_them():
     for planner in ("lut", "mc"):
         with pytest.raises(ConfigError, match=f"the {planner} planner needs an expected-entropy evaluator"):
             IdentificationAgent(None, dbs, planner=planner)
+
+
+def test_an_unknown_sensing_profile_is_one_clear_line(tmp_path):
+    """On the command line (argparse's choices) and in the Python API (the profile's ConfigError)."""
+    import pytest
+
+    from lab.errors import ConfigError
+    from lab.runs.identify import run_identify
+
+    r = subprocess.run(
+        [sys.executable, "-m", "lab", "identify", "--sensing", "perfect"], capture_output=True, text=True
+    )
+    assert r.returncode == 2 and "argument --sensing: invalid choice: 'perfect'" in r.stderr
+    assert "'realistic', 'ideal'" in r.stderr and len(r.stderr.strip().splitlines()) <= 2  # usage + error
+    with pytest.raises(ConfigError, match="perfect"):
+        run_identify(2, seed=0, planner="circle", max_actions=0, figures=False, sensing="perfect")
+    with pytest.raises(ConfigError, match="must be a finite number >= 0, got -1"):
+        bad = {"camera": {"blur_sigma_px": -1}}
+        run_identify(2, planner="circle", max_actions=0, figures=False, sensing=bad)
