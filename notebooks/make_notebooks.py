@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import nbformat
+from cells_00_sensing import CELLS as NB00_SENSING  # notebooks/ is the script's folder: sys.path[0]
 
 HERE = Path(__file__).resolve().parent
 
@@ -183,6 +184,7 @@ assert np.allclose(np.sqrt(f3d.covariances[:, 2, 2]), sigma_z_mm(Z) / 1e3, rtol=
 world.close()
 """,
     ),
+    *NB00_SENSING,
 ]
 
 NB01 = [
