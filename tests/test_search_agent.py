@@ -226,9 +226,11 @@ def check_contract(d: dict) -> None:
 
 
 def test_closed_loop_finds_the_toy_block():
-    res = run_search(
-        "toy_block", seed=0, place=SCENE.body("toy_block").pose, max_time=120.0, navigate=truth_navigator
-    )
+    """The loop's precision under the ideal profile (its bars were set there; the realistic profile's
+    figures are measured by benchmarks/eval_search.py: its world-frame error is odometry-bound)."""
+    place = SCENE.body("toy_block").pose
+    nav = truth_navigator
+    res = run_search("toy_block", seed=0, place=place, max_time=120.0, navigate=nav, sensing="ideal")
     print(f"\n{json.dumps({k: v for k, v in res.to_json().items() if k not in ('events', 'map_snapshots')})}")
     assert res.found and res.success, res.reason
     assert res.position_error_m <= 0.05 and res.orientation_error_deg <= 10.0
