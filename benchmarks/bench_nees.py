@@ -41,6 +41,7 @@ import numpy as np  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 
 from lab.estimation import EKFConfig, OrientationChart, PoseEKF, nees  # noqa: E402
+from lab.evaluation import parse_seeds  # noqa: E402
 from lab.geometry import G_to_pose6, Pose2D, relative_pose2d, se3_inv  # noqa: E402
 from lab.sim import SimRobot, SimWorld, load_box_models  # noqa: E402
 from lab.training import get_database  # noqa: E402
@@ -73,17 +74,6 @@ STARTS = (
     Start("left-1.3m-creep", -1.2, 0.45, -0.2, math.pi - 0.4, "creep"),
     Start("right-1.5m-pan", -1.4, -0.5, 0.25, math.pi + 0.5, "pan"),
 )
-
-
-def _range(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        if "-" in part:
-            a, b = part.split("-")
-            out += list(range(int(a), int(b) + 1))
-        elif part:
-            out.append(int(part))
-    return out
 
 
 def _aim(robot: SimRobot, G_WO: np.ndarray) -> tuple[float, float]:
@@ -254,7 +244,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--profiles", default="ideal,realistic")
     ap.add_argument("--out", type=Path, help="JSON summary")
     args = ap.parse_args(argv)
-    seeds = _range(args.seeds)
+    seeds = parse_seeds(args.seeds)
     profiles = [p for p in args.profiles.split(",") if p]
     split = "report" if min(seeds) >= 100000 else "tuning" if max(seeds) < 1000 else "mixed"
     print(

@@ -35,18 +35,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from lab.evaluation import report_seeds, split_of, wilson_interval
-
-
-def _range(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        if "-" in part:
-            a, b = part.split("-")
-            out += list(range(int(a), int(b) + 1))
-        elif part:
-            out.append(int(part))
-    return out
+from lab.evaluation import parse_seeds, report_seeds, split_of, wilson_interval
 
 
 def episode_path(out: Path, planner: str, model: int, seed: int) -> Path:
@@ -238,10 +227,10 @@ def print_table(summary: dict) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("out/eval_identify"))
-    ap.add_argument("--models", type=_range, default=[0, 1, 2, 3], help="e.g. 0-3 (default)")
+    ap.add_argument("--models", type=parse_seeds, default=[0, 1, 2, 3], help="e.g. 0-3 (default)")
     ap.add_argument(
         "--seeds",
-        type=_range,
+        type=parse_seeds,
         default=report_seeds(25),
         help="e.g. 100000-100024 (default: the report split's first 25) or 0-9 (the tuning split)",
     )

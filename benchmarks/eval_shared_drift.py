@@ -30,7 +30,7 @@ import statistics
 import subprocess
 import sys
 
-from eval_identify import _range  # "0-3,5" -> [0, 1, 2, 3, 5] (run from benchmarks/, as documented)
+from lab.evaluation import parse_seeds as _range  # "0-3,5" -> [0, 1, 2, 3, 5]
 
 
 def _episodes(text: str) -> list[tuple[int, int]]:

@@ -17,7 +17,14 @@ from collections.abc import Iterable
 
 from lab.errors import ConfigError
 
-__all__ = ["REPORT_SEEDS_START", "TUNING_SEEDS_END", "report_seeds", "split_of", "wilson_interval"]
+__all__ = [
+    "REPORT_SEEDS_START",
+    "TUNING_SEEDS_END",
+    "parse_seeds",
+    "report_seeds",
+    "split_of",
+    "wilson_interval",
+]
 
 TUNING_SEEDS_END = 1000  #: seeds 0 .. 999 are the tuning split
 REPORT_SEEDS_START = 100000  #: the report split starts here
@@ -28,6 +35,30 @@ def report_seeds(n: int, start: int = REPORT_SEEDS_START) -> list[int]:
     if int(n) != n or n < 1:
         raise ConfigError(f"the number of report seeds must be a positive integer, got {n!r}")
     return list(range(start, start + int(n)))
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``"100000-100004,7"`` -> ``[100000, ..., 100004, 7]``: the evaluation scripts' ``--seeds``.
+
+    Raises
+    ------
+    ConfigError
+        A part that is neither a number nor ``A-B`` with A <= B.
+    """
+    out: list[int] = []
+    for part in (p.strip() for p in str(text).split(",")):
+        if not part:
+            continue
+        a, sep, b = part.partition("-")
+        try:
+            lo, hi = (int(a), int(b)) if sep else (int(a), int(a))
+        except ValueError:
+            msg = f"seeds must look like 100000-100024 or 0,3,5, got {part!r} in {text!r}"
+            raise ConfigError(msg) from None
+        if hi < lo:
+            raise ConfigError(f"seed range {part!r} runs backwards (write {hi}-{lo})")
+        out += range(lo, hi + 1)
+    return out
 
 
 def split_of(seeds: Iterable[int]) -> str:

@@ -26,3 +26,14 @@ def test_bad_counts_are_refused():
         wilson_interval(5, 4)
     with pytest.raises(ConfigError, match="positive integer"):
         report_seeds(0)
+
+
+def test_seed_lists_parse_and_bad_ones_are_one_clear_line():
+    from lab.evaluation import parse_seeds
+
+    assert parse_seeds("100000-100003,7") == [100000, 100001, 100002, 100003, 7]
+    assert parse_seeds("0-3,5") == [0, 1, 2, 3, 5] and parse_seeds("4") == [4]
+    with pytest.raises(ConfigError, match="seeds must look like 100000-100024 or 0,3,5, got 'x'"):
+        parse_seeds("1,x")
+    with pytest.raises(ConfigError, match="runs backwards"):
+        parse_seeds("9-3")
