@@ -40,7 +40,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 
-from lab.estimation import EKFConfig, OrientationChart, PoseEKF, nees  # noqa: E402
+from lab.estimation import CalibrationUncertainty, EKFConfig, OrientationChart, PoseEKF, nees  # noqa: E402
 from lab.evaluation import parse_seeds  # noqa: E402
 from lab.geometry import G_to_pose6, Pose2D, relative_pose2d, se3_inv  # noqa: E402
 from lab.sim import SimRobot, SimWorld, load_box_models  # noqa: E402
@@ -138,7 +138,8 @@ def run_episode(model, db, start: Start, seed: int, sensing: str, frames: int, w
         pan0, tilt0 = _aim(robot, carrier.G_WO)
         robot.command_pan_tilt(pan0, tilt0)
         robot.wait_pan_tilt()
-        ekf = PoseEKF(EKFConfig(chart=chart), rng=np.random.default_rng(seed))
+        calibration = CalibrationUncertainty.of_camera(robot.camera)  # the camera's stated accuracy
+        ekf = PoseEKF(EKFConfig(chart=chart, calibration=calibration), rng=np.random.default_rng(seed))
         matcher = Matcher(db)
         prev, values, parts, outcomes = None, [], [], {}
         for k in range(frames):

@@ -106,6 +106,13 @@ class StereoCamera:
         Pan/tilt axes intersection in the robot frame R.
     camera_offset_P : tuple of 3 floats [m]
         Left camera's optical centre in the pan-tilt frame P (x forward, y left, z up).
+    depth_scale_std : float
+        How well the calibration is known, as the relative error of triangulated depths it leaves
+        (focal length and baseline errors in quadrature): 0.007 is a checkerboard calibration to
+        0.5 % each. 0: exact (a simulated camera under the ``ideal`` profile). The pose filters take
+        it into account (``lab.estimation.CalibrationUncertainty.of_camera``).
+    pointing_std_deg : float [deg]
+        The same for the camera's orientation on the robot (pan-tilt zero, mount), per axis.
     """
 
     width: int
@@ -117,8 +124,14 @@ class StereoCamera:
     baseline: float
     mount_R: tuple[float, float, float] = (0.0, 0.0, 0.8)
     camera_offset_P: tuple[float, float, float] = (0.05, 0.06, 0.0)
+    depth_scale_std: float = 0.0
+    pointing_std_deg: float = 0.0
 
     def __post_init__(self):
+        for name in ("depth_scale_std", "pointing_std_deg"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ConfigError(f"camera {name} must be a finite number >= 0, got {v!r}")
         if self.width < 16 or self.height < 16:
             raise ConfigError(f"camera size {self.width}x{self.height} px is too small (at least 16x16)")
         if not (self.fx > 0 and self.fy > 0):

@@ -2,6 +2,7 @@
 update, SciPy's multivariate normal for Eq. (9); covariance properties with hypothesis; the bank."""
 
 import numpy as np
+import pytest
 from ekf_scenarios import CAMERA, cube, moving_run, observe
 from filterpy.kalman import ExtendedKalmanFilter
 from hypothesis import given, settings
@@ -9,6 +10,7 @@ from hypothesis import strategies as st
 from scipy.stats import chi2, multivariate_normal
 
 from lab.estimation import (
+    CalibrationUncertainty,
     EKFBank,
     EKFConfig,
     GateConfig,
@@ -149,6 +151,72 @@ def test_log_likelihood_is_eq9_against_scipy():
     res = ekf.update(f.d_C, f.b_O, f.Sigma_d)
     assert abs(res.log_likelihood - expected) < 1e-9 * abs(expected)
     assert ekf.log_likelihood == res.log_likelihood
+
+
+def _calibrated_points(h, c):
+    """``(1 + s) Exp(delta) h`` with SciPy's rotation (independent of ``calibration_jacobian``)."""
+    from scipy.spatial.transform import Rotation
+
+    return (1.0 + c[0]) * Rotation.from_rotvec(c[1:]).apply(h)
+
+
+def test_calibration_update_is_the_dense_update_with_correlated_feature_errors():
+    """With a calibration error shared by the frame's features, the update equals the dense textbook
+    one with ``S = C Sigma_bar C^T + U Sigma_c U^T + Sigma_m`` (``U`` by central differences of
+    ``(1 + s) Exp(delta) h`` through SciPy), and its log likelihood is SciPy's on that ``S``."""
+    rng = np.random.default_rng(5)
+    b_O, nrm = cube(rng)
+    X = np.array([0.05, -0.02, 1.2, 0.4, 0.3, -2.0])
+    f = observe(rng, X, b_O, nrm)
+    mu_bar = X + rng.normal(0, [0.01, 0.01, 0.02, 0.02, 0.02, 0.02])
+    Sigma_bar = np.diag([0.01, 0.01, 0.02, 0.03, 0.03, 0.03]) ** 2
+    cal = CalibrationUncertainty(scale_std=0.007, pointing_std_deg=0.05)
+    h = measurement_model(mu_bar, f.b_O)
+    U = np.zeros((h.size, 4))
+    for j in range(4):
+        e = np.zeros(4)
+        e[j] = 1e-6
+        U[:, j] = (_calibrated_points(h, e) - _calibrated_points(h, -e)).reshape(-1) / 2e-6
+    C = measurement_jacobian(mu_bar, f.b_O)
+    Sm = measurement_covariance(f.Sigma_d)
+    S = C @ Sigma_bar @ C.T + U @ cal.covariance() @ U.T + Sm
+    y = (f.d_C - h).reshape(-1)
+    K = np.linalg.solve(S, C @ Sigma_bar).T
+    I_KC = np.eye(6) - K @ C
+    Sigma_ref = I_KC @ Sigma_bar @ I_KC.T + K @ (S - C @ Sigma_bar @ C.T) @ K.T
+    ekf = PoseEKF(EKFConfig(gate=NO_GATE.gate, calibration=cal), rng=rng)
+    ekf.initialize(mu_bar, Sigma_bar)
+    res = ekf.update(f.d_C, f.b_O, f.Sigma_d)
+    assert res.applied, res.reason
+    np.testing.assert_allclose(state_residual(ekf.mu, mu_bar + K @ y), 0.0, atol=1e-9)
+    np.testing.assert_allclose(ekf.Sigma, Sigma_ref, rtol=0, atol=1e-7 * np.abs(Sigma_ref).max())
+    expected = multivariate_normal.logpdf(f.d_C.reshape(-1), h.reshape(-1), S)
+    assert abs(res.log_likelihood - expected) < 1e-9 * abs(expected)
+    assert abs(res.nis - y @ np.linalg.solve(S, y)) < 1e-7 * res.nis
+    # the shared error keeps the filter less sure than independent errors would
+    plain = PoseEKF(NO_GATE, rng=rng)
+    plain.initialize(mu_bar, Sigma_bar)
+    plain.update(f.d_C, f.b_O, f.Sigma_d)
+    assert np.linalg.eigvalsh(ekf.Sigma - plain.Sigma).min() > -1e-15
+    assert np.trace(ekf.Sigma[:3, :3]) > 1.5 * np.trace(plain.Sigma[:3, :3])
+
+
+def test_calibration_uncertainty_refuses_bad_values_and_reads_the_camera():
+    import dataclasses
+
+    for bad in (-0.01, float("nan"), True):
+        with pytest.raises(ValueError, match="scale_std must be a finite number >= 0"):
+            CalibrationUncertainty(scale_std=bad)
+    cam = dataclasses.replace(CAMERA, depth_scale_std=0.007, pointing_std_deg=0.05)
+    assert CalibrationUncertainty.of_camera(cam) == CalibrationUncertainty(0.007, 0.05)
+    assert CalibrationUncertainty.of_camera(CAMERA).is_none  # an exact camera: the papers' filter
+    rng = np.random.default_rng(3)
+    only_scale = PoseEKF(EKFConfig(gate=NO_GATE.gate, calibration=CalibrationUncertainty(0.01, 0.0)), rng=rng)
+    b_O, nrm = cube(rng)
+    X = np.array([0.0, 0.0, 1.0, 0.2, 0.1, 0.3])
+    f = observe(rng, X, b_O, nrm)
+    only_scale.initialize(X, np.diag([0.01] * 3 + [0.02] * 3) ** 2)
+    assert only_scale.update(f.d_C, f.b_O, f.Sigma_d).applied
 
 
 def test_gate_rejects_wrong_matches_and_keeps_good_ones():

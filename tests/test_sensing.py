@@ -73,7 +73,12 @@ def test_realistic_reports_the_nominal_camera_and_angles():
         r = SimRobot(w, seed=0, sensing="realistic")
         f = _drive_and_look(r)
         d = w.truth.sensing.camera
-        assert f.camera == r.camera == nominal and d.render_camera != nominal
+        # the nominal calibration, with its stated accuracy (not the episode's draw)
+        assert f.camera == r.camera == dataclasses.replace(
+            nominal, depth_scale_std=math.hypot(0.005, 0.005), pointing_std_deg=0.05
+        )
+        assert nominal.depth_scale_std == nominal.pointing_std_deg == 0.0  # ideal: exact
+        assert (d.render_camera.fx, d.render_camera.baseline) != (nominal.fx, nominal.baseline)
         assert (f.pan_tilt.pan, f.pan_tilt.tilt) == (0.3, -0.2)  # what was commanded
         # the true camera differs from the reported angles' by the zero offsets and the backlash
         G_rep = w.truth.robot_pose().G() @ r.camera.G_RC(0.3, -0.2)
@@ -377,6 +382,38 @@ def test_bad_input_is_one_clear_line(spec, words):
         sensing_profile(spec)
     msg = str(e.value)
     assert "\n" not in msg and all(w in msg for w in words), msg
+
+
+def test_a_run_configuration_file_gives_the_profile(tmp_path):
+    """``--sensing FILE.toml``: the file's ``[sensing]`` table, or the whole file without one."""
+    run = tmp_path / "classroom.toml"
+    run.write_text('[sensing]\nprofile = "realistic"\n[sensing.odometry]\nwheel_noise = 0.0\n')
+    p = sensing_profile(str(run))
+    assert p.name == "realistic+custom" and p.odometry.wheel_noise == 0.0 and p.camera == CameraErrors()
+    bare = tmp_path / "bare.toml"
+    bare.write_text('profile = "ideal"\n')
+    assert sensing_profile(bare) == PROFILES["ideal"]
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ('[sensing]\nprofile = "noisy"\n', ["bad.toml", "sensing.profile", "'noisy'", "ideal, realistic"]),
+        ("[sensing]\ncamera = 3\n", ["bad.toml", "sensing.camera", "table"]),
+        ("[sensing.camera]\nblur_sigma_px = -0.5\n", ["bad.toml", "sensing.camera.blur_sigma_px", ">= 0"]),
+        ('profile = "ideal"\nnoise = 2\n', ["bad.toml", "'noise'", "profile"]),
+        ("[sensing\n", ["bad.toml", "not a readable TOML file"]),
+    ],
+)
+def test_a_bad_run_configuration_file_is_one_line_naming_it(tmp_path, text, words):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        sensing_profile(str(bad))
+    msg = str(e.value)
+    assert "\n" not in msg and all(w in msg for w in words), msg
+    with pytest.raises(ConfigError, match="no such sensing configuration file"):
+        sensing_profile(tmp_path / "missing.toml")
 
 
 def test_a_robot_refuses_a_bad_profile_and_two_odometry_models():

@@ -11,6 +11,13 @@ from lab.errors import LabError
 __all__ = ["HANDLERS"]
 
 
+def _sensing(args):
+    """The ``--sensing`` profile, read and checked before anything starts (a file's errors name it)."""
+    from lab.sim.sensing import sensing_profile
+
+    return sensing_profile(args.sensing)
+
+
 def _cmd_worlds(args) -> int:
     from lab.scene import list_worlds, load_scene
 
@@ -101,7 +108,7 @@ def _cmd_identify(args) -> int:
         keep_direction=args.keep_direction,
         robot_config=args.robot,
         progress=print if args.robot is not None else None,
-        sensing=args.sensing,
+        sensing=_sensing(args),
     )
     keys = ["true_model", "identified_model", "success", "actions", "sim_time_s", "wall_time_s"]
     keys += ["final_posterior", "pose_error", "sensing"] + (
@@ -145,7 +152,7 @@ def _cmd_search(args) -> int:
         obstacles=args.obstacles,
         progress=True,
         record=args.record,
-        sensing=args.sensing,
+        sensing=_sensing(args),
     )
     data = res.to_json()
     if args.json is not None:
@@ -240,7 +247,7 @@ def _cmd_demo(args) -> int:
         max_time_s=args.max_time,
         record=args.record,
         robot=args.robot,
-        sensing=args.sensing,
+        sensing=_sensing(args),
     )
     print(f"demo: figures, identify.json and the report are in {report.parent}/ (open {report})")
     return 0

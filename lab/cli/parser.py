@@ -8,14 +8,26 @@ from pathlib import Path
 __all__ = ["build_parser"]
 
 
+def _sensing(value: str) -> str:
+    """``--sensing``'s value: a profile name or a ``.toml`` file (read and checked by the command)."""
+    if value in ("realistic", "ideal") or value.endswith(".toml"):
+        return value
+    raise argparse.ArgumentTypeError(
+        f"unknown sensing profile {value!r}; allowed: realistic, ideal, or a .toml file with a [sensing] table"
+    )
+
+
 def _sensing_argument(p: argparse.ArgumentParser) -> None:
     """``--sensing``: the simulator's sensing profile (``lab/sim/sensing.py``)."""
     p.add_argument(
         "--sensing",
         default="realistic",
-        choices=("realistic", "ideal"),
+        type=_sensing,
+        metavar="{realistic,ideal,FILE.toml}",
         help="the simulator's sensor errors (default: realistic: camera noise, calibration error, odometry "
-        "drift, pan-tilt backlash; ideal: exact sensors, for teaching the mathematics)",
+        "drift, pan-tilt backlash; ideal: exact sensors, for teaching the mathematics; FILE.toml: a "
+        "[sensing] table, profile = \"realistic\" plus [sensing.camera], [sensing.odometry], "
+        "[sensing.pan_tilt] fields to change)",
     )
 
 

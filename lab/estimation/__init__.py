@@ -17,6 +17,7 @@ Euler angles (``docs/conventions.md``).
 
 from lab.estimation.bank import EKFBank
 from lab.estimation.ekf import (
+    CalibrationUncertainty,
     DivergenceConfig,
     EKFConfig,
     PoseEKF,
@@ -58,6 +59,7 @@ __all__ = [
     "PoseEstimate",
     "UpdateOutcome",
     "UpdateResult",
+    "CalibrationUncertainty",
     "data_log_likelihood",
     "gate_matches",
     "nees",

@@ -62,7 +62,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from lab.errors import ConfigError
-from lab.estimation import EKFBank, EKFConfig, OrientationChart, UpdateOutcome
+from lab.estimation import CalibrationUncertainty, EKFBank, EKFConfig, OrientationChart, UpdateOutcome
 from lab.geometry import G_to_pose6, Pose2D, relative_pose2d, wrap_angle
 from lab.identification.actions import ActionConfig, RingBlocked
 from lab.identification.bayes import uniform
@@ -171,7 +171,12 @@ class IdentificationAgent:
             for db, s in zip(self.dbs, self.scorers, strict=True)
         ]
         self.bank = EKFBank(
-            len(self.dbs), EKFConfig(chart=OrientationChart.ROTATION_VECTOR), rng=np.random.default_rng(seed)
+            len(self.dbs),
+            EKFConfig(
+                chart=OrientationChart.ROTATION_VECTOR,
+                calibration=CalibrationUncertainty.of_camera(robot.camera),  # shared by a frame's features
+            ),
+            rng=np.random.default_rng(seed),
         )
         self.head = HeadController(robot.camera, robot.pan_tilt_limits)
         self.follower = PathFollower(

@@ -38,7 +38,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lab.errors import ConfigError
-from lab.estimation import EKFConfig, OrientationChart, PoseEKF, PoseEstimate, ProcessNoise
+from lab.estimation import (
+    CalibrationUncertainty,
+    EKFConfig,
+    OrientationChart,
+    PoseEKF,
+    PoseEstimate,
+    ProcessNoise,
+)
 from lab.geometry import relative_pose2d, transform_points, wrap_angle
 from lab.robot import Robot, StereoCamera, StereoFrame
 from lab.vision.database import FeatureDatabase
@@ -301,7 +308,11 @@ class _LocalSearch:
     def __init__(self, robot: Robot, db: FeatureDatabase, rng, cfg: LocalSearchConfig, matcher: Matcher):
         self.robot, self.db, self.rng, self.cfg, self.matcher = robot, db, rng, cfg, matcher
         self.detector = sift()
-        self.ekf_cfg = EKFConfig(chart=OrientationChart.ROTATION_VECTOR, process=cfg.process)
+        self.ekf_cfg = EKFConfig(
+            chart=OrientationChart.ROTATION_VECTOR,
+            process=cfg.process,
+            calibration=CalibrationUncertainty.of_camera(robot.camera),  # shared by a frame's features
+        )
         self.records: list[ViewRecord] = []
         self.best_reason, self.best_rank = "no view had enough matches", (-1, -1)
 

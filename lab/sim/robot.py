@@ -120,6 +120,7 @@ class SimRobot(Robot):
             raise ConfigError(f"dt_physics must be within (0, 0.1] s, got {dt_physics}")
         self.dt_physics = dt_physics
         self._sensing = sensing_profile(sensing)
+        self._camera = self._sensing.reported_camera(self._camera)
         if odometry_noise is not None and not self._sensing.odometry.is_none:
             raise ConfigError(
                 f"odometry_noise applies only without odometry errors (sensing 'ideal'); sensing "

@@ -20,8 +20,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -439,6 +441,16 @@ class SensingProfile:
     odometry: OdometryErrors
     pan_tilt: PanTiltErrors
 
+    def reported_camera(self, camera: StereoCamera) -> StereoCamera:
+        """The camera the robot reports: the nominal calibration with its stated accuracy, what a
+        calibration report gives (``depth_scale_std`` from the focal length and baseline errors in
+        quadrature, ``pointing_std_deg`` from the pan-tilt's zero offset); not the episode's draw."""
+        return dataclasses.replace(
+            camera,
+            depth_scale_std=math.hypot(self.camera.intrinsics_error, self.camera.baseline_error),
+            pointing_std_deg=self.pan_tilt.zero_offset_deg,
+        )
+
 
 PROFILES: dict[str, SensingProfile] = {
     "ideal": SensingProfile("ideal", CameraErrors.none(), OdometryErrors.none(), PanTiltErrors.none()),
@@ -447,13 +459,15 @@ PROFILES: dict[str, SensingProfile] = {
 _SECTIONS = {"camera": CameraErrors, "odometry": OdometryErrors, "pan_tilt": PanTiltErrors}
 
 
-def sensing_profile(spec: SensingProfile | str | Mapping) -> SensingProfile:
-    """A profile by name, or from a configuration section.
+def sensing_profile(spec: SensingProfile | str | Path | Mapping) -> SensingProfile:
+    """A profile by name, from a run configuration file, or from a configuration section.
 
     Parameters
     ----------
-    spec : SensingProfile, str or mapping
-        A profile (returned as it is), a name (``"ideal"``, ``"realistic"``), or a TOML-like section::
+    spec : SensingProfile, str, Path or mapping
+        A profile (returned as it is), a name (``"ideal"``, ``"realistic"``), the path of a TOML file
+        (a ``Path``, or a string ending in ``.toml``: its ``[sensing]`` table, or the whole file when it
+        has none; ``lab identify --sensing my_room.toml``), or a TOML-like section::
 
             profile = "realistic"          # the base, default "ideal"
             [camera]                       # optional: fields of CameraErrors to change
@@ -469,6 +483,8 @@ def sensing_profile(spec: SensingProfile | str | Mapping) -> SensingProfile:
     """
     if isinstance(spec, SensingProfile):
         return spec
+    if isinstance(spec, Path) or (isinstance(spec, str) and spec.endswith(".toml")):
+        return _from_file(Path(spec))
     if isinstance(spec, str):
         return _named(spec)
     if not isinstance(spec, Mapping):
@@ -485,6 +501,22 @@ def sensing_profile(spec: SensingProfile | str | Mapping) -> SensingProfile:
             parts[key] = _section(spec[key], cls, parts[key], f"sensing.{key}")
     name = base.name if parts == {k: getattr(base, k) for k in _SECTIONS} else f"{base.name}+custom"
     return SensingProfile(name, **parts)
+
+
+def _from_file(path: Path) -> SensingProfile:
+    """The profile of a run configuration file: its ``[sensing]`` table, or the whole file."""
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such sensing configuration file") from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise ConfigError(f"{path}: not a readable TOML file ({e})") from None
+    section = data.get("sensing", data)
+    try:
+        profile = sensing_profile(section if isinstance(section, Mapping) else {"profile": section})
+    except ConfigError as e:
+        raise ConfigError(f"{path}: {e}") from None
+    return profile
 
 
 def _named(name) -> SensingProfile:

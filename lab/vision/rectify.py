@@ -80,8 +80,18 @@ class StereoCalibration:
         """Distance between the rectified optical centres [m]."""
         return float(-self.P2[0, 3] / self.P2[0, 0])
 
-    def camera_model(self, mount_R=(0.0, 0.0, 0.8), camera_offset_P=(0.05, 0.06, 0.0)) -> StereoCamera:
-        """The :class:`lab.robot.StereoCamera` of the *rectified* images."""
+    def camera_model(
+        self,
+        mount_R=(0.0, 0.0, 0.8),
+        camera_offset_P=(0.05, 0.06, 0.0),
+        depth_scale_std: float = 0.007,
+        pointing_std_deg: float = 0.05,
+    ) -> StereoCamera:
+        """The :class:`lab.robot.StereoCamera` of the *rectified* images.
+
+        ``depth_scale_std`` and ``pointing_std_deg``: how well a checkerboard calibration and a homed
+        pan-tilt know the camera (0.5 % on the focal length and the baseline each, one PTU step); the
+        pose filters use them (:attr:`lab.robot.StereoCamera.depth_scale_std`)."""
         w, h = self.image_size
         P = self.P1
         return StereoCamera(
@@ -94,6 +104,8 @@ class StereoCalibration:
             self.baseline,
             tuple(float(v) for v in mount_R),
             tuple(float(v) for v in camera_offset_P),
+            float(depth_scale_std),
+            float(pointing_std_deg),
         )
 
     def save(self, path: str | Path) -> None:
