@@ -122,8 +122,16 @@ def test_an_unknown_sensing_profile_is_one_clear_line(tmp_path):
     r = subprocess.run(
         [sys.executable, "-m", "lab", "identify", "--sensing", "perfect"], capture_output=True, text=True
     )
-    assert r.returncode == 2 and "argument --sensing: invalid choice: 'perfect'" in r.stderr
-    assert "'realistic', 'ideal'" in r.stderr and len(r.stderr.strip().splitlines()) <= 2  # usage + error
+    assert r.returncode == 2 and "argument --sensing: unknown sensing profile 'perfect'" in r.stderr
+    assert "allowed: realistic, ideal, or a .toml file" in r.stderr
+    assert len(r.stderr.strip().splitlines()) <= 2  # usage + error
+    bad_file = tmp_path / "room.toml"
+    bad_file.write_text('[sensing]\nprofile = "realistic"\n[sensing.odometry]\nspin_slip = -0.1\n')
+    r = subprocess.run(
+        [sys.executable, "-m", "lab", "identify", "--sensing", str(bad_file)], capture_output=True, text=True
+    )
+    assert r.returncode == 2 and "room.toml: sensing.odometry.spin_slip must be a finite number >= 0" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     with pytest.raises(ConfigError, match="perfect"):
         run_identify(2, seed=0, planner="circle", max_actions=0, figures=False, sensing="perfect")
     with pytest.raises(ConfigError, match="must be a finite number >= 0, got -1"):
