@@ -270,7 +270,7 @@ def _check_values(c: HardwareConfig, where: str) -> None:
     missing = [i for i in REQUIRED_STREAM if i not in sp]
     need(
         not missing,
-        f"[base] stream_packets must include {list(REQUIRED_STREAM)} (safety and odometry), missing {missing}",
+        f"[base] stream_packets must include {list(REQUIRED_STREAM)} (safety, odometry); missing {missing}",
     )
     need(
         p.baudrate in PTU_BAUDS,

@@ -150,6 +150,7 @@ class Create2:
         self._enabled = False
         self._safe_confirmed = False
         self.safety_trip: str | None = None
+        self.bump_count = 0  # bumper presses (rising edges of packet 7's bump bits) since construction
         self.lost: ConnectionLost | None = None
         self._reader: threading.Thread | None = None
         self._stop_reader = threading.Event()
@@ -250,7 +251,9 @@ class Create2:
                     f"it streams, including {list(REQUIRED_STREAM)})"
                 )
             elif got:
-                hint = f"received {got} bytes but no valid frame: wrong baud rate? (Create 2: 115200, or 19200)"
+                hint = (
+                    f"received {got} bytes but no valid frame: wrong baud rate? (Create 2: 115200, or 19200)"
+                )
             else:
                 hint = "check that it is switched on (press Clean), the cable, and the port"
             raise DeviceTimeout(
@@ -532,6 +535,7 @@ class Create2:
         if was_stale:
             self._emit("stream_resumed", "sensor stream from the Create 2 is back")
         if (s.bump_left or s.bump_right) and not (prev and (prev.bump_left or prev.bump_right)):
+            self.bump_count += 1
             self._emit("bump", "left" if s.bump_left else "right")
         if self._enabled and self.safety_trip is None:
             reason = self._hazard(s)
