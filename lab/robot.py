@@ -25,6 +25,9 @@ Safety contract (both implementations):
   until ``clear_estop()`` and ``enable()``.
 * A safety trip (cliff, wheel drop) raises :class:`~lab.errors.SafetyStop` from the next command or
   step and leaves the robot disabled; it is never re-armed automatically.
+* ``bumps`` counts the times the base ran into something (the Create 2's bumpers, packet 7; the
+  simulated base's contacts), one per contact; a bump does not disarm. A wrapper passes it on, so
+  the navigator sees a bump through any wrapper (it ends a drive with ``BUMPED``).
 
 Ground truth (true poses, contacts) is not part of this interface: the simulator exposes it through a
 separate evaluation handle (``lab.sim.SimWorld.truth``) for tests and scoring only.
@@ -314,6 +317,11 @@ class Robot(ABC):
     @abstractmethod
     def capture_stereo(self, after: float | None = None) -> StereoFrame:
         """A rectified stereo pair, taken at ``now()`` (or the first frame newer than ``after``)."""
+
+    @property
+    @abstractmethod
+    def bumps(self) -> int:
+        """Number of bumps (contacts of the base with something) since the robot was created."""
 
     @abstractmethod
     def odometry(self) -> Pose2D:

@@ -33,6 +33,7 @@ class KinematicRobot(Robot):
         self.actual: list[tuple[float, float, float]] = []  # (t, v, omega) executed
         self.trajectory: list[tuple[float, float, float]] = [tuple(self._pose)]
         self.watchdog_trips = 0
+        self.bump_count = 0  # a test raises it to make the robot bump
 
     # -- the interface ---------------------------------------------------------------------------
     @property
@@ -63,6 +64,10 @@ class KinematicRobot(Robot):
 
     def capture_stereo(self, after=None):
         raise NotImplementedError("no camera on the kinematic test robot")
+
+    @property
+    def bumps(self) -> int:
+        return self.bump_count
 
     def odometry(self) -> Pose2D:
         x, y, th = self._pose

@@ -57,12 +57,19 @@ class ContractSubject:
         Remove the cause of the trip (put the robot back on the floor) so that ``enable()`` can re-arm.
     commands_sent : callable, optional
         Number of motion commands that reached the devices so far ("nothing was sent" checks).
+    put_obstacle_ahead : callable, optional
+        Make the base run into something when it drives forward about 0.1 m from where it stands now
+        (a box in the simulator; a pressed bumper on the emulated Create).
+    stale_sensors : callable(bool), optional
+        Stop (True) or resume (False) the base's sensor stream.
     """
 
     robot: Robot
     trip_safety: Callable[[], None] | None = None
     clear_hazard: Callable[[], None] | None = None
     commands_sent: Callable[[], int] | None = None
+    put_obstacle_ahead: Callable[[], None] | None = None
+    stale_sensors: Callable[[bool], None] | None = None
 
 
 def _dist(a: Pose2D, b: Pose2D) -> float:
@@ -276,6 +283,43 @@ class RobotContract:
         robot.enable()
         robot.drive(0.1, 0.0)
         robot.step(0.2)
+        robot.stop()
+
+    # --- bumps and stale sensors ----------------------------------------------------------------
+    def test_a_bump_is_counted_once_and_does_not_disarm(self, subject, robot):
+        if subject.put_obstacle_ahead is None:
+            pytest.skip("this implementation has no way to put an obstacle in the base's way")
+        robot.enable()
+        b0 = robot.bumps
+        assert b0 == 0
+        subject.put_obstacle_ahead()
+        _hold(robot, 0.15, 0.0, 2.0)  # about 0.25 m: into the obstacle and on pushing against it
+        assert robot.bumps == b0 + 1  # one contact, one bump
+        assert robot.enabled  # a bump stops nothing by itself: the navigator decides (BUMPED)
+        robot.stop()
+
+    def test_stale_sensors_stop_the_base_and_show_in_the_state(self, subject, robot):
+        if subject.stale_sensors is None:
+            pytest.skip("this implementation has no sensor stream that can go stale")
+        from lab.errors import DeviceTimeout
+
+        robot.enable()
+        _hold(robot, 0.1, 0.0, 0.5)
+        subject.stale_sensors(True)
+        try:
+            with pytest.raises(DeviceTimeout, match="no sensor stream"):
+                _hold(robot, 0.1, 0.0, 3.0)  # refused once the stream is stale
+            assert not robot.enabled and getattr(robot, "state", "stale") == "stale"
+            p0 = robot.odometry()
+            robot.step(0.3)
+            assert _dist(p0, robot.odometry()) < 0.01
+        finally:
+            subject.stale_sensors(False)
+        t_end = robot.now() + 3.0
+        while not robot.enabled and robot.now() < t_end:
+            robot.step(0.05)
+        assert robot.enabled and getattr(robot, "state", "enabled") == "enabled"  # back by itself
+        robot.drive(0.1, 0.0)
         robot.stop()
 
     # --- lifecycle ------------------------------------------------------------------------------

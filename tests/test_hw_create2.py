@@ -257,3 +257,40 @@ def test_odometry_sign_conventions(base, emu):
     _frames_after_the_stop(base)
     assert base.odometry().theta == pytest.approx(emu.theta, abs=0.01) and emu.theta > 0.15
     assert math.hypot(base.odometry().x, base.odometry().y) < 0.002
+
+
+def test_a_stream_without_the_optional_packets_falls_back_to_the_required_set(emu):
+    """A firmware (or emulator) that streams only the packets it knows sends valid frames of another
+    length: bring-up asks again for the required set, and safety and odometry work on it."""
+    from lab.hardware.open_interface import DEFAULT_STREAM, REQUIRED_STREAM
+
+    emu.known_packets = set(REQUIRED_STREAM)
+    b = _make(emu.port, first_frame_timeout_s=0.25, connect_attempts=4)
+    b.connect()
+    try:
+        assert b.stream_ids == REQUIRED_STREAM and b.requested_stream_ids == DEFAULT_STREAM
+        assert any(k == "stream_fallback" for k, _ in b.events)
+        s = b.sensors()
+        assert s.battery_charge_mah is None and not s.charging and s.oi_mode == 1
+        b.enable()
+        b.drive_direct(100, 100)
+        assert wait_until(lambda: emu.wheel_speeds() == (100, 100), 2.0)
+        x0 = b.odometry().x
+        time.sleep(0.3)
+        assert b.odometry().x - x0 > 0.01  # odometry from the fallback stream's encoders
+        emu.cliff(1)
+        assert wait_until(lambda: b.safety_trip is not None, 2.0)
+        assert "cliff" in b.safety_trip and emu.wheel_speeds() == (0, 0)
+    finally:
+        b.close()
+
+
+def test_frames_of_another_packet_set_are_named_in_the_error(emu):
+    """Frames that check out but lack a required packet: the error names the packets, not the baud rate."""
+    emu.known_packets = {7, 9, 10, 11, 12, 43, 44}  # no OI mode (35)
+    b = _make(emu.port, first_frame_timeout_s=0.2, connect_attempts=3)
+    with pytest.raises(
+        DeviceTimeout, match=r"frames check out but carry packets \[7, 9, 10, 11, 12, 43, 44\], not"
+    ):
+        b.connect()
+    assert not b.connected

@@ -318,3 +318,42 @@ def test_threads_share_the_port_without_mixing_replies(ptu, emu):
     assert all(lo <= r["P"] <= hi and abs(r["T"]) <= 60 for r in results)
     assert ptu.counters["protocol_errors"] == 0 and ptu.counters["retries"] == 0
     assert math.degrees(ptu.get_pan_tilt()[0]) == pytest.approx(1.0, abs=0.06)
+
+
+def test_garbage_before_every_third_reply_connects_and_moves(emu):
+    """Stray bytes before every third reply (a noisy line): the absolute commands are retried once like the
+    queries, so connect() and the moves succeed and the head ends where it was sent."""
+    emu.garbage_every = 3
+    p = PTUD46(emu.port, banner_wait_s=0.0, timeout_s=TIMEOUT)
+    p.connect()
+    try:
+        for pan_deg, tilt_deg in ((10.0, -5.0), (-20.0, 8.0), (3.0, 0.0)):
+            p.set_pan_tilt(math.radians(pan_deg), math.radians(tilt_deg), wait=True)
+            assert p.counters["protocol_errors"] > 0
+            steps = emu.position_steps()
+            assert p.to_rad("P", steps["P"]) == pytest.approx(math.radians(pan_deg), abs=math.radians(0.06))
+            assert p.to_rad("T", steps["T"]) == pytest.approx(math.radians(tilt_deg), abs=math.radians(0.06))
+            assert (p.target_steps["P"], p.target_steps["T"]) == (steps["P"], steps["T"])
+        assert p.counters["retries"] >= p.counters["protocol_errors"] > 0
+    finally:
+        p.close()
+
+
+def test_garbled_move_reply_is_retried_once(ptu, emu):
+    emu.garbage_next = 1
+    ptu.set_pan_tilt(math.radians(6.0), 0.0, wait=True)
+    assert ptu.counters["retries"] == 1 and ptu.counters["protocol_errors"] == 1
+    assert math.degrees(ptu.targets[0]) == pytest.approx(6.0, abs=0.06)
+    assert math.degrees(ptu.to_rad("P", emu.position_steps()["P"])) == pytest.approx(6.0, abs=0.06)
+
+
+def test_failed_move_re_reads_the_position_as_the_target(ptu, emu):
+    """PP garbled on its try and its retry: the unit may have taken it. The driver halts the head and takes
+    the position it reads back as the target, so the state never reports motion towards a stale target."""
+    ptu.set_pan_tilt(math.radians(2.0), 0.0, wait=True)
+    emu.garbage_next = 2
+    with pytest.raises(ProtocolError, match="unexpected reply"):
+        ptu.set_pan_tilt(math.radians(30.0), 0.0)
+    time.sleep(0.1)
+    steps = ptu.get_steps()
+    assert ptu.target_steps == steps == emu.position_steps()

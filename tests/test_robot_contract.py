@@ -9,6 +9,7 @@ yielding a ContractSubject) and add it to IMPLEMENTATIONS.
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 
 import pytest
@@ -55,6 +56,8 @@ def hardware_emulated(tmp_path):
             trip_safety=lambda: emu.create.wheel_drop(True),
             clear_hazard=clear_hazard,
             commands_sent=commands_sent,
+            put_obstacle_ahead=lambda: emu.create.bump(True, True),  # the bumper is pressed at once
+            stale_sensors=lambda on: setattr(emu.create, "mute_stream", on),
         )
     finally:
         robot.close()
@@ -68,7 +71,20 @@ def simulator(tmp_path):
     world = SimWorld("arena")
     robot = SimRobot(world, odometry_noise=OdometryNoise.none())
     try:
-        yield ContractSubject(robot, trip_safety=lambda: robot.trip_safety("cliff"))
+
+        def put_obstacle_ahead():
+            """A 0.1 m cube 0.1 m ahead of the base's front."""
+            p = world.truth.robot_pose()
+            d = robot.base_limits.radius + 0.1 + 0.05
+            world.add_box(
+                "contract_obstacle",
+                (0.1, 0.1, 0.1),
+                (p.x + d * math.cos(p.theta), p.y + d * math.sin(p.theta)),
+            )
+
+        yield ContractSubject(
+            robot, trip_safety=lambda: robot.trip_safety("cliff"), put_obstacle_ahead=put_obstacle_ahead
+        )
     finally:
         robot.close()
         world.close()

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from lab.errors import ConfigError
+from lab.hardware.open_interface import PACKETS, REQUIRED_STREAM
 
 __all__ = [
     "BaseConfig",
@@ -62,6 +63,9 @@ class BaseConfig:
     stale_timeout_s: float = 0.1
     first_frame_timeout_s: float = 0.5
     connect_attempts: int = 10
+    # the sensor packets streamed; without the optional ones (25, 26 battery, 34 charger) the driver falls
+    # back to the required set when the device streams only what it knows
+    stream_packets: tuple = (7, 9, 10, 11, 12, 25, 26, 34, 35, 43, 44)
 
 
 @dataclass(frozen=True)
@@ -256,6 +260,17 @@ def _check_values(c: HardwareConfig, where: str) -> None:
     need(
         1 <= b.connect_attempts <= 50,
         f"[base] connect_attempts must be within [1, 50], got {b.connect_attempts}",
+    )
+    sp = b.stream_packets
+    need(
+        all(isinstance(i, int) and not isinstance(i, bool) and i in PACKETS for i in sp)
+        and len(set(sp)) == len(sp),
+        f"[base] stream_packets must be distinct sensor packet ids among {sorted(PACKETS)}, got {list(sp)}",
+    )
+    missing = [i for i in REQUIRED_STREAM if i not in sp]
+    need(
+        not missing,
+        f"[base] stream_packets must include {list(REQUIRED_STREAM)} (safety, odometry); missing {missing}",
     )
     need(
         p.baudrate in PTU_BAUDS,

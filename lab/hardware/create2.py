@@ -29,6 +29,7 @@ from lab.hardware.odometry import DiffDriveOdometry, EncoderUnwrapper
 from lab.hardware.open_interface import (
     DEFAULT_STREAM,
     MODE_GAP_S,
+    REQUIRED_STREAM,
     OIMode,
     Op,
     StreamParser,
@@ -124,9 +125,10 @@ class Create2:
         self.baudrate = baudrate
         self.mode = mode
         self.stream_ids = tuple(stream_ids)
-        for i in (7, 9, 10, 11, 12, 35, 43, 44):
+        for i in REQUIRED_STREAM:
             if i not in self.stream_ids:
                 raise ValueError(f"the stream must include packet {i} (safety and odometry need it)")
+        self.requested_stream_ids = self.stream_ids
         self.stale_timeout_s = stale_timeout_s
         self.first_frame_timeout_s = first_frame_timeout_s
         self.connect_attempts = connect_attempts
@@ -148,6 +150,7 @@ class Create2:
         self._enabled = False
         self._safe_confirmed = False
         self.safety_trip: str | None = None
+        self.bump_count = 0  # bumper presses (rising edges of packet 7's bump bits) since construction
         self.lost: ConnectionLost | None = None
         self._reader: threading.Thread | None = None
         self._stop_reader = threading.Event()
@@ -172,6 +175,7 @@ class Create2:
             b.port,
             baudrate=b.baudrate,
             mode=b.mode,
+            stream_ids=b.stream_packets,
             stale_timeout_s=b.stale_timeout_s,
             first_frame_timeout_s=b.first_frame_timeout_s,
             connect_attempts=b.connect_attempts,
@@ -207,6 +211,7 @@ class Create2:
         self._stale = False
         self._enabled = False
         self._safe_confirmed = False
+        self.stream_ids = self.requested_stream_ids
         self._parser = StreamParser(self.stream_ids)
         self._left.rebase()
         self._right.rebase()
@@ -229,12 +234,28 @@ class Create2:
                     return
                 if self.lost is not None:
                     raise self.lost
+                if self._parser.foreign_frames and self.stream_ids != REQUIRED_STREAM:
+                    # valid frames of another packet set: a device that streams only the packets it knows
+                    self._emit(
+                        "stream_fallback",
+                        f"the Create 2 streams packets {list(self._parser.foreign_ids or ())} instead of "
+                        f"{list(self.stream_ids)}; asking for the required set {list(REQUIRED_STREAM)}",
+                    )
+                    self.stream_ids = REQUIRED_STREAM
+                    self._parser = StreamParser(self.stream_ids)
             got = self.counters["bytes_received"]
-            hint = (
-                f"received {got} bytes but no valid frame: wrong baud rate? (Create 2: 115200, or 19200)"
-                if got
-                else "check that it is switched on (press Clean), the cable, and the port"
-            )
+            if self._parser.foreign_frames:
+                hint = (
+                    f"its frames check out but carry packets {list(self._parser.foreign_ids or ())}, "
+                    f"not the requested {list(self.stream_ids)} (set [base] stream_packets to packets "
+                    f"it streams, including {list(REQUIRED_STREAM)})"
+                )
+            elif got:
+                hint = (
+                    f"received {got} bytes but no valid frame: wrong baud rate? (Create 2: 115200, or 19200)"
+                )
+            else:
+                hint = "check that it is switched on (press Clean), the cable, and the port"
             raise DeviceTimeout(
                 f"Create 2 on {self.port}: no sensor stream within "
                 f"{self.connect_attempts * self.first_frame_timeout_s:.1f} s; {hint}"
@@ -514,6 +535,7 @@ class Create2:
         if was_stale:
             self._emit("stream_resumed", "sensor stream from the Create 2 is back")
         if (s.bump_left or s.bump_right) and not (prev and (prev.bump_left or prev.bump_right)):
+            self.bump_count += 1
             self._emit("bump", "left" if s.bump_left else "right")
         if self._enabled and self.safety_trip is None:
             reason = self._hazard(s)

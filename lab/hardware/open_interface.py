@@ -110,6 +110,8 @@ PACKETS: dict[int, tuple[str, int, bool]] = {
 
 #: what the driver streams: bumps/wheel drops, 4 cliffs, charging sources, battery, OI mode, encoders
 DEFAULT_STREAM: tuple[int, ...] = (7, 9, 10, 11, 12, 25, 26, 34, 35, 43, 44)
+#: what safety and odometry need (bumps/wheel drops, cliffs, OI mode, encoders): the fallback stream
+REQUIRED_STREAM: tuple[int, ...] = (7, 9, 10, 11, 12, 35, 43, 44)
 
 
 def clamp_mm_s(v: float) -> int:
@@ -189,6 +191,8 @@ class StreamParser:
         self.frames = 0
         self.corrupt_frames = 0
         self.discarded_bytes = 0
+        self.foreign_frames = 0  # frames that check out (checksum, packet ids) but carry other packets
+        self.foreign_ids: tuple[int, ...] | None = None  # the packets the last such frame carried
 
     def reset(self) -> None:
         self._buf.clear()
@@ -210,7 +214,13 @@ class StreamParser:
             if len(buf) < 2:
                 break
             n = buf[1]
-            if n == 0 or (self._n is not None and n != self._n):
+            if n == 0:
+                self._reject(buf)
+                continue
+            if self._n is not None and n != self._n:
+                if len(buf) >= n + 3 and self._foreign(bytes(buf[: n + 3])):
+                    del buf[: n + 3]
+                    continue
                 self._reject(buf)
                 continue
             if len(buf) < n + 3:
@@ -224,6 +234,15 @@ class StreamParser:
             self.frames += 1
             out.append(values)
         return out
+
+    def _foreign(self, frame: bytes) -> bool:
+        """A whole frame of another length that checks out: the device streams another packet set."""
+        values = _decode_body(frame[2:-1]) if sum(frame) & 0xFF == 0 else None
+        if not values:
+            return False
+        self.foreign_frames += 1
+        self.foreign_ids = tuple(values)
+        return True
 
     def _reject(self, buf: bytearray) -> None:
         self.corrupt_frames += 1

@@ -18,7 +18,10 @@ tilt up) through a per-axis ``sign`` and ``zero_offset`` taken from the configur
 
     angle [rad] = sign * (steps * resolution - zero_offset)
 
-Every read has a deadline; queries are retried once; one lock serialises the transactions on a port.
+Every read has a deadline; queries and the absolute commands (``PP<n>``, ``TP<n>``, ``PS<n>``, ``TS<n>``,
+``I``, ``CI``, ``LE``, ``ED``, ``FT``: safe to repeat) are retried once on a garbled or missing
+reply; one lock serialises the transactions on a port. A move that still fails halts the head and re-reads
+its position as the targets, so ``targets`` never describe a move the unit may not be making.
 """
 
 from __future__ import annotations
@@ -37,12 +40,19 @@ from lab.hardware.config import HardwareConfig, PTUConfig
 from lab.hardware.serial_port import lost, open_port
 from lab.robot import PanTiltLimits, check_finite
 
-__all__ = ["ARCSEC", "PTUD46", "PTUReply", "parse_number", "parse_reply"]
+__all__ = ["ARCSEC", "PTUD46", "PTUReply", "parse_number", "parse_reply", "repeatable"]
 
 ARCSEC = math.pi / (180.0 * 3600.0)  # one arc-second [rad]
 
 _ASYNC = re.compile(r"!([PT])(?![A-Za-z])")  # "!P"/"!T" limit hits; an error reply is "! <message>"
 _NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?")
+# absolute commands: repeating one after a lost or garbled reply leaves the unit in the same state
+_REPEATABLE = re.compile(r"^(?:[PT][PS][-+]?\d+|I|CI|LE|ED|FT)$")
+
+
+def repeatable(command: str) -> bool:
+    """True for commands whose repetition is harmless (absolute positions/speeds, modes)."""
+    return bool(_REPEATABLE.match(command.strip().upper()))
 
 
 @dataclass(frozen=True)
@@ -348,12 +358,28 @@ class PTUD46:
                 if sp[ax] != self.speed_steps.get(ax):
                     self._transact(f"{ax}S{sp[ax]}")
                     self.speed_steps[ax] = sp[ax]
-            self._transact(f"PP{p}")
-            self.target_steps["P"] = p
-            self._transact(f"TP{t}")
-            self.target_steps["T"] = t
+            try:
+                self._transact(f"PP{p}")
+                self.target_steps["P"] = p
+                self._transact(f"TP{t}")
+                self.target_steps["T"] = t
+            except (DeviceTimeout, ProtocolError):
+                self._resync_after_failed_move()
+                raise
             if wait:
                 self.await_motion(timeout)
+
+    def _resync_after_failed_move(self) -> None:
+        """A move command failed even on its retry: the unit may or may not have taken it. Halt (best
+        effort) and take the positions read back as the targets, so no stale target reads as motion."""
+        try:
+            self._transact("H", timeout=min(self.timeout_s, 1.0))
+        except (DeviceTimeout, ProtocolError, CommandRejected, ConnectionLost):
+            pass
+        try:
+            self.target_steps = self.get_steps()
+        except (DeviceTimeout, ProtocolError, ConnectionLost):
+            pass
 
     def _set_speed(self, speed: float) -> None:
         sp = self._speed_steps(speed)
@@ -371,7 +397,11 @@ class PTUD46:
                 )
                 timeout = 1.5 * travel + self.move_margin_s
             try:
-                self._transact("A", timeout=timeout)
+                try:
+                    self._transact("A", timeout=timeout)
+                except ProtocolError:  # garbled "*": asking again is harmless (it answers when still)
+                    self.counters["retries"] += 1
+                    self._transact("A", timeout=timeout)
             except DeviceTimeout as e:
                 self.halt()
                 raise DeviceTimeout(
@@ -429,11 +459,15 @@ class PTUD46:
         command: str,
         timeout: float | None = None,
         *,
-        retry: bool = False,
+        retry: bool | None = None,
         expect_limit_hits: bool = False,
     ) -> str:
-        """Write ``command`` and return the body of its ``*`` reply; ``!`` -> CommandRejected."""
+        """Write ``command`` and return the body of its ``*`` reply; ``!`` -> CommandRejected.
+
+        ``retry`` (default: :func:`repeatable`) sends it once more after a timeout or a garbled reply."""
         timeout = self.timeout_s if timeout is None else timeout
+        if retry is None:
+            retry = repeatable(command)
         with self._lock:
             for attempt in (0, 1) if retry else (0,):
                 try:

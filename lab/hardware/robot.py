@@ -7,13 +7,17 @@ Threads and timing (the simulator's sub-step, done in real time):
 * a servo thread (``[robot] servo_rate_hz``, 50 Hz) slews the sent velocity towards the target within the
   acceleration limits (``BaseLimits.max_accel``, ``max_turn_accel``), converts it to wheel speeds (scaled
   together so neither wheel exceeds ``max_speed``) and writes Drive Direct when it changes;
-* the same thread is the **watchdog**: it sleeps exactly until ``last drive + cmd_timeout_s`` and then sends
-  a zero Drive Direct at once (no slew: it is a stop, not a manoeuvre), and it turns device events (a
-  safety trip seen in the Create's stream, a lost port) into robot state;
+* the same thread is the **watchdog**: it sleeps until ``last drive + cmd_timeout_s - watchdog_lead_s``
+  (0.1 s early, so that the zero reaches the base within the contract's 0.5 s with a margin for the
+  thread's wake-up and the serial line) and then sends a zero Drive Direct at once (no slew: it is a
+  stop, not a manoeuvre), and it turns device events (a safety trip seen in the Create's stream, a lost
+  port) into robot state;
 * ``step(dt)`` sleeps to a monotonic deadline and raises as soon as a trip or a lost device is seen.
 
 States (``state``): "disconnected" -> ``connect()`` -> "connected" -> ``enable()`` -> "enabled";
-"faulted" after a safety trip (until ``enable()``); "estopped" while the e-stop is latched; a lost
+"faulted" after a safety trip (until ``enable()``); "estopped" while the e-stop is latched; "stale" while
+the Create's sensor stream is stale (no cliff detection: the base is stopped and ``drive`` refused; it
+comes back by itself when the stream does); a lost
 device makes it "disconnected" until ``reconnect()``, after which it is "connected" (disabled).
 
 Stops happen on ``stop()``, ``disable()``, ``estop()``, ``close()``, ``with``-block exit (also on an
@@ -106,6 +110,8 @@ class HardwareRobot(Robot):
     """
 
     is_simulated = False
+    #: the watchdog fires this long before ``cmd_timeout_s`` [s], so that its stop arrives within it
+    watchdog_lead_s = 0.1
 
     def __init__(
         self,
@@ -255,7 +261,7 @@ class HardwareRobot(Robot):
 
     @property
     def state(self) -> str:
-        """ "disconnected", "connected", "enabled", "faulted" or "estopped"."""
+        """ "disconnected", "connected", "enabled", "stale", "faulted" or "estopped"."""
         with self._lock:
             if self._closed or self._lost is not None or not self._connected:
                 return "disconnected"
@@ -263,6 +269,8 @@ class HardwareRobot(Robot):
                 return "estopped"
             if self._trip is not None:
                 return "faulted"
+            if self.base.stale:
+                return "stale"
             return "enabled" if self._enabled else "connected"
 
     @property
@@ -462,6 +470,11 @@ class HardwareRobot(Robot):
             raw.t, left, right, self._camera, pan_tilt_at(raw.t, pt0, pt1), pose_at(raw.t, odom0, odom1)
         )
 
+    @property
+    def bumps(self) -> int:
+        """Bumper presses (packet 7, left or right, counted on the rising edge) since the robot was made."""
+        return self.base.bump_count
+
     def odometry(self) -> Pose2D:
         """Wheel odometry since the first connect (kept across reconnects; motion while unplugged is lost)."""
         return self.base.odometry()
@@ -553,9 +566,13 @@ class HardwareRobot(Robot):
             with self._lock:
                 wait = period
                 if self._v_target or self._w_target or self._v_out or self._w_out:
-                    wait = min(wait, max(0.0, self._last_cmd_t + self.cmd_timeout_s - time.monotonic()))
+                    wait = min(wait, max(0.0, self._last_cmd_t + self._watchdog_s - time.monotonic()))
             self._wake.wait(wait)
             self._wake.clear()
+
+    @property
+    def _watchdog_s(self) -> float:
+        return max(self.cmd_timeout_s - self.watchdog_lead_s, 0.5 * self.cmd_timeout_s)
 
     def _servo_once(self, now: float, dt: float) -> None:
         self._poll_devices()
@@ -570,7 +587,7 @@ class HardwareRobot(Robot):
                 self._v_out = self._w_out = 0.0
                 return
             moving = self._v_target or self._w_target or self._v_out or self._w_out
-            if moving and now - self._last_cmd_t >= self.cmd_timeout_s:
+            if moving and now - self._last_cmd_t >= self._watchdog_s:
                 self._v_target = self._w_target = self._v_out = self._w_out = 0.0
                 self.watchdog_stops += 1
                 self._send(0.0, 0.0, force=True)

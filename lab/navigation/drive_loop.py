@@ -50,7 +50,7 @@ class NavOutcome(Enum):
     ARRIVED = "arrived within the follower's tolerances (odometry)"
     NO_PATH = "no path (see the reason)"
     TIMEOUT = "timed out"
-    BUMPED = "the base bumped into something (its collision counter rose)"
+    BUMPED = "the base bumped into something (its bump count rose)"
     SAFETY_STOP = "the robot stopped itself (bump, cliff or wheel drop)"
 
 
@@ -402,8 +402,8 @@ class DriveLoop:
         )
 
     def _bumps(self) -> int:
-        """The base's bump count, where the robot has one (``SimRobot.collisions``), else 0."""
-        return int(getattr(self.robot, "collisions", 0))
+        """The base's bump count (:attr:`lab.robot.Robot.bumps`: passed on by any wrapper)."""
+        return int(self.robot.bumps)
 
     def _point_head(self, pose: Pose2D, wait: bool = False) -> None:
         """Pan the head towards the path ``look_ahead`` metres ahead (along the final heading at the end)."""

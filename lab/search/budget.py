@@ -102,6 +102,10 @@ class BudgetedRobot(Robot):
     def capture_stereo(self, after=None):
         return self.base.capture_stereo(after)
 
+    @property
+    def bumps(self) -> int:
+        return self.base.bumps
+
     def odometry(self) -> Pose2D:
         return self.base.odometry()
 

@@ -302,6 +302,11 @@ class SimRobot(Robot):
         self._safety_trip = reason
 
     @property
+    def bumps(self) -> int:
+        """Contacts of the base with something (the bump sensor's count); see :attr:`collisions`."""
+        return self._collisions
+
+    @property
     def collisions(self) -> int:
         """Number of times the base ran into something (the bump sensor's count)."""
         return self._collisions

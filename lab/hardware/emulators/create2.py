@@ -95,6 +95,7 @@ class Create2Emulator(PtyDevice):
         self.x = self.y = self.theta = 0.0  # true pose [m, m, rad]
         self.enc = [float(encoder_start[0]), float(encoder_start[1])]  # left, right [ticks]
         self.stream_ids: tuple[int, ...] = ()
+        self.known_packets: set[int] | None = None  # a firmware that streams only these (None: all)
         self.stream_paused = False
         self._next_frame_t = 0.0
         self.bumps = [False, False]  # left, right
@@ -243,7 +244,8 @@ class Create2Emulator(PtyDevice):
             self._drive(round(r * 500 / 255), round(l * 500 / 255))
         elif op == Op.STREAM:
             ids = tuple(args[1:])
-            self.stream_ids = tuple(i for i in ids if i in PACKETS)
+            known = PACKETS if self.known_packets is None else self.known_packets
+            self.stream_ids = tuple(i for i in ids if i in PACKETS and i in known)
             self.stream_paused = False
             self._next_frame_t = self.now()
         elif op == Op.PAUSE_RESUME_STREAM:

@@ -2,7 +2,8 @@
 
 The head moves at its set speeds on the emulator's clock. Fault switches (thread-safe, besides those of
 :class:`~lab.hardware.emulators.pty_device.PtyDevice`): ``drop_next``, ``garbage_next``,
-``corrupt_next``, ``truncate_next`` (counts of replies to spoil), ``stall`` (motors do not move: ``A``
+``corrupt_next``, ``truncate_next`` (counts of replies to spoil), ``garbage_every`` (stray bytes before
+every n-th reply, 0: never), ``stall`` (motors do not move: ``A``
 never completes), ``unit_id``, ``banner``, :meth:`PTUEmulator.limit_hit`.
 """
 
@@ -74,6 +75,8 @@ class PTUEmulator(PtyDevice):
         self.stall = False
         self.drop_next = 0
         self.garbage_next = 0
+        self.garbage_every = 0
+        self._replies = 0
         self.corrupt_next = 0
         self.truncate_next = 0
         self.commands: list[tuple[float, str]] = []
@@ -126,8 +129,11 @@ class PTUEmulator(PtyDevice):
             self.drop_next -= 1
             return
         data = text.encode("latin-1") + b"\r\n"
-        if self.garbage_next:
-            self.garbage_next -= 1
+        self._replies += 1
+        every = self.garbage_every and self._replies % self.garbage_every == 0
+        if self.garbage_next or every:
+            if not every:
+                self.garbage_next -= 1
             data = bytes(self._rng.choice(b"#%&@\x8f\xfe\x00\x13~") for _ in range(5)) + data
         if self.corrupt_next:
             self.corrupt_next -= 1
