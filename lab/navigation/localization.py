@@ -203,9 +203,9 @@ class LocalizerConfig:
     max_range_m, min_facing : float
         A landmark is looked for in a frame only within this range and when seen at most
         ``acos(min_facing)`` off its face normal.
-    relocalize_sigma_m : float [m]
+    relocalize_sigma_m, relocalize_sigma_rad : float [m], [rad]
         Active re-localization: the robot looks for a landmark when the position standard deviation
-        (the larger axis of the covariance ellipse) exceeds this.
+        (the larger axis of the covariance ellipse) or the heading's exceeds these.
     """
 
     sigma_along_m_per_sqrt_m: float = 0.02
@@ -213,13 +213,14 @@ class LocalizerConfig:
     sigma_heading_rad_per_sqrt_m: float = 0.03
     sigma_heading_rad_per_sqrt_rad: float = 0.06
     obs_sigma_m: float = 0.005
-    obs_sigma_rel: float = 0.004
-    obs_sigma_rad: float = math.radians(0.3)
+    obs_sigma_rel: float = 0.006
+    obs_sigma_rad: float = math.radians(0.5)
     gate_prob: float = 0.999
     min_inliers: int = 10
     max_range_m: float = 6.5
     min_facing: float = 0.35
     relocalize_sigma_m: float = 0.05
+    relocalize_sigma_rad: float = math.radians(0.5)
     ransac: RansacConfig = field(default_factory=lambda: RansacConfig(min_matches=6, dist_max_m=0.25))
 
     def __post_init__(self):
@@ -517,16 +518,21 @@ class LocalizedRobot(Robot):
                 self.log(f"localization: rejected {obs.landmark.name} (NIS {rec.nis:.1f}, an outlier)")
         return replace(frame, odom=self._pose())
 
+    def certain(self) -> bool:
+        """Whether the pose is within the re-localization thresholds (position and heading)."""
+        est = self.pose_estimate()
+        return est.sigma_xy_m <= self.config.relocalize_sigma_m and est.sigma_theta_rad <= self.config.relocalize_sigma_rad
+
     def relocalize(self, max_views: int = 6, tilt_max: float = math.radians(25.0)) -> bool:
         """Active re-localization: when the position is uncertain, stop and pan the head to the landmarks
         the estimate says are in view, nearest-facing first, until it is certain again.
 
-        Returns True when the pose is (or became) within ``config.relocalize_sigma_m``; the head is put
-        back where it was.
+        Returns True when the pose is (or became) within the thresholds (:meth:`certain`); the head is
+        put back where it was.
         """
         if self.mode is LocalizationMode.ODOMETRY:
             return False
-        if self.pose_estimate().sigma_xy_m <= self.config.relocalize_sigma_m:
+        if self.certain():
             return True
         self.base.stop()
         start = self.base.pan_tilt()
@@ -550,7 +556,7 @@ class LocalizedRobot(Robot):
             self.base.command_pan_tilt(pan, tilt)
             self.base.wait_pan_tilt()
             self.capture_stereo()
-            if self.pose_estimate().sigma_xy_m <= self.config.relocalize_sigma_m:
+            if self.certain():
                 done = True
                 break
         self.base.command_pan_tilt(start.pan, start.tilt)

@@ -21,7 +21,7 @@ Each landmark's database is trained like an object's (:mod:`lab.training.databas
 rendered alone from viewpoints in front of its face -- azimuths up to ``max_azimuth_deg`` off its
 normal, at several distances, the range the robot sees it from in the room -- and the 3D SIFT features
 on its face are moved into L with the known training pose and merged across views. Databases are
-cached by the texture's and the parameters' hash (``<cache>/landmarks/v<FORMAT>/<name>.npz``).
+cached by the texture's and the parameters' hash (``<cache>/landmarks/v<FORMAT>/<name>-<hash>.npz``).
 """
 
 from __future__ import annotations
@@ -277,13 +277,14 @@ def train_landmark_database(
     )
 
 
-def _path(name: str, folder: Path | None) -> Path:
-    return Path(folder or cache_dir() / "landmarks") / f"v{FORMAT_VERSION}" / f"{name}.npz"
+def _path(name: str, asset_hash: str, folder: Path | None) -> Path:
+    # the hash in the name: two worlds may have posters of one name but other sizes or images
+    return Path(folder or cache_dir() / "landmarks") / f"v{FORMAT_VERSION}" / f"{name}-{asset_hash[:12]}.npz"
 
 
 def _cached_database(p: _Poster, params, camera, folder, progress: bool) -> FeatureDatabase:
-    path = _path(p.landmark.name, folder)
     want = _asset_hash(p, params, camera)
+    path = _path(p.landmark.name, want, folder)
     try:
         db = load_database(path, p.landmark.name)
         if db.meta.get("asset_hash") == want:
