@@ -198,6 +198,11 @@ class LocalizerConfig:
     gate_prob : float
         Observations whose innovation's Mahalanobis distance exceeds the chi-square(3) quantile are
         rejected as outliers.
+    max_rejected_in_a_row, reject_inflation : int, float
+        Gate lock-out recovery: after this many rejected observations in a row the estimate, not the
+        landmarks, is the likelier culprit (an odometry bias the noise model does not cover, such as
+        wheel scrub in long turns), so the covariance is multiplied by ``reject_inflation`` and the
+        next observation can correct it.
     min_inliers : int
         Fewest RANSAC inliers for a landmark observation.
     max_range_m, min_facing : float
@@ -211,11 +216,13 @@ class LocalizerConfig:
     sigma_along_m_per_sqrt_m: float = 0.02
     sigma_cross_m_per_sqrt_m: float = 0.01
     sigma_heading_rad_per_sqrt_m: float = 0.03
-    sigma_heading_rad_per_sqrt_rad: float = 0.06
+    sigma_heading_rad_per_sqrt_rad: float = 0.1
     obs_sigma_m: float = 0.005
     obs_sigma_rel: float = 0.006
     obs_sigma_rad: float = math.radians(0.5)
     gate_prob: float = 0.999
+    max_rejected_in_a_row: int = 3
+    reject_inflation: float = 9.0
     min_inliers: int = 10
     max_range_m: float = 6.5
     min_facing: float = 0.35
@@ -327,6 +334,8 @@ class Localizer:
             np.diag([0.01**2, 0.01**2, math.radians(0.5) ** 2]) if Sigma0 is None else np.array(Sigma0, float)
         )
         self.history: list[UpdateRecord] = []
+        self.rejected_in_a_row = 0
+        self.n_inflations = 0
 
     @property
     def n_updates(self) -> int:
@@ -359,6 +368,13 @@ class Localizer:
             IKH = np.eye(3) - K @ H
             Sigma = IKH @ Sigma_bar @ IKH.T + K @ Q @ K.T  # Joseph form
             self.x, self.Sigma = x, 0.5 * (Sigma + Sigma.T)
+            self.rejected_in_a_row = 0
+        else:
+            self.rejected_in_a_row += 1
+            if self.rejected_in_a_row >= self.config.max_rejected_in_a_row:  # gate lock-out recovery
+                self.Sigma = self.config.reject_inflation * self.Sigma
+                self.rejected_in_a_row = 0
+                self.n_inflations += 1
         rec = UpdateRecord(t, landmark.name, z, Q, x_bar, Sigma_bar, self.x.copy(), self.Sigma.copy(), nis,
                            bool(accepted), int(n_inliers))
         self.history.append(rec)
