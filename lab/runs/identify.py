@@ -186,20 +186,25 @@ def run_identify(
 
 def _localized(session: RobotSession, robot_config, localization, seed: int):
     """The episode's robot behind the localizer (:class:`LocalizedRobot`), and a note when it has to
-    fall back to odometry alone. The simulator's landmarks are the scene's posters; a real robot's the
-    ``landmarks.toml`` beside its config."""
+    fall back to odometry alone. The simulator's landmarks are its scene's posters (its odometry starts
+    at the true start pose, in the world frame); a real robot or a rehearsal runs on odometry alone until
+    its start pose in the room of ``hardware/landmarks.toml`` is measured."""
     from lab.training.landmarks import trained_landmark_map
 
     mode = LocalizationMode.parse(localization)
     note = None
     landmarks = None
     if mode is LocalizationMode.LANDMARKS:
-        if session.kind is RobotKind.SIM:
+        if session.kind is RobotKind.SIM:  # its odometry starts at the true start, in the world frame
             landmarks = trained_landmark_map(session.world.scene, progress=False)
-        elif robot_config is not None and (Path(robot_config).parent / "landmarks.toml").is_file():
-            landmarks = trained_landmark_map(Path(robot_config).parent / "landmarks.toml", progress=False)
         if landmarks is None or len(landmarks) == 0:
-            note = "no landmark map for this robot: the pose is odometry alone"
+            # a real robot's odometry starts at its own origin, not at a measured pose in the room that
+            # the landmark map (hardware/landmarks.toml) is written in: not supported yet
+            note = (
+                "no landmark map in the odometry's frame for this robot: the pose is odometry alone"
+                if session.kind is not RobotKind.SIM
+                else "the scene has no landmarks: the pose is odometry alone"
+            )
             mode = LocalizationMode.ODOMETRY
     robot = LocalizedRobot(session.robot, mode, landmarks, rng=np.random.default_rng([seed, 20]))
     return robot, note
