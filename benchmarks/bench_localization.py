@@ -5,10 +5,10 @@ Run from the repository root (long: about 15 s of CPU per drive and mode)::
     nice python benchmarks/bench_localization.py [--seeds 100000-100019] [--length 30] \
         [--sensing realistic] [--figure out/localization.png] [--json out/localization.json]
 
-Each seed drives the same seeded loop through the lab room (:func:`lab.runs.localization.run_localization_drive`)
-twice: once on odometry alone, once localized against the posters. Printed: the median final position and
-heading error of each (with the 25-75 % range), the localizer's NEES (its error against the truth
-weighted by its own covariance) after every accepted update and the fraction inside the chi-square(3)
+Each seed drives the same seeded loop through the lab room
+(:func:`lab.runs.localization.run_localization_drive`) twice: once on odometry alone, once localized
+against the posters. Printed: the median final position and heading error of each (with the
+25-75 % range), the localizer's NEES (its error against the truth weighted by its own covariance) after every accepted update and the fraction inside the chi-square(3)
 95 % band [0.216, 9.35], and the number of updates and rejected observations. The default seeds are the
 report split (:func:`lab.evaluation.report_seeds`); tune on seeds < 1000.
 """
@@ -73,9 +73,13 @@ def main() -> None:
 
     nees = np.asarray(nees_all)
     k_in = int(np.sum((nees >= lo) & (nees <= hi)))
-    ok_pos = sum(r["localization_error_m"] <= 0.03 and r["localization_heading_error_deg"] <= 1.0 for r in rows)
-    print(f"\n{n} drives of {args.length:g} m, sensing {args.sensing}, seeds {seeds[0]}..{seeds[-1]}, "
-          f"{time.perf_counter() - t0:.0f} s")
+    ok_pos = sum(
+        r["localization_error_m"] <= 0.03 and r["localization_heading_error_deg"] <= 1.0 for r in rows
+    )
+    print(
+        f"\n{n} drives of {args.length:g} m, sensing {args.sensing}, seeds {seeds[0]}..{seeds[-1]}, "
+        f"{time.perf_counter() - t0:.0f} s"
+    )
     print(f"path length [m]                  {med('path_m')}")
     print(f"odometry final error [m]         {med('odometry_error_m')}")
     print(f"odometry final heading [deg]     {med('odometry_heading_error_deg')}")
@@ -84,12 +88,21 @@ def main() -> None:
     w = wilson_interval(ok_pos, n)
     print(f"drives within 3 cm and 1 deg     {ok_pos}/{n} (Wilson 95 %: {w[0]:.2f}-{w[1]:.2f})")
     wn = wilson_interval(k_in, max(len(nees), 1))
-    print(f"NEES in the 95 % band            {k_in}/{len(nees)} = {k_in / max(len(nees), 1):.3f} "
-          f"(Wilson 95 %: {wn[0]:.3f}-{wn[1]:.3f}); median NEES {np.median(nees):.2f} (chi2(3) median 2.37)")
-    print(f"updates per drive                {med('updates')}; rejected {sum(r['rejected'] for r in rows)} in all")
+    print(
+        f"NEES in the 95 % band            {k_in}/{len(nees)} = {k_in / max(len(nees), 1):.3f} "
+        f"(Wilson 95 %: {wn[0]:.3f}-{wn[1]:.3f}); median NEES {np.median(nees):.2f} (chi2(3) median 2.37)"
+    )
+    print(
+        f"updates per drive                {med('updates')}; "
+        f"rejected {sum(r['rejected'] for r in rows)} in all"
+    )
     if args.json:
-        write_text_atomic(args.json, json.dumps({"seeds": seeds, "length_m": args.length,
-                                                 "sensing": args.sensing, "rows": rows}, indent=1))
+        write_text_atomic(
+            args.json,
+            json.dumps(
+                {"seeds": seeds, "length_m": args.length, "sensing": args.sensing, "rows": rows}, indent=1
+            ),
+        )
     if args.figure and first is not None:
         from lab.viz.localization import drive_figure
 

@@ -149,14 +149,22 @@ def test_filter_is_consistent_on_synthetic_data():
     of the updates fall in the 95 % band."""
     rng = np.random.default_rng(7)
     # a moderate heading noise: with the default's 0.1 rad/sqrt(rad) the linearisation shows (mean NEES 3.6)
-    cfg = LocalizerConfig(obs_sigma_m=0.0, obs_sigma_rel=0.0, obs_sigma_rad=0.0, gate_prob=0.99999,
-                          sigma_heading_rad_per_sqrt_rad=0.06)
+    cfg = LocalizerConfig(
+        obs_sigma_m=0.0,
+        obs_sigma_rel=0.0,
+        obs_sigma_rad=0.0,
+        gate_prob=0.99999,
+        sigma_heading_rad_per_sqrt_rad=0.06,
+    )
     lms = landmark_map_from_scene("lab_room")
     nees = []
     for run in range(20):
         x_true = np.array([0.0, -3.0, math.pi / 2])
-        loc = Localizer(x_true + rng.multivariate_normal(np.zeros(3), np.diag([1e-4, 1e-4, 7.6e-5])),
-                        np.diag([1e-4, 1e-4, 7.6e-5]), cfg)
+        loc = Localizer(
+            x_true + rng.multivariate_normal(np.zeros(3), np.diag([1e-4, 1e-4, 7.6e-5])),
+            np.diag([1e-4, 1e-4, 7.6e-5]),
+            cfg,
+        )
         for k in range(200):
             u = np.array([0.05, 0.0, 0.02 * math.sin(k / 10.0)])
             x_true = motion_model(x_true, u)

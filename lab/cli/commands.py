@@ -105,9 +105,14 @@ def _cmd_identify(args) -> int:
         localization=args.localization,
     )
     keys = ["true_model", "identified_model", "success", "actions", "sim_time_s", "wall_time_s"]
-    keys += ["final_posterior", "pose_error", "sensing", "localization", "odometry_error_m", "localization_error_m"] + (
-        ["watchdog_stops"] if args.robot is not None else []
-    )
+    keys += [
+        "final_posterior",
+        "pose_error",
+        "sensing",
+        "localization",
+        "odometry_error_m",
+        "localization_error_m",
+    ] + (["watchdog_stops"] if args.robot is not None else [])
     summary = {k: res[k] for k in keys}
     print(_json.dumps(summary, indent=2))
     return 0

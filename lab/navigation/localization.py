@@ -149,7 +149,9 @@ def measurement_jacobian(x, l) -> np.ndarray:
     return np.array([[-c, -s, h[1]], [s, -c, -h[0]], [0.0, 0.0, -1.0]])
 
 
-def observation_of(G_RC: np.ndarray, G_CL: np.ndarray, Sigma_rv_CL: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def observation_of(
+    G_RC: np.ndarray, G_CL: np.ndarray, Sigma_rv_CL: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     r"""The measurement ``z`` (the landmark's planar pose in R) of a fitted ``G_CL``, and its covariance.
 
     ``G_RL = G_RC G_CL``; ``z = [t_RL,x, t_RL,y, atan2(R_RL[1,0], R_RL[0,0])]``. The fit's covariance
@@ -231,20 +233,30 @@ class LocalizerConfig:
     ransac: RansacConfig = field(default_factory=lambda: RansacConfig(min_matches=6, dist_max_m=0.25))
 
     def __post_init__(self):
-        for k in ("sigma_along_m_per_sqrt_m", "sigma_cross_m_per_sqrt_m", "sigma_heading_rad_per_sqrt_m",
-                  "sigma_heading_rad_per_sqrt_rad", "obs_sigma_m", "obs_sigma_rel", "obs_sigma_rad"):
+        for k in (
+            "sigma_along_m_per_sqrt_m",
+            "sigma_cross_m_per_sqrt_m",
+            "sigma_heading_rad_per_sqrt_m",
+            "sigma_heading_rad_per_sqrt_rad",
+            "obs_sigma_m",
+            "obs_sigma_rel",
+            "obs_sigma_rad",
+        ):
             v = getattr(self, k)
             if not (math.isfinite(v) and v >= 0):
                 raise ConfigError(f"LocalizerConfig.{k} must be a finite number >= 0, got {v!r}")
         if not 0.0 < self.gate_prob < 1.0:
             raise ConfigError(f"LocalizerConfig.gate_prob must be in (0, 1), got {self.gate_prob}")
         if not self.relocalize_sigma_m > 0:
-            raise ConfigError(f"LocalizerConfig.relocalize_sigma_m must be > 0 m, got {self.relocalize_sigma_m}")
+            raise ConfigError(
+                f"LocalizerConfig.relocalize_sigma_m must be > 0 m, got {self.relocalize_sigma_m}"
+            )
 
     def motion_noise(self, u) -> np.ndarray:
         r"""``M(u)``: covariance (3, 3) of an odometry increment ``u``, in its own frame.
 
-        .. math:: M = \mathrm{diag}(\sigma_a^2 d,\; \sigma_c^2 d,\; \sigma_{\theta d}^2 d + \sigma_{\theta\theta}^2 |\Delta\theta|),
+        .. math:: M = \mathrm{diag}(\sigma_a^2 d,\; \sigma_c^2 d,\;
+                  \sigma_{\theta d}^2 d + \sigma_{\theta\theta}^2 |\Delta\theta|),
                   \quad d = \|[\Delta x, \Delta y]\|
         """
         d = math.hypot(float(u[0]), float(u[1]))
@@ -342,7 +354,9 @@ class Localizer:
         return sum(1 for r in self.history if r.accepted)
 
     def predict(self, u) -> None:
-        """Prediction from an odometry increment ``u`` (3,): ``x_bar = f(x, u)``, ``Sigma_bar = F Sigma F^T + V M V^T``."""
+        """Prediction from an odometry increment ``u`` (3,).
+
+        ``x_bar = f(x, u)``, ``Sigma_bar = F Sigma F^T + V M V^T``."""
         F, V = motion_jacobians(self.x, u)
         M = self.config.motion_noise(u)
         self.x = motion_model(self.x, u)  # x_bar = f(x, u)
@@ -375,8 +389,19 @@ class Localizer:
                 self.Sigma = self.config.reject_inflation * self.Sigma
                 self.rejected_in_a_row = 0
                 self.n_inflations += 1
-        rec = UpdateRecord(t, landmark.name, z, Q, x_bar, Sigma_bar, self.x.copy(), self.Sigma.copy(), nis,
-                           bool(accepted), int(n_inliers))
+        rec = UpdateRecord(
+            t,
+            landmark.name,
+            z,
+            Q,
+            x_bar,
+            Sigma_bar,
+            self.x.copy(),
+            self.Sigma.copy(),
+            nis,
+            bool(accepted),
+            int(n_inliers),
+        )
         self.history.append(rec)
         return rec
 
@@ -437,7 +462,9 @@ class LandmarkObserver:
         return out
 
     def features(self, frame: StereoFrame) -> Features3D:
-        return stereo_features(frame.left, frame.right, frame.camera, self._params, t=frame.t, detector=self._det)
+        return stereo_features(
+            frame.left, frame.right, frame.camera, self._params, t=frame.t, detector=self._det
+        )
 
     def observe(self, frame: StereoFrame, candidates: list[Landmark]) -> list[LandmarkObservation]:
         """Fit every candidate landmark in the frame; those with enough RANSAC inliers."""
@@ -482,8 +509,15 @@ class LocalizedRobot(Robot):
         Where the localizer says what it does (default: stderr).
     """
 
-    def __init__(self, base: Robot, mode="landmarks", landmarks: LandmarkMap | None = None,
-                 config: LocalizerConfig | None = None, rng: np.random.Generator | None = None, log=None):
+    def __init__(
+        self,
+        base: Robot,
+        mode="landmarks",
+        landmarks: LandmarkMap | None = None,
+        config: LocalizerConfig | None = None,
+        rng: np.random.Generator | None = None,
+        log=None,
+    ):
         self.base = base
         self.mode = LocalizationMode.parse(mode)
         self.config = config or LocalizerConfig()
@@ -492,7 +526,9 @@ class LocalizedRobot(Robot):
         self.observer = None
         if self.mode is LocalizationMode.LANDMARKS:
             if landmarks is None or len(landmarks) == 0:
-                raise ConfigError("localization 'landmarks' needs a trained landmark map with at least one landmark")
+                raise ConfigError(
+                    "localization 'landmarks' needs a trained landmark map with at least one landmark"
+                )
             self.observer = LandmarkObserver(landmarks, self.config, rng or np.random.default_rng(0))
         self.log = log or (lambda msg: print(f"lab: {msg}", file=sys.stderr))
         self.frames_seen = 0
@@ -513,8 +549,9 @@ class LocalizedRobot(Robot):
     def pose_estimate(self) -> PoseEstimate:
         """The robot's pose estimate and covariance now."""
         self._sync()
-        return PoseEstimate(self._pose(), self.localizer.Sigma.copy(), self.base.now(), self.mode,
-                            self.localizer.n_updates)
+        return PoseEstimate(
+            self._pose(), self.localizer.Sigma.copy(), self.base.now(), self.mode, self.localizer.n_updates
+        )
 
     def odometry(self) -> Pose2D:
         """The pose estimate (the localized pose, or the wheel odometry in ``odometry`` mode)."""
@@ -537,7 +574,10 @@ class LocalizedRobot(Robot):
     def certain(self) -> bool:
         """Whether the pose is within the re-localization thresholds (position and heading)."""
         est = self.pose_estimate()
-        return est.sigma_xy_m <= self.config.relocalize_sigma_m and est.sigma_theta_rad <= self.config.relocalize_sigma_rad
+        return (
+            est.sigma_xy_m <= self.config.relocalize_sigma_m
+            and est.sigma_theta_rad <= self.config.relocalize_sigma_rad
+        )
 
     def relocalize(self, max_views: int = 6, tilt_max: float = math.radians(25.0)) -> bool:
         """Active re-localization: when the position is uncertain, stop and pan the head to the landmarks
@@ -564,7 +604,9 @@ class LocalizedRobot(Robot):
             if not lim.pan_min <= pan <= lim.pan_max:
                 continue
             dz = lm.centre_W[2] - cam.mount_R[2]
-            tilt = float(np.clip(math.atan2(dz, r), max(lim.tilt_min, -tilt_max), min(lim.tilt_max, tilt_max)))
+            tilt = float(
+                np.clip(math.atan2(dz, r), max(lim.tilt_min, -tilt_max), min(lim.tilt_max, tilt_max))
+            )
             order.append((-lm.facing(x[:2]) * lm.width_m / max(r, 0.5), pan, tilt, lm.name))
         order.sort()
         done = False

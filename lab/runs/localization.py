@@ -124,13 +124,15 @@ def run_localization_drive(
     scene = load_scene(world)
     landmarks = trained_landmark_map(scene, progress=False) if mode is LocalizationMode.LANDMARKS else None
     rows, ellipses, nees = [], [], []
-    with SimWorld(scene, RenderSettings(supersample=supersample)) as w, make_robot(
-        world=w, seed=seed, sensing=sensing
-    ) as run:
+    with (
+        SimWorld(scene, RenderSettings(supersample=supersample)) as w,
+        make_robot(world=w, seed=seed, sensing=sensing) as run,
+    ):
         base = run.robot
         base.enable()
-        robot = LocalizedRobot(base, mode, landmarks, config, rng=np.random.default_rng([seed, 21]),
-                               log=lambda m: None)
+        robot = LocalizedRobot(
+            base, mode, landmarks, config, rng=np.random.default_rng([seed, 21]), log=lambda m: None
+        )
         dt = 0.05
         travelled = 0.0
         last_truth = w.truth.robot_pose()

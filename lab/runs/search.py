@@ -339,7 +339,9 @@ def run_search(
         print(f"lab: localization: {note}", file=sys.stderr)
     return SearchResult(
         **_scored(object, out, truth, odom),
-        localization_error_m=math.hypot(estimate.pose.x - truth.robot_pose.x, estimate.pose.y - truth.robot_pose.y),
+        localization_error_m=math.hypot(
+            estimate.pose.x - truth.robot_pose.x, estimate.pose.y - truth.robot_pose.y
+        ),
         localization=mode.value,
         landmark_updates=estimate.n_updates,
         localization_note=note,

@@ -110,12 +110,16 @@ def landmark_map_from_scene(scene: Scene | str = "lab_room") -> LandmarkMap:
     """The scene's posters as an (untrained) landmark map."""
     scene = scene if isinstance(scene, Scene) else load_scene(scene)
     size = scene.room.size if scene.room is not None else (12.0, 12.0)
-    return LandmarkMap(tuple(p.landmark for p in _posters_of_scene(scene)), tuple(size), f"scene {scene.name}")
+    return LandmarkMap(
+        tuple(p.landmark for p in _posters_of_scene(scene)), tuple(size), f"scene {scene.name}"
+    )
 
 
 def _numbers(v, n: int, where: str) -> tuple[float, ...]:
-    if not isinstance(v, list) or len(v) != n or not all(
-        isinstance(x, (int, float)) and not isinstance(x, bool) for x in v
+    if (
+        not isinstance(v, list)
+        or len(v) != n
+        or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
     ):
         raise ConfigError(f"{where}: expected a list of {n} numbers, got {v!r}")
     out = tuple(float(x) for x in v)
@@ -224,14 +228,19 @@ def train_landmark_database(
     centre_z = 1.5
     # the poster at the origin of a bare floor, with its own yaw: then L = G_WL below and its normal
     # is the map's
-    spec = BodySpec(lm.name, "poster", lm.size, (0.0, 0.0, centre_z - lm.size[2] / 2, math.degrees(lm.yaw)),
-                    texture=poster.texture)
+    spec = BodySpec(
+        lm.name,
+        "poster",
+        lm.size,
+        (0.0, 0.0, centre_z - lm.size[2] / 2, math.degrees(lm.yaw)),
+        texture=poster.texture,
+    )
     scene = replace(load_scene("box_database"), bodies=(spec,), models=())
     G_WL = se3(Rz(lm.yaw), (0.0, 0.0, centre_z))
     n = np.array([*lm.normal_W, 0.0])
     side = np.array([-n[1], n[0], 0.0])
     half = 0.5 * np.asarray(lm.size)
-    n_L = (se3_inv(G_WL)[:3, :3] @ n)
+    n_L = se3_inv(G_WL)[:3, :3] @ n
     thin = int(np.argmax(np.abs(n_L[:2])))
     stereo_params = StereoParams()
     det = sift(stereo_params.n_features, stereo_params.contrast_threshold)
@@ -249,8 +258,9 @@ def train_landmark_database(
                 continue
             p_L = transform_points(se3_inv(G_WL) @ G_WC, f.points_C)
             on_face = np.abs(p_L[:, thin] - np.sign(n_L[thin]) * half[thin]) <= params.face_margin_m
-            inside = np.all(np.abs(np.delete(p_L, thin, axis=1)) <= np.delete(half, thin) - params.face_margin_m,
-                            axis=1)
+            inside = np.all(
+                np.abs(np.delete(p_L, thin, axis=1)) <= np.delete(half, thin) - params.face_margin_m, axis=1
+            )
             keep = on_face & inside
             _merge(points, descs, seen, counts, p_L[keep], f.descriptors[keep], v, tp)
     N, V = len(points), len(views)
@@ -293,7 +303,9 @@ def _cached_database(p: _Poster, params, camera, folder, progress: bool) -> Feat
     except AssetError as e:
         reason = "it is not in the cache" if not path.is_file() else str(e)
     if progress:
-        print(f"lab: building the landmark database of {p.landmark.name} ({reason}) -> {path}", file=sys.stderr)
+        print(
+            f"lab: building the landmark database of {p.landmark.name} ({reason}) -> {path}", file=sys.stderr
+        )
     db = train_landmark_database(p, params, camera)
     save_database(db, path)
     return db
@@ -310,8 +322,11 @@ def trained_landmark_map(
     scene), each landmark with its (cached) database."""
     params = params or LandmarkTraining()
     camera = camera or SIM_CAMERA.camera()
-    if isinstance(source, (str, Path)) and str(source).endswith(".toml") and Path(source).is_file() and (
-        "landmark" in tomllib.loads(Path(source).read_text())
+    if (
+        isinstance(source, (str, Path))
+        and str(source).endswith(".toml")
+        and Path(source).is_file()
+        and ("landmark" in tomllib.loads(Path(source).read_text()))
     ):
         posters, room = _read_landmark_file(Path(source))
         where = str(source)

@@ -20,10 +20,19 @@ def _ellipse(x, Sigma, k: float = 3.0, n: int = 60) -> np.ndarray:
 def trajectories_axes(ax, odometry_run, localized_run, landmarks: LandmarkMap | None = None) -> None:
     """Draw, on ``ax``, the true path, the odometry of the odometry-only drive and the estimate of the
     localized one (each ``DriveResult``), with the localized drive's 3-sigma ellipses at the corners."""
-    for run, col, lab in ((odometry_run, "tab:red", "odometry alone"), (localized_run, "tab:blue", "localized")):
+    for run, col, lab in (
+        (odometry_run, "tab:red", "odometry alone"),
+        (localized_run, "tab:blue", "localized"),
+    ):
         tr = run.trajectory
-        ax.plot(tr[:, 1], tr[:, 2], color="0.3", lw=1.0, ls="--" if run is odometry_run else "-",
-                label=f"true ({lab} drive)")
+        ax.plot(
+            tr[:, 1],
+            tr[:, 2],
+            color="0.3",
+            lw=1.0,
+            ls="--" if run is odometry_run else "-",
+            label=f"true ({lab} drive)",
+        )
         cols = slice(4, 6) if run is odometry_run else slice(7, 9)
         ax.plot(tr[:, cols][:, 0], tr[:, cols][:, 1], color=col, lw=1.2, label=f"{lab}: estimate")
     for x, Sigma in localized_run.ellipses:
@@ -53,8 +62,11 @@ def drive_figure(odometry_run, localized_run, path, landmarks: LandmarkMap | Non
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 5))
     trajectories_axes(a, odometry_run, localized_run, landmarks)
-    a.set_title(f"seed {localized_run.seed}: final error odometry {odometry_run.odometry_error_m * 100:.1f} cm, "
-                f"localized {localized_run.localization_error_m * 100:.1f} cm", fontsize=8)
+    a.set_title(
+        f"seed {localized_run.seed}: final error odometry {odometry_run.odometry_error_m * 100:.1f} cm, "
+        f"localized {localized_run.localization_error_m * 100:.1f} cm",
+        fontsize=8,
+    )
     b.semilogy(localized_run.nees, ".", ms=4)
     for q in (0.025, 0.975):
         b.axhline(chi2.ppf(q, 3), color="0.5", ls=":")
