@@ -7,10 +7,11 @@ Run from the repository root (long: about 15 s of CPU per drive and mode)::
 
 Each seed drives the same seeded loop through the lab room
 (:func:`lab.runs.localization.run_localization_drive`) twice: once on odometry alone, once localized
-against the posters. Printed: the median final position and heading error of each (with the
-25-75 % range), the localizer's NEES (its error against the truth weighted by its own covariance) after every accepted update and the fraction inside the chi-square(3)
-95 % band [0.216, 9.35], and the number of updates and rejected observations. The default seeds are the
-report split (:func:`lab.evaluation.report_seeds`); tune on seeds < 1000.
+against the posters. Printed: the median final position and heading error of each (with the 25-75 %
+range), the localizer's NEES (its error against the truth weighted by its own covariance) after every
+accepted update and the fraction inside the chi-square(3) 95 % band [0.216, 9.35], and the number of
+updates and rejected observations. The default seeds are the report split
+(:func:`lab.evaluation.report_seeds`); tune on seeds < 1000.
 """
 
 from __future__ import annotations
