@@ -612,13 +612,13 @@ class LocalizedRobot(Robot):
         done = False
         for _, pan, tilt, _name in order[:max_views]:
             self.base.command_pan_tilt(pan, tilt)
-            self.base.wait_pan_tilt()
+            self.base.wait_pan_tilt(timeout=15.0)  # a swing across the whole pan range takes > 5 s
             self.capture_stereo()
             if self.certain():
                 done = True
                 break
         self.base.command_pan_tilt(start.pan, start.tilt)
-        self.base.wait_pan_tilt()
+        self.base.wait_pan_tilt(timeout=15.0)
         return done
 
     # the Robot interface, passed on
