@@ -318,7 +318,7 @@ def build_textures(out: Path | None = None) -> list[Path]:
         p = out / f"{name}.png"
         write_png_atomic(p, tile_texture(seed, base=base, contrast=contrast))
         written.append(p)
-    for k in range(6):  # 0-2 the first walls' posters, 3-5 added as localization landmarks
+    for k in range(3):
         p = out / f"poster{k}.png"
         write_png_atomic(p, magazine_texture(4000 + k, size=FACE_PX, n_shapes=20))
         written.append(p)
