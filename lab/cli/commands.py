@@ -109,11 +109,17 @@ def _cmd_identify(args) -> int:
         robot_config=args.robot,
         progress=print if args.robot is not None else None,
         sensing=_sensing(args),
+        localization=args.localization,
     )
     keys = ["true_model", "identified_model", "success", "actions", "sim_time_s", "wall_time_s"]
-    keys += ["final_posterior", "pose_error", "sensing"] + (
-        ["watchdog_stops"] if args.robot is not None else []
-    )
+    keys += [
+        "final_posterior",
+        "pose_error",
+        "sensing",
+        "localization",
+        "odometry_error_m",
+        "localization_error_m",
+    ] + (["watchdog_stops"] if args.robot is not None else [])
     summary = {k: res[k] for k in keys}
     print(_json.dumps(summary, indent=2))
     return 0
@@ -153,6 +159,7 @@ def _cmd_search(args) -> int:
         progress=True,
         record=args.record,
         sensing=_sensing(args),
+        localization=args.localization,
     )
     data = res.to_json()
     if args.json is not None:

@@ -31,6 +31,18 @@ def _sensing_argument(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _localization_argument(p: argparse.ArgumentParser) -> None:
+    """``--localization``: where the robot's pose comes from (``lab/navigation/localization.py``)."""
+    p.add_argument(
+        "--localization",
+        choices=("landmarks", "odometry"),
+        default="odometry",
+        help="where the robot's pose comes from: odometry alone (default, for now: the localizer's "
+        "effect on the search and the identification is not measured yet), or odometry corrected by the "
+        "walls' posters seen in stereo (landmarks)",
+    )
+
+
 def _episode_arguments(p: argparse.ArgumentParser, movers: tuple[str, ...], max_time: float) -> None:
     """The arguments of one identification episode, shared by ``lab demo`` and ``lab identify``."""
     p.add_argument(
@@ -182,6 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
     _episode_arguments(idf, movers=("static", "scripted", "random", "evasive", "teleop"), max_time=240.0)
     idf.add_argument("--json", type=Path, help="write the result JSON here")
     idf.add_argument("--out", type=Path, help="write the figures (Fig. 5, 6, 7) and identify.json here")
+    _localization_argument(idf)
     idf.add_argument(
         "--keep-direction",
         type=float,
@@ -223,6 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     se.add_argument("--robot", type=Path, help="real robot: not supported for the search yet")
     _sensing_argument(se)
+    _localization_argument(se)
 
     hw = sub.add_parser(
         "hardware",

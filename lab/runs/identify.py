@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
+import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -30,6 +31,7 @@ from lab.identification.agent import AgentConfig, IdentificationAgent, PlannerCh
 from lab.identification.evaluators import make_evaluator
 from lab.identification.scoring import ScoringConfig
 from lab.io import write_json_atomic
+from lab.navigation.localization import LocalizationMode, LocalizedRobot
 from lab.robot import Robot
 from lab.runs.robots import RobotKind, RobotSession, make_robot
 from lab.training import box_model_names, get_database, get_tables
@@ -111,6 +113,7 @@ def run_identify(
     robot_config=None,
     progress=None,
     sensing="realistic",
+    localization="odometry",
 ) -> dict:
     """Run one episode and return the ``lab identify`` JSON (also written to ``json_path``).
 
@@ -137,6 +140,8 @@ def run_identify(
     sensing : str or mapping
         The simulator's sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic,
         or ideal), recorded as the JSON's ``sensing``.
+    localization : {"landmarks", "odometry"}
+        Where the robot's pose comes from (:class:`lab.navigation.localization.LocalizedRobot`).
     """
     from lab.sim import box_model
 
@@ -151,7 +156,8 @@ def run_identify(
         plan = None
         if session.kind is RobotKind.SIM and world.scene.room is not None:
             plan = floor_plan(world.scene.room.size, session.robot.base_limits.radius)
-        agent = build_agent(session.robot, planner, seed, config, floor_plan=plan)
+        robot, note = _localized(session, robot_config, localization, seed)
+        agent = build_agent(robot, planner, seed, config, floor_plan=plan)
         recorder = _watch(agent, record, progress)
         if attach is not None:
             attach(agent, session.carrier)
@@ -167,6 +173,7 @@ def run_identify(
         error = _final_pose_error(agent, session, truth, true_model)
         elapsed = session.robot.now() - t0
         extra = _robot_fields(session)
+        extra.update(_localization_fields(robot, session, note))
     wall, cpu = time.perf_counter() - t_wall, time.process_time() - t_cpu
     result = _episode_json(agent, session, true_model, identified, planner, seed, mover, t0)
     result.update(sim_time_s=elapsed, wall_time_s=wall, pose_error=error, **extra)
@@ -175,6 +182,55 @@ def run_identify(
     _finish_recording(recorder, result, progress)
     _write(result, json_path, out if figures else None, agent, session, [G_WO for _, G_WO in truth])
     return result
+
+
+def _localized(session: RobotSession, robot_config, localization, seed: int):
+    """The episode's robot behind the localizer (:class:`LocalizedRobot`), and a note when it has to
+    fall back to odometry alone. The simulator's landmarks are its scene's posters (its odometry starts
+    at the true start pose, in the world frame); a real robot or a rehearsal runs on odometry alone until
+    its start pose in the room of ``hardware/landmarks.toml`` is measured."""
+    from lab.training.landmarks import trained_landmark_map
+
+    mode = LocalizationMode.parse(localization)
+    note = None
+    landmarks = None
+    if mode is LocalizationMode.LANDMARKS:
+        if session.kind is RobotKind.SIM:  # its odometry starts at the true start, in the world frame
+            landmarks = trained_landmark_map(session.world.scene, progress=False)
+        if landmarks is None or len(landmarks) == 0:
+            # a real robot's odometry starts at its own origin, not at a measured pose in the room that
+            # the landmark map (hardware/landmarks.toml) is written in: not supported yet
+            note = (
+                "no landmark map in the odometry's frame for this robot: the pose is odometry alone"
+                if session.kind is not RobotKind.SIM
+                else "the scene has no landmarks: the pose is odometry alone"
+            )
+            mode = LocalizationMode.ODOMETRY
+    robot = LocalizedRobot(session.robot, mode, landmarks, rng=np.random.default_rng([seed, 20]))
+    return robot, note
+
+
+def _localization_fields(robot: LocalizedRobot, session: RobotSession, note) -> dict:
+    """``localization``, ``odometry_error_m`` and ``localization_error_m`` (against the simulator's
+    truth; null without one), the landmark updates, and a note when no landmark was used."""
+    est = robot.pose_estimate()
+    if note is None and robot.mode is LocalizationMode.LANDMARKS and est.n_updates == 0:
+        note = "no landmark was seen: the pose is odometry alone"
+    if note is not None:
+        print(f"lab: localization: {note}", file=sys.stderr)
+    odo_err = loc_err = None
+    if session.kind is RobotKind.SIM:
+        t = session.world.truth.robot_pose()
+        o = session.robot.odometry()
+        odo_err = round(math.hypot(o.x - t.x, o.y - t.y), 4)
+        loc_err = round(math.hypot(est.pose.x - t.x, est.pose.y - t.y), 4)
+    return {
+        "localization": robot.mode.value,
+        "odometry_error_m": odo_err,
+        "localization_error_m": loc_err,
+        "landmark_updates": est.n_updates,
+        "localization_note": note,
+    }
 
 
 def _write(result: dict, json_path, out, agent, session: RobotSession, true_poses: list) -> None:

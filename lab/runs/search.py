@@ -8,6 +8,7 @@ the object's true pose, the collision count and the errors are filled in here, a
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -19,6 +20,7 @@ from lab.geometry import R_to_euler_zyx, se3_inv
 from lab.navigation.astar import astar_to_region
 from lab.navigation.drive_loop import NavOutcome
 from lab.navigation.grid import GridSpec
+from lab.navigation.localization import LocalizationMode, LocalizedRobot
 from lab.navigation.navigator import Navigator
 from lab.robot import Robot
 from lab.runs.placement import (
@@ -36,6 +38,7 @@ from lab.scene import BodySpec, Scene, load_scene
 from lab.search.agent import AgentConfig, AgentResult, NavigationResult, SearchAgent, SearchEvent, Strategy
 from lab.search.budget import BudgetedRobot
 from lab.search.probability_map import ProbabilityMap
+from lab.training.landmarks import trained_landmark_map
 from lab.training.search import search_database
 from lab.vision.database import FeatureDatabase
 
@@ -168,6 +171,15 @@ class SearchResult:
         (the local search's own error; ``position_error_m`` adds the odometry's drift to it).
     odometry_error_m : float
         Distance between the odometry's and the true robot position at the end of the run.
+    localization_error_m : float
+        Distance between the robot's pose estimate (odometry alone, or localized against the room's
+        landmarks) and the true robot position at the end of the run.
+    localization : str
+        ``odometry`` or ``landmarks`` (:mod:`lab.navigation.localization`).
+    landmark_updates : int
+        Landmark observations the localizer used (0 with landmarks: it fell back to odometry alone,
+        and ``localization_note`` says so).
+    localization_note : str or None
     events : tuple of SearchEvent
     trace : SearchTrace
     recording : str or None
@@ -197,6 +209,10 @@ class SearchResult:
     obstacles: tuple = ()
     camera_frame_error: dict | None = None
     odometry_error_m: float = 0.0
+    localization_error_m: float = 0.0
+    localization: str = "odometry"
+    landmark_updates: int = 0
+    localization_note: str | None = None
     events: tuple[SearchEvent, ...] = field(default=(), repr=False)
     trace: SearchTrace | None = field(default=None, repr=False, compare=False)
     recording: str | None = None
@@ -227,6 +243,10 @@ class SearchResult:
             "obstacles": [[round(float(v), 4) for v in o] for o in self.obstacles],
             "camera_frame_error": self.camera_frame_error,
             "odometry_error_m": round(float(self.odometry_error_m), 4),
+            "localization_error_m": round(float(self.localization_error_m), 4),
+            "localization": self.localization,
+            "landmark_updates": int(self.landmark_updates),
+            "localization_note": self.localization_note,
             "events": [e.as_dict() for e in self.events],
             "recording": self.recording,
             "sensing": self.sensing,
@@ -259,6 +279,7 @@ def run_search(
     record=None,
     attach: Callable | None = None,
     sensing="realistic",
+    localization="odometry",
 ) -> SearchResult:
     """Run one search trial in the simulator and score it: the :class:`SearchResult`.
 
@@ -286,11 +307,17 @@ def run_search(
         ``attach(agent)`` before the run (a notebook's ``LiveView.for_search(agent).widget``).
     sensing : str or mapping
         The sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic).
+    localization : {"landmarks", "odometry"}
+        Where the robot's pose comes from (:class:`lab.navigation.localization.LocalizedRobot`): the
+        odometry corrected by the room's posters, or odometry alone (default, until the localizer's effect
+        on the search is measured).
     """
     wall0 = time.perf_counter()
     strategy = Strategy.parse(strategy)
     scene = world if isinstance(world, Scene) else load_scene(world)
     recorder = _check_trial(scene, object, navigate, max_time, record)
+    mode = LocalizationMode.parse(localization)
+    landmarks = trained_landmark_map(scene, progress=progress) if mode is LocalizationMode.LANDMARKS else None
     rng = np.random.default_rng(seed)
     scene, place, surface, obstacle_poses = _place_object(scene, object, place, obstacles, rng)
     db = search_database(object, progress=progress)
@@ -302,11 +329,23 @@ def run_search(
         SimWorld(scene, RenderSettings(supersample=supersample)) as w,
         make_robot(world=w, seed=seed, sensing=sensing) as run,
     ):
+        robot = LocalizedRobot(run.robot, mode, landmarks, rng=np.random.default_rng([seed, 20]))
         parts = (db, navigate, spec, cfg, seed, recorder, attach, (max_time, max_wall_time))
-        out, truth, budget, odom = _search(run.robot, w, object, *parts)
+        out, truth, budget, odom = _search(robot, w, object, *parts)
         profile = run.sensing
+        estimate = robot.pose_estimate()
+    note = None
+    if mode is LocalizationMode.LANDMARKS and estimate.n_updates == 0:
+        note = "no landmark was seen: the pose is odometry alone"
+        print(f"lab: localization: {note}", file=sys.stderr)
     return SearchResult(
         **_scored(object, out, truth, odom),
+        localization_error_m=math.hypot(
+            estimate.pose.x - truth.robot_pose.x, estimate.pose.y - truth.robot_pose.y
+        ),
+        localization=mode.value,
+        landmark_updates=estimate.n_updates,
+        localization_note=note,
         path_length_m=budget.path_length_m,
         global_searches=out.global_searches,
         local_searches=out.local_searches,
@@ -330,7 +369,7 @@ def _search(robot, w, object, db, navigate, spec, cfg, seed, recorder, attach, b
     odometry at the end."""
     robot.enable()
     budget = BudgetedRobot(robot, *budgets)
-    nav = navigate(budget, spec)
+    nav = _relocalizing(navigate(budget, spec), robot)
     agent = SearchAgent(budget, db, nav, ProbabilityMap(spec), cfg, rng=np.random.default_rng([seed, 1]))
     if recorder is not None:
         from lab.viz.live import LiveView
@@ -339,6 +378,7 @@ def _search(robot, w, object, db, navigate, spec, cfg, seed, recorder, attach, b
     if attach is not None:
         attach(agent)
     out = agent.run()
+    out = _relocalized_find(out, robot)
     truth = _TrialTruth(
         G_WO=w.truth.G_W(object),
         G_WC=w.truth.G_WC(),  # the head has not moved since the last frame of a found track
@@ -346,7 +386,32 @@ def _search(robot, w, object, db, navigate, spec, cfg, seed, recorder, attach, b
         collisions=int(w.truth.collisions),
         sim_time_s=robot.now(),
     )
-    return out, truth, budget, robot.odometry()
+    return out, truth, budget, robot.base.odometry()
+
+
+def _relocalizing(navigate, robot: LocalizedRobot):
+    """Active re-localization before every drive: when the pose is uncertain, look for a landmark first."""
+
+    def go(*args, **kwargs):
+        robot.relocalize()
+        return navigate(*args, **kwargs)
+
+    for k, v in vars(navigate).items():  # keep what the callable carries (its navigator, for figures)
+        setattr(go, k, v)
+    return go
+
+
+def _relocalized_find(out: AgentResult, robot: LocalizedRobot) -> AgentResult:
+    """Active re-localization before reporting a found object: the object's pose relative to the robot
+    stays; its world pose follows the corrected robot pose ``G_WO' = G_WR' G_WR^-1 G_WO``."""
+    if not out.found or out.G_WO is None or robot.mode is not LocalizationMode.LANDMARKS:
+        return out
+    before = robot.odometry()
+    if robot.certain():
+        return out
+    robot.relocalize()
+    after = robot.odometry()
+    return replace(out, G_WO=after.G() @ se3_inv(before.G()) @ out.G_WO)
 
 
 def _scored(object: str, out: AgentResult, truth: _TrialTruth, odom) -> dict:

@@ -1,0 +1,686 @@
+r"""Localization against the room: an EKF over the robot's planar pose, corrected by stereo landmarks.
+
+Both papers take the robot's pose from wheel odometry alone. Here an extended Kalman filter over the
+planar pose :math:`x = [x, y, \theta]^T` in the world W fuses
+
+* **prediction** from odometry: between two odometry readings the base moved by
+  :math:`u = [\Delta x, \Delta y, \Delta\theta]^T`, written in the earlier odometry pose's frame
+  (:func:`odometry_increment`); the motion model composes it onto the estimate (:func:`motion_model`)
+  and its noise grows with the distance driven and the angle turned (:meth:`LocalizerConfig.motion_noise`);
+* **updates** from landmarks (:mod:`lab.navigation.landmarks`): a poster on a wall, whose pose
+  ``G_WL`` is known, is found in a stereo frame by matching its 3D SIFT database and fitting
+  ``G_CL`` with RANSAC + Gauss-Newton (:func:`lab.estimation.fit.ransac_pose`, the objects' own
+  initialisation); through the pan-tilt transform ``G_RL = G_RC(pan, tilt) G_CL`` it gives the
+  landmark's planar pose in the robot frame, the measurement :math:`z` (:func:`observation_of`), whose
+  model is :func:`measurement_model`.
+
+The filter never sees ground truth. Its equations, written as the code does::
+
+    predict:  x_bar = f(x, u)                           F = df/dx,  V = df/du
+              Sigma_bar = F Sigma F^T + V M(u) V^T
+    update:   nu = z - h(x_bar)   (angle wrapped)       H = dh/dx
+              S = H Sigma_bar H^T + Q
+              gate: nu^T S^-1 nu <= chi2_3(gate_prob), else the observation is rejected (an outlier)
+              K = Sigma_bar H^T S^-1
+              x = x_bar + K nu
+              Sigma = (I - K H) Sigma_bar (I - K H)^T + K Q K^T      (Joseph form: stays symmetric PSD)
+
+:class:`LocalizedRobot` puts the filter behind the :class:`~lab.robot.Robot` interface: its
+``odometry()`` and every frame's ``odom`` are the filter's estimate, so the navigator's costmap and
+path following, the search's map and the object poses it reports all use the localized pose without a
+change; :meth:`LocalizedRobot.pose_estimate` adds the covariance. With ``mode=odometry`` it passes the
+wheel odometry through unchanged (and still reports the covariance of dead reckoning).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field, replace
+from enum import Enum
+
+import numpy as np
+
+from lab.errors import ConfigError
+from lab.estimation.fit import RansacConfig, chi2_quantile, ransac_pose
+from lab.geometry import Pose2D, pose6_to_G, se3_inv, transform_points, wrap_angle
+from lab.navigation.landmarks import Landmark, LandmarkMap
+from lab.robot import Robot, StereoFrame
+from lab.vision.matching import Matcher
+from lab.vision.stereo import Features3D, StereoParams, sift, stereo_features
+
+__all__ = [
+    "LandmarkObservation",
+    "LandmarkObserver",
+    "LocalizationMode",
+    "LocalizedRobot",
+    "Localizer",
+    "LocalizerConfig",
+    "PoseEstimate",
+    "UpdateRecord",
+    "measurement_jacobian",
+    "measurement_model",
+    "motion_jacobians",
+    "motion_model",
+    "observation_of",
+    "odometry_increment",
+]
+
+
+class LocalizationMode(Enum):
+    """Where the robot's pose comes from: wheel odometry alone, or odometry corrected by landmarks."""
+
+    ODOMETRY = "odometry"
+    LANDMARKS = "landmarks"
+
+    @classmethod
+    def parse(cls, v) -> LocalizationMode:
+        if isinstance(v, cls):
+            return v
+        try:
+            return cls(v)
+        except ValueError:
+            raise ConfigError(
+                f"localization must be one of {', '.join(m.value for m in cls)}, got {v!r}"
+            ) from None
+
+
+# --- the models -------------------------------------------------------------------------------------
+
+
+def odometry_increment(a: Pose2D, b: Pose2D) -> np.ndarray:
+    r"""The motion ``u = [dx, dy, dtheta]`` from odometry pose ``a`` to ``b``, written in ``a``'s frame.
+
+    .. math:: [\Delta x, \Delta y]^T = R(\theta_a)^T [x_b - x_a, y_b - y_a]^T, \quad
+              \Delta\theta = \mathrm{wrap}(\theta_b - \theta_a)
+    """
+    c, s = math.cos(a.theta), math.sin(a.theta)
+    dx, dy = b.x - a.x, b.y - a.y
+    return np.array([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b.theta - a.theta)])
+
+
+def motion_model(x, u) -> np.ndarray:
+    r"""``f(x, u)``: the pose ``x = [x, y, theta]`` moved by the increment ``u`` (in its own frame).
+
+    .. math:: f(x, u) = [x + \Delta x \cos\theta - \Delta y \sin\theta,\;
+                         y + \Delta x \sin\theta + \Delta y \cos\theta,\; \theta + \Delta\theta]^T
+    """
+    x = np.asarray(x, float)
+    dx, dy, dth = np.asarray(u, float)
+    c, s = math.cos(x[2]), math.sin(x[2])
+    return np.array([x[0] + c * dx - s * dy, x[1] + s * dx + c * dy, wrap_angle(x[2] + dth)])
+
+
+def motion_jacobians(x, u) -> tuple[np.ndarray, np.ndarray]:
+    r"""``F = df/dx`` and ``V = df/du`` of :func:`motion_model`, both (3, 3).
+
+    .. math:: F = \begin{bmatrix} 1 & 0 & -\Delta x \sin\theta - \Delta y \cos\theta \\
+                                  0 & 1 & \Delta x \cos\theta - \Delta y \sin\theta \\
+                                  0 & 0 & 1 \end{bmatrix}, \qquad
+              V = \begin{bmatrix} R(\theta) & 0 \\ 0 & 1 \end{bmatrix}
+    """
+    dx, dy, _ = np.asarray(u, float)
+    c, s = math.cos(float(x[2])), math.sin(float(x[2]))
+    F = np.array([[1.0, 0.0, -s * dx - c * dy], [0.0, 1.0, c * dx - s * dy], [0.0, 0.0, 1.0]])
+    V = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return F, V
+
+
+def measurement_model(x, l) -> np.ndarray:
+    r"""``h(x; l)``: landmark ``l = [x_l, y_l, theta_l]`` (its planar pose in W) seen from pose ``x``.
+
+    .. math:: h(x) = [R(\theta)^T ([x_l, y_l]^T - [x, y]^T),\; \mathrm{wrap}(\theta_l - \theta)]^T
+    """
+    x = np.asarray(x, float)
+    l = np.asarray(l, float)
+    c, s = math.cos(x[2]), math.sin(x[2])
+    dX, dY = l[0] - x[0], l[1] - x[1]
+    return np.array([c * dX + s * dY, -s * dX + c * dY, wrap_angle(l[2] - x[2])])
+
+
+def measurement_jacobian(x, l) -> np.ndarray:
+    r"""``H = dh/dx`` of :func:`measurement_model`, (3, 3); with ``h = [h_1, h_2, h_3]``:
+
+    .. math:: H = \begin{bmatrix} -\cos\theta & -\sin\theta & h_2 \\
+                                  \sin\theta & -\cos\theta & -h_1 \\ 0 & 0 & -1 \end{bmatrix}
+    """
+    h = measurement_model(x, l)
+    c, s = math.cos(float(x[2])), math.sin(float(x[2]))
+    return np.array([[-c, -s, h[1]], [s, -c, -h[0]], [0.0, 0.0, -1.0]])
+
+
+def observation_of(
+    G_RC: np.ndarray, G_CL: np.ndarray, Sigma_rv_CL: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""The measurement ``z`` (the landmark's planar pose in R) of a fitted ``G_CL``, and its covariance.
+
+    ``G_RL = G_RC G_CL``; ``z = [t_RL,x, t_RL,y, atan2(R_RL[1,0], R_RL[0,0])]``. The fit's covariance
+    ``Sigma_rv_CL`` (6, 6) is over ``[t_CL, phi]`` with ``R_CL <- Exp(phi) R_CL`` (rotation vector in C,
+    :func:`lab.estimation.fit.ransac_pose`); it is carried to z by the Jacobian ``J`` (3, 6):
+
+    .. math:: \partial t_{RL} / \partial t_{CL} = R_{RC}, \qquad
+              \partial \psi / \partial \phi = \frac{r_{00}\, a_1 - r_{10}\, a_0}{r_{00}^2 + r_{10}^2} R_{RC},
+              \quad a = -[r_0]_\times
+
+    where ``r_0`` is R_RL's first column (a small rotation ``omega`` in R moves it by ``omega x r_0``).
+    """
+    G_RL = G_RC @ G_CL
+    R_RL = G_RL[:3, :3]
+    R_RC = G_RC[:3, :3]
+    r0 = R_RL[:, 0]
+    z = np.array([G_RL[0, 3], G_RL[1, 3], math.atan2(r0[1], r0[0])])
+    a = -np.array([[0.0, -r0[2], r0[1]], [r0[2], 0.0, -r0[0]], [-r0[1], r0[0], 0.0]])
+    J = np.zeros((3, 6))
+    J[:2, :3] = R_RC[:2, :]
+    J[2, 3:] = ((r0[0] * a[1] - r0[1] * a[0]) / (r0[0] ** 2 + r0[1] ** 2)) @ R_RC
+    return z, J @ Sigma_rv_CL @ J.T
+
+
+# --- the filter -------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LocalizerConfig:
+    """Noise models and thresholds of the localizer (tuned on seeds < 1000, see the benchmark).
+
+    Attributes
+    ----------
+    sigma_along_m_per_sqrt_m : float [m / sqrt(m)]
+        Odometry's distance error grows like a random walk in the distance driven ``d``:
+        ``var = sigma**2 * d`` along the motion ...
+    sigma_cross_m_per_sqrt_m : float [m / sqrt(m)]
+        ... and across it;
+    sigma_heading_rad_per_sqrt_m : float [rad / sqrt(m)]
+        heading error per distance (unequal wheels curve a straight drive);
+    sigma_heading_rad_per_sqrt_rad : float [rad / sqrt(rad)]
+        heading error per angle turned (track width error, wheel scrub).
+    obs_sigma_m, obs_sigma_rel, obs_sigma_rad : float [m], [-], [rad]
+        A floor under each landmark observation's covariance, added to the fit's own: pan-tilt zero
+        offsets, camera calibration (baseline, focal length: an error relative to the range).
+    gate_prob : float
+        Observations whose innovation's Mahalanobis distance exceeds the chi-square(3) quantile are
+        rejected as outliers.
+    max_rejected_in_a_row, reject_inflation : int, float
+        Gate lock-out recovery: after this many rejected observations in a row the estimate, not the
+        landmarks, is the likelier culprit (an odometry bias the noise model does not cover, such as
+        wheel scrub in long turns), so the covariance is multiplied by ``reject_inflation`` and the
+        next observation can correct it.
+    min_inliers : int
+        Fewest RANSAC inliers for a landmark observation.
+    max_range_m, min_facing : float
+        A landmark is looked for in a frame only within this range and when seen at most
+        ``acos(min_facing)`` off its face normal.
+    relocalize_sigma_m, relocalize_sigma_rad : float [m], [rad]
+        Active re-localization: the robot looks for a landmark when the position standard deviation
+        (the larger axis of the covariance ellipse) or the heading's exceeds these.
+    """
+
+    sigma_along_m_per_sqrt_m: float = 0.02
+    sigma_cross_m_per_sqrt_m: float = 0.01
+    sigma_heading_rad_per_sqrt_m: float = 0.03
+    sigma_heading_rad_per_sqrt_rad: float = 0.1
+    obs_sigma_m: float = 0.005
+    obs_sigma_rel: float = 0.006
+    obs_sigma_rad: float = math.radians(0.5)
+    gate_prob: float = 0.999
+    max_rejected_in_a_row: int = 3
+    reject_inflation: float = 9.0
+    min_inliers: int = 10
+    max_range_m: float = 6.5
+    min_facing: float = 0.35
+    relocalize_sigma_m: float = 0.05
+    relocalize_sigma_rad: float = math.radians(0.5)
+    ransac: RansacConfig = field(default_factory=lambda: RansacConfig(min_matches=6, dist_max_m=0.25))
+
+    def __post_init__(self):
+        for k in (
+            "sigma_along_m_per_sqrt_m",
+            "sigma_cross_m_per_sqrt_m",
+            "sigma_heading_rad_per_sqrt_m",
+            "sigma_heading_rad_per_sqrt_rad",
+            "obs_sigma_m",
+            "obs_sigma_rel",
+            "obs_sigma_rad",
+        ):
+            v = getattr(self, k)
+            if not (math.isfinite(v) and v >= 0):
+                raise ConfigError(f"LocalizerConfig.{k} must be a finite number >= 0, got {v!r}")
+        if not 0.0 < self.gate_prob < 1.0:
+            raise ConfigError(f"LocalizerConfig.gate_prob must be in (0, 1), got {self.gate_prob}")
+        if not self.relocalize_sigma_m > 0:
+            raise ConfigError(
+                f"LocalizerConfig.relocalize_sigma_m must be > 0 m, got {self.relocalize_sigma_m}"
+            )
+
+    def motion_noise(self, u) -> np.ndarray:
+        r"""``M(u)``: covariance (3, 3) of an odometry increment ``u``, in its own frame.
+
+        .. math:: M = \mathrm{diag}(\sigma_a^2 d,\; \sigma_c^2 d,\;
+                  \sigma_{\theta d}^2 d + \sigma_{\theta\theta}^2 |\Delta\theta|),
+                  \quad d = \|[\Delta x, \Delta y]\|
+        """
+        d = math.hypot(float(u[0]), float(u[1]))
+        turn = abs(float(u[2]))
+        return np.diag(
+            [
+                self.sigma_along_m_per_sqrt_m**2 * d,
+                self.sigma_cross_m_per_sqrt_m**2 * d,
+                self.sigma_heading_rad_per_sqrt_m**2 * d + self.sigma_heading_rad_per_sqrt_rad**2 * turn,
+            ]
+        )
+
+    def observation_floor(self, z) -> np.ndarray:
+        """Covariance (3, 3) added to every landmark observation ``z`` (see the attributes)."""
+        r = math.hypot(float(z[0]), float(z[1]))
+        s = self.obs_sigma_m + self.obs_sigma_rel * r
+        return np.diag([s * s, s * s, self.obs_sigma_rad**2])
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """The robot's pose estimate and its covariance.
+
+    Attributes
+    ----------
+    pose : Pose2D
+    Sigma : ndarray, shape (3, 3) [m^2, m rad, rad^2]
+    t : float [s]
+    mode : LocalizationMode
+    n_updates : int
+        Landmark observations the filter used so far (0: the pose is odometry alone).
+    """
+
+    pose: Pose2D
+    Sigma: np.ndarray = field(repr=False)
+    t: float = 0.0
+    mode: LocalizationMode = LocalizationMode.LANDMARKS
+    n_updates: int = 0
+
+    @property
+    def sigma_xy_m(self) -> float:
+        """Standard deviation along the position ellipse's larger axis [m]."""
+        return float(math.sqrt(max(np.linalg.eigvalsh(self.Sigma[:2, :2])[-1], 0.0)))
+
+    @property
+    def sigma_theta_rad(self) -> float:
+        return float(math.sqrt(max(self.Sigma[2, 2], 0.0)))
+
+
+@dataclass(frozen=True)
+class UpdateRecord:
+    """One landmark observation the filter considered: what it saw and whether the gate let it in.
+
+    ``x_bar``/``Sigma_bar`` before, ``x``/``Sigma`` after (equal to before when rejected); ``nis`` the
+    innovation's squared Mahalanobis distance.
+    """
+
+    t: float
+    landmark: str
+    z: np.ndarray = field(repr=False)
+    Q: np.ndarray = field(repr=False)
+    x_bar: np.ndarray = field(repr=False)
+    Sigma_bar: np.ndarray = field(repr=False)
+    x: np.ndarray = field(repr=False)
+    Sigma: np.ndarray = field(repr=False)
+    nis: float = 0.0
+    accepted: bool = True
+    n_inliers: int = 0
+
+
+class Localizer:
+    """The EKF over ``x = [x, y, theta]`` (see the module docstring for its equations).
+
+    Parameters
+    ----------
+    x0 : array_like, shape (3,)
+        The start pose [m, m, rad] (the odometry's origin: the run starts aligned with the world).
+    Sigma0 : array_like, shape (3, 3), optional
+        Its covariance (default: 1 cm, 0.5 deg).
+    config : LocalizerConfig, optional
+    """
+
+    def __init__(self, x0, Sigma0=None, config: LocalizerConfig | None = None):
+        self.config = config or LocalizerConfig()
+        self.x = np.array(x0, dtype=float).reshape(3)
+        self.Sigma = (
+            np.diag([0.01**2, 0.01**2, math.radians(0.5) ** 2]) if Sigma0 is None else np.array(Sigma0, float)
+        )
+        self.history: list[UpdateRecord] = []
+        self.rejected_in_a_row = 0
+        self.n_inflations = 0
+
+    @property
+    def n_updates(self) -> int:
+        return sum(1 for r in self.history if r.accepted)
+
+    def predict(self, u) -> None:
+        """Prediction from an odometry increment ``u`` (3,).
+
+        ``x_bar = f(x, u)``, ``Sigma_bar = F Sigma F^T + V M V^T``."""
+        F, V = motion_jacobians(self.x, u)
+        M = self.config.motion_noise(u)
+        self.x = motion_model(self.x, u)  # x_bar = f(x, u)
+        Sigma = F @ self.Sigma @ F.T + V @ M @ V.T  # Sigma_bar = F Sigma F^T + V M V^T
+        self.Sigma = 0.5 * (Sigma + Sigma.T)
+
+    def update(self, z, Q, landmark: Landmark, t: float = 0.0, n_inliers: int = 0) -> UpdateRecord:
+        """Update from one landmark observation ``z`` (3,) with covariance ``Q`` (3, 3); gated."""
+        z = np.asarray(z, float)
+        Q = np.asarray(Q, float) + self.config.observation_floor(z)
+        l = landmark.planar
+        x_bar, Sigma_bar = self.x.copy(), self.Sigma.copy()
+        H = measurement_jacobian(x_bar, l)
+        nu = z - measurement_model(x_bar, l)  # innovation
+        nu[2] = wrap_angle(nu[2])
+        S = H @ Sigma_bar @ H.T + Q  # innovation covariance
+        nis = float(nu @ np.linalg.solve(S, nu))
+        accepted = nis <= chi2_quantile(self.config.gate_prob, 3)
+        if accepted:
+            K = np.linalg.solve(S, H @ Sigma_bar).T  # K = Sigma_bar H^T S^-1 (S, Sigma_bar symmetric)
+            x = x_bar + K @ nu
+            x[2] = wrap_angle(x[2])
+            IKH = np.eye(3) - K @ H
+            Sigma = IKH @ Sigma_bar @ IKH.T + K @ Q @ K.T  # Joseph form
+            self.x, self.Sigma = x, 0.5 * (Sigma + Sigma.T)
+            self.rejected_in_a_row = 0
+        else:
+            self.rejected_in_a_row += 1
+            if self.rejected_in_a_row >= self.config.max_rejected_in_a_row:  # gate lock-out recovery
+                self.Sigma = self.config.reject_inflation * self.Sigma
+                self.rejected_in_a_row = 0
+                self.n_inflations += 1
+        rec = UpdateRecord(
+            t,
+            landmark.name,
+            z,
+            Q,
+            x_bar,
+            Sigma_bar,
+            self.x.copy(),
+            self.Sigma.copy(),
+            nis,
+            bool(accepted),
+            int(n_inliers),
+        )
+        self.history.append(rec)
+        return rec
+
+
+# --- seeing landmarks -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LandmarkObservation:
+    """A landmark found in a frame: its fitted ``G_CL``, the measurement ``z`` and covariance ``Q``."""
+
+    landmark: Landmark
+    G_CL: np.ndarray = field(repr=False)
+    z: np.ndarray = field(repr=False)
+    Q: np.ndarray = field(repr=False)
+    n_inliers: int = 0
+
+
+class LandmarkObserver:
+    """Finds the landmarks of a map in stereo frames (features, database matching, RANSAC).
+
+    Parameters
+    ----------
+    landmarks : LandmarkMap
+        A trained map (every landmark has a database).
+    config : LocalizerConfig
+    rng : numpy.random.Generator
+        Seeds RANSAC's minimal samples.
+    """
+
+    def __init__(self, landmarks: LandmarkMap, config: LocalizerConfig, rng: np.random.Generator):
+        if not landmarks.trained:
+            raise ConfigError(f"landmark map {landmarks.source} is not trained (lab.training.landmarks)")
+        self.map, self.config, self.rng = landmarks, config, rng
+        self.matchers = {lm.name: Matcher(lm.database, method="brute") for lm in landmarks}
+        self._params = StereoParams()
+        self._det = sift(self._params.n_features, self._params.contrast_threshold)
+
+    def candidates(self, x, frame_or_G_RC, camera=None, margin_px: float = 20.0) -> list[Landmark]:
+        """Landmarks whose centre the camera should see from pose ``x`` (in range, facing, in the image)."""
+        if isinstance(frame_or_G_RC, StereoFrame):
+            G_RC, camera = frame_or_G_RC.G_RC, frame_or_G_RC.camera
+        else:
+            G_RC = frame_or_G_RC
+        G_WC = Pose2D(*x).G() @ G_RC
+        G_CW = se3_inv(G_WC)
+        out = []
+        for lm in self.map:
+            rng_m, _ = self.map.bearing_in_robot(lm, x)
+            if rng_m > self.config.max_range_m or lm.facing(x[:2]) < self.config.min_facing:
+                continue
+            p = transform_points(G_CW, np.asarray(lm.centre_W))
+            if p[2] < 0.3:
+                continue
+            u, v = camera.project(p[None])[0]
+            if -margin_px <= u <= camera.width + margin_px and -margin_px <= v <= camera.height + margin_px:
+                out.append(lm)
+        return out
+
+    def features(self, frame: StereoFrame) -> Features3D:
+        return stereo_features(
+            frame.left, frame.right, frame.camera, self._params, t=frame.t, detector=self._det
+        )
+
+    def observe(self, frame: StereoFrame, candidates: list[Landmark]) -> list[LandmarkObservation]:
+        """Fit every candidate landmark in the frame; those with enough RANSAC inliers."""
+        if not candidates:
+            return []
+        f = self.features(frame)
+        out = []
+        for lm in candidates:
+            corr = self.matchers[lm.name].match(f)
+            if corr.n_matched < self.config.min_inliers:
+                continue
+            d, b, S = corr.pairs(f, lm.database)
+            res = ransac_pose(d, b, S, self.rng, self.config.ransac)
+            if not res.success or res.n_inliers < self.config.min_inliers:
+                continue
+            G_CL = pose6_to_G(res.mu)
+            z, Q = observation_of(frame.G_RC, G_CL, res.Sigma_rv)
+            out.append(LandmarkObservation(lm, G_CL, z, Q, res.n_inliers))
+        return out
+
+
+# --- behind the Robot interface ---------------------------------------------------------------------
+
+
+class LocalizedRobot(Robot):
+    """A :class:`~lab.robot.Robot` whose ``odometry()`` and frames' ``odom`` are the localizer's estimate.
+
+    Every call is passed on to ``base``. With ``mode=LANDMARKS`` each captured frame in which a landmark
+    should be visible updates the filter; ``relocalize()`` points the head at landmarks until the pose
+    is certain again (active re-localization). With ``mode=ODOMETRY`` the base's odometry is passed
+    through unchanged and frames are not looked at (the filter only reports dead reckoning's covariance).
+
+    Parameters
+    ----------
+    base : Robot
+    mode : LocalizationMode or str
+    landmarks : LandmarkMap, optional
+        A trained map; needed for ``landmarks`` mode.
+    config : LocalizerConfig, optional
+    rng : numpy.random.Generator, optional
+    log : callable(str), optional
+        Where the localizer says what it does (default: stderr).
+    """
+
+    def __init__(
+        self,
+        base: Robot,
+        mode="landmarks",
+        landmarks: LandmarkMap | None = None,
+        config: LocalizerConfig | None = None,
+        rng: np.random.Generator | None = None,
+        log=None,
+    ):
+        self.base = base
+        self.mode = LocalizationMode.parse(mode)
+        self.config = config or LocalizerConfig()
+        self._odom = base.odometry()
+        self.localizer = Localizer(self._odom.as_array(), config=self.config)
+        self.observer = None
+        if self.mode is LocalizationMode.LANDMARKS:
+            if landmarks is None or len(landmarks) == 0:
+                raise ConfigError(
+                    "localization 'landmarks' needs a trained landmark map with at least one landmark"
+                )
+            self.observer = LandmarkObserver(landmarks, self.config, rng or np.random.default_rng(0))
+        self.log = log or (lambda msg: print(f"lab: {msg}", file=sys.stderr))
+        self.frames_seen = 0
+
+    # the estimate
+    def _sync(self, odom: Pose2D | None = None) -> None:
+        odom = self.base.odometry() if odom is None else odom
+        u = odometry_increment(self._odom, odom)
+        if np.any(u != 0.0):
+            self.localizer.predict(u)
+        self._odom = odom
+
+    def _pose(self) -> Pose2D:
+        if self.mode is LocalizationMode.ODOMETRY:
+            return self._odom
+        return Pose2D(*(float(v) for v in self.localizer.x))
+
+    def pose_estimate(self) -> PoseEstimate:
+        """The robot's pose estimate and covariance now."""
+        self._sync()
+        return PoseEstimate(
+            self._pose(), self.localizer.Sigma.copy(), self.base.now(), self.mode, self.localizer.n_updates
+        )
+
+    def odometry(self) -> Pose2D:
+        """The pose estimate (the localized pose, or the wheel odometry in ``odometry`` mode)."""
+        self._sync()
+        return self._pose()
+
+    def capture_stereo(self, after=None):
+        frame = self.base.capture_stereo(after)
+        self._sync(frame.odom)
+        if self.mode is LocalizationMode.ODOMETRY:
+            return frame
+        self.frames_seen += 1
+        cands = self.observer.candidates(self.localizer.x, frame)
+        for obs in self.observer.observe(frame, cands):
+            rec = self.localizer.update(obs.z, obs.Q, obs.landmark, frame.t, obs.n_inliers)
+            if not rec.accepted:
+                self.log(f"localization: rejected {obs.landmark.name} (NIS {rec.nis:.1f}, an outlier)")
+        return replace(frame, odom=self._pose())
+
+    def certain(self) -> bool:
+        """Whether the pose is within the re-localization thresholds (position and heading)."""
+        est = self.pose_estimate()
+        return (
+            est.sigma_xy_m <= self.config.relocalize_sigma_m
+            and est.sigma_theta_rad <= self.config.relocalize_sigma_rad
+        )
+
+    def relocalize(self, max_views: int = 6, tilt_max: float = math.radians(25.0)) -> bool:
+        """Active re-localization: when the position is uncertain, stop and pan the head to the landmarks
+        the estimate says are in view, nearest-facing first, until it is certain again.
+
+        Returns True when the pose is (or became) within the thresholds (:meth:`certain`); the head is
+        put back where it was.
+        """
+        if self.mode is LocalizationMode.ODOMETRY:
+            return False
+        if self.certain():
+            return True
+        self.base.stop()
+        start = self.base.pan_tilt()
+        lim = self.base.pan_tilt_limits
+        cam = self.base.camera
+        x = self.localizer.x
+        order = []
+        for lm in self.observer.map:
+            r, bearing = self.observer.map.bearing_in_robot(lm, x)
+            if r > self.config.max_range_m or lm.facing(x[:2]) < self.config.min_facing:
+                continue
+            pan = wrap_angle(bearing)
+            if not lim.pan_min <= pan <= lim.pan_max:
+                continue
+            dz = lm.centre_W[2] - cam.mount_R[2]
+            tilt = float(
+                np.clip(math.atan2(dz, r), max(lim.tilt_min, -tilt_max), min(lim.tilt_max, tilt_max))
+            )
+            order.append((-lm.facing(x[:2]) * lm.width_m / max(r, 0.5), pan, tilt, lm.name))
+        order.sort()
+        done = False
+        for _, pan, tilt, _name in order[:max_views]:
+            self.base.command_pan_tilt(pan, tilt)
+            self.base.wait_pan_tilt(timeout=15.0)  # a swing across the whole pan range takes > 5 s
+            self.capture_stereo()
+            if self.certain():
+                done = True
+                break
+        self.base.command_pan_tilt(start.pan, start.tilt)
+        self.base.wait_pan_tilt(timeout=15.0)
+        return done
+
+    # the Robot interface, passed on
+    @property
+    def camera(self):
+        return self.base.camera
+
+    @property
+    def pan_tilt_limits(self):
+        return self.base.pan_tilt_limits
+
+    @property
+    def base_limits(self):
+        return self.base.base_limits
+
+    @property
+    def cmd_timeout_s(self):  # type: ignore[override]
+        return self.base.cmd_timeout_s
+
+    def now(self) -> float:
+        return self.base.now()
+
+    def enable(self) -> None:
+        self.base.enable()
+
+    def disable(self) -> None:
+        self.base.disable()
+
+    @property
+    def enabled(self) -> bool:
+        return self.base.enabled
+
+    def pan_tilt(self):
+        return self.base.pan_tilt()
+
+    def command_pan_tilt(self, pan, tilt, speed=None) -> None:
+        self.base.command_pan_tilt(pan, tilt, speed)
+
+    def drive(self, v, omega) -> None:
+        self.base.drive(v, omega)
+
+    def stop(self) -> None:
+        self.base.stop()
+
+    def step(self, dt: float) -> None:
+        self.base.step(dt)
+        self._sync()
+
+    @property
+    def bumps(self) -> int:
+        return self.base.bumps
+
+    def estop(self) -> None:
+        self.base.estop()
+
+    def clear_estop(self) -> None:
+        self.base.clear_estop()
+
+    def close(self) -> None:
+        self.base.close()
+
+    def __getattr__(self, name):  # anything else the base offers (e.g. a hardware robot's extras)
+        if name == "base":
+            raise AttributeError(name)
+        return getattr(self.base, name)

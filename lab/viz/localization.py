@@ -1,0 +1,80 @@
+"""Figures of a localization drive: the true, odometry and localized trajectories, and 3-sigma ellipses."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lab.navigation.landmarks import LandmarkMap
+
+__all__ = ["drive_figure", "trajectories_axes"]
+
+
+def _ellipse(x, Sigma, k: float = 3.0, n: int = 60) -> np.ndarray:
+    """Points (n, 2) of the ``k``-sigma ellipse of the position part of ``Sigma`` around ``x``."""
+    lam, V = np.linalg.eigh(Sigma[:2, :2])
+    a = np.linspace(0, 2 * np.pi, n)
+    circle = np.stack([np.cos(a), np.sin(a)])
+    return (V @ (k * np.sqrt(np.maximum(lam, 0.0))[:, None] * circle)).T + np.asarray(x)[:2]
+
+
+def trajectories_axes(ax, odometry_run, localized_run, landmarks: LandmarkMap | None = None) -> None:
+    """Draw, on ``ax``, the true path, the odometry of the odometry-only drive and the estimate of the
+    localized one (each ``DriveResult``), with the localized drive's 3-sigma ellipses at the corners."""
+    for run, col, lab in (
+        (odometry_run, "tab:red", "odometry alone"),
+        (localized_run, "tab:blue", "localized"),
+    ):
+        tr = run.trajectory
+        ax.plot(
+            tr[:, 1],
+            tr[:, 2],
+            color="0.3",
+            lw=1.0,
+            ls="--" if run is odometry_run else "-",
+            label=f"true ({lab} drive)",
+        )
+        cols = slice(4, 6) if run is odometry_run else slice(7, 9)
+        ax.plot(tr[:, cols][:, 0], tr[:, cols][:, 1], color=col, lw=1.2, label=f"{lab}: estimate")
+    for x, Sigma in localized_run.ellipses:
+        e = _ellipse(x, Sigma)
+        ax.plot(e[:, 0], e[:, 1], color="tab:blue", lw=0.6)
+    if landmarks is not None:
+        for lm in landmarks:
+            ax.plot(*lm.centre_W[:2], "ks", ms=5)
+            ax.annotate(lm.name, lm.centre_W[:2], fontsize=6)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.legend(fontsize=7, loc="upper right")
+
+
+def drive_figure(odometry_run, localized_run, path, landmarks: LandmarkMap | None = None):
+    """Write the trajectories figure (and the NEES of the updates) as a PNG at ``path``."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from scipy.stats import chi2
+
+    from lab.io import write_bytes_atomic
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 5))
+    trajectories_axes(a, odometry_run, localized_run, landmarks)
+    a.set_title(
+        f"seed {localized_run.seed}: final error odometry {odometry_run.odometry_error_m * 100:.1f} cm, "
+        f"localized {localized_run.localization_error_m * 100:.1f} cm",
+        fontsize=8,
+    )
+    b.semilogy(localized_run.nees, ".", ms=4)
+    for q in (0.025, 0.975):
+        b.axhline(chi2.ppf(q, 3), color="0.5", ls=":")
+    b.set_xlabel("accepted landmark update")
+    b.set_ylabel("NEES")
+    b.set_title("NEES with the chi-square(3) 95 % band", fontsize=8)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    write_bytes_atomic(path, buf.getvalue())
+    return path
