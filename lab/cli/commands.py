@@ -266,6 +266,12 @@ def _cmd_grade(args) -> int:
     return run_grade(args)
 
 
+def _cmd_eval(args) -> int:
+    from lab.eval.cli import run_eval
+
+    return run_eval(args)
+
+
 def _cmd_assignments(args) -> int:
     from lab.grading.cli import run_assignments
 
@@ -280,6 +286,7 @@ def _cmd_assignments(args) -> int:
 HANDLERS = {
     "assignments": _cmd_assignments,
     "demo": _cmd_demo,
+    "eval": _cmd_eval,
     "grade": _cmd_grade,
     "hardware": _cmd_hardware,
     "identify": _cmd_identify,

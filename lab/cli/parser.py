@@ -333,6 +333,30 @@ def build_parser() -> argparse.ArgumentParser:
         help="grade even without a working sandbox (practice only: every result says so)",
     )
 
+    ev = sub.add_parser(
+        "eval",
+        help="run an evaluation sweep (seeded episodes) on a process pool or a Dask cluster",
+        description="Run a grid of seeded episodes (models x seeds x planners x movers x sensing), locally "
+        "(--workers N processes) or on a Dask cluster (--scheduler tcp://HOST:8786, or 'local' for a local "
+        "one); writes OUT/jobs/KEY.json per job as it finishes, OUT/results.csv and OUT/report.md.",
+    )
+    evs = ev.add_subparsers(dest="eval_command", metavar="SWEEP", required=True)
+    ei = evs.add_parser("identify", help="identification episodes (`lab identify`)")
+    ei.add_argument("--sweep", type=Path, help="a TOML file with the grid (flags given here override it)")
+    ei.add_argument("--models", help="true models, e.g. 0-3 (default) or 0,2")
+    ei.add_argument("--seeds", help="e.g. 100000-100009 (default: the report split's first 25)")
+    ei.add_argument("--planners", help="comma-separated: lut, mc, random, circle (default lut,random)")
+    ei.add_argument("--movers", "--mover", dest="movers", help="comma-separated (default evasive)")
+    ei.add_argument("--sensing", help="comma-separated: realistic, ideal (default realistic)")
+    ei.add_argument("--max-actions", type=int, help="planning actions budget per episode (default 8)")
+    ei.add_argument("--max-time", type=float, help="sim-time budget per episode [s] (default 240)")
+    ei.add_argument("--keep-direction", type=float, help="the agent's keep_direction (default 0.5)")
+    ei.add_argument("--out", type=Path, required=True, help="output folder")
+    ei.add_argument("--resume", action="store_true", help="run only the jobs without a result in --out")
+    ei.add_argument("--workers", type=int, help="worker processes (default 1)")
+    ei.add_argument("--scheduler", help="a Dask scheduler's address (tcp://HOST:8786), or 'local'")
+    ei.add_argument("--retries", type=int, default=0, help="Dask re-runs a job that raised this often")
+
     a = sub.add_parser(
         "assignments",
         help="list the assignments or write the student release",

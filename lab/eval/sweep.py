@@ -1,0 +1,287 @@
+"""A sweep: a grid of seeded jobs, run by an executor, each job's JSON written as it finishes.
+
+``OUT/jobs/KEY.json`` is a finished job's result (the ``lab identify --json`` schema, checked against
+``lab/schemas`` by :mod:`lab.contract`); ``OUT/failed/KEY.json`` a failed one's error; ``OUT/results.csv``
+one row per job (rewritten after each), ``OUT/report.md`` the success rates with Wilson 95 %
+intervals per condition. ``resume=True`` runs only the jobs without a result (the failed ones again).
+
+**Seeds.** Job ``(model, planner, mover, sensing, seed)`` runs the episode ``lab identify --seed
+SEED`` would, wherever it runs: every generator of the episode is ``numpy.random.default_rng(SEED)``,
+i.e. seeded through ``numpy.random.SeedSequence(SEED)``, so jobs with different seeds draw independent
+streams and a job's stream depends on nothing but its seed (:func:`job_seed_sequence`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import sys
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from lab.errors import ConfigError
+from lab.eval.executor import Job, Outcome
+
+__all__ = ["IdentifySweep", "identify_job", "job_seed_sequence", "load_sweep_file", "run_sweep"]
+
+CSV_FIELDS = (
+    "key",
+    "true_model",
+    "planner",
+    "mover",
+    "sensing",
+    "seed",
+    "max_actions",
+    "success",
+    "identified_model",
+    "actions",
+    "sim_time_s",
+    "wall_time_s",
+    "error",
+)
+
+
+def job_seed_sequence(seed: int):
+    """The job's ``SeedSequence``: what ``default_rng(seed)`` in every part of the episode starts from."""
+    import numpy as np
+
+    return np.random.SeedSequence(int(seed))
+
+
+@dataclass(frozen=True)
+class IdentifySweep:
+    """The grid of ``lab eval identify``: models x seeds x planners x movers x sensing profiles."""
+
+    models: tuple[int, ...] = (0, 1, 2, 3)
+    seeds: tuple[int, ...] = ()
+    planners: tuple[str, ...] = ("lut", "random")
+    movers: tuple[str, ...] = ("evasive",)
+    sensing: tuple[str, ...] = ("realistic",)
+    max_actions: int = 8
+    max_time: float = 240.0
+    keep_direction: float | None = None
+    fields: tuple = field(default=(), compare=False, repr=False)
+
+    def check(self) -> None:
+        from lab.identification.agent import PlannerChoice
+
+        if not self.seeds:
+            raise ConfigError("the seed range is empty: give --seeds like 100000-100009 (or seeds = [...])")
+        if not self.models:
+            raise ConfigError("no models: give --models like 0,1,2,3")
+        bad = [m for m in self.models if not 0 <= m <= 3]
+        if bad:
+            raise ConfigError(f"models must be 0..3, got {bad}")
+        known = [p.value for p in PlannerChoice]
+        for p in self.planners:
+            if p not in known:
+                raise ConfigError(f"unknown planner {p!r}; planners: {', '.join(known)}")
+        for m in self.movers:
+            if m not in ("static", "scripted", "random", "evasive"):
+                raise ConfigError(f"unknown mover {m!r}; movers: static, scripted, random, evasive")
+        for s in self.sensing:
+            if s not in ("realistic", "ideal"):
+                raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal")
+        if self.max_actions < 0:
+            raise ConfigError(f"max_actions must be >= 0, got {self.max_actions}")
+        if not self.max_time > 0:
+            raise ConfigError(f"max_time must be > 0 s, got {self.max_time}")
+
+    def jobs(self) -> list[Job]:
+        out = []
+        for planner in self.planners:
+            for mover in self.movers:
+                for sensing in self.sensing:
+                    for seed in self.seeds:
+                        for m in self.models:
+                            kw = dict(
+                                true_model=m,
+                                seed=seed,
+                                mover=mover,
+                                planner=planner,
+                                max_actions=self.max_actions,
+                                max_time_s=self.max_time,
+                                sensing=sensing,
+                                keep_direction=self.keep_direction,
+                            )
+                            out.append(Job(f"{planner}_{mover}_{sensing}_m{m}_s{seed}", identify_job, kw))
+        return out
+
+
+SWEEP_FIELDS = (
+    "models",
+    "seeds",
+    "planners",
+    "movers",
+    "sensing",
+    "max_actions",
+    "max_time",
+    "keep_direction",
+)
+
+
+def load_sweep_file(path: Path) -> dict:
+    """A TOML sweep file's fields (``[sweep]`` table or top level): lists, or strings like the flags'."""
+    try:
+        data = tomllib.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"sweep file {path} does not exist") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"sweep file {path} is not valid TOML: {e}") from None
+    data = data.get("sweep", data)
+    unknown = sorted(set(data) - set(SWEEP_FIELDS))
+    if unknown:
+        raise ConfigError(
+            f"sweep file {path}: unknown field(s) {', '.join(unknown)}; fields: {', '.join(SWEEP_FIELDS)}"
+        )
+    return data
+
+
+def identify_job(**kwargs) -> dict:
+    """One identification episode in this worker process (its own PyBullet client), no figures."""
+    from lab.runs.identify import run_identify
+
+    return run_identify(figures=False, **kwargs)
+
+
+def _row(key: str, job_kw: dict, res: dict | None, error: str | None, wall: float | None) -> dict:
+    row = {k: job_kw.get(k) for k in ("true_model", "planner", "mover", "sensing", "seed", "max_actions")}
+    row["key"] = key
+    if res is not None:
+        row.update({k: res.get(k) for k in ("success", "identified_model", "actions", "sim_time_s")})
+        row["wall_time_s"] = res.get("wall_time_s", wall)
+    else:
+        row.update(success=False, wall_time_s=wall)
+    row["error"] = error or ""
+    return row
+
+
+def _write_table(out: Path, rows: list[dict]) -> Path:
+    from lab.io import write_text_atomic
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in sorted(rows, key=lambda r: r["key"]):
+        w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in CSV_FIELDS})
+    write_text_atomic(out / "results.csv", buf.getvalue())
+    try:  # Parquet too, when pyarrow is there
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        pq.write_table(
+            pa.Table.from_pylist([{k: r.get(k) for k in CSV_FIELDS} for r in rows]), out / "results.parquet"
+        )
+    except ImportError:
+        pass
+    return out / "results.csv"
+
+
+def run_sweep(out: Path, jobs: list[Job], executor, resume: bool = False, echo=print) -> list[dict]:
+    """Run ``jobs`` (those without a result in ``out`` when ``resume``) and write the table; the rows."""
+    from lab.contract import problems
+    from lab.io import write_json_atomic
+
+    out = Path(out)
+    done_dir, fail_dir = out / "jobs", out / "failed"
+    if not resume and (out / "results.csv").exists():
+        raise ConfigError(f"{out} already holds a sweep: --resume to complete it, or another --out")
+    keys = [j.key for j in jobs]
+    if len(set(keys)) != len(keys):
+        raise ConfigError("the sweep has duplicate jobs (a value given twice?)")
+    rows: dict[str, dict] = {}
+    todo = []
+    for j in jobs:
+        p = done_dir / f"{j.key}.json"
+        if resume and p.is_file():
+            rows[j.key] = _row(j.key, j.kwargs, json.loads(p.read_text()), None, None)
+        else:
+            todo.append(j)
+    echo(f"{len(jobs)} jobs, {len(jobs) - len(todo)} done before, {len(todo)} to run on {executor.name}")
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    n_ok = n_fail = 0
+    for o in executor.run(todo):
+        o: Outcome
+        res, err = o.result, o.error
+        if res is not None:
+            bad = problems("identify", res)
+            if bad:
+                res, err = None, f"ContractError: {bad[0]}"
+        if res is not None:
+            write_json_atomic(done_dir / f"{o.job.key}.json", res)
+            (fail_dir / f"{o.job.key}.json").unlink(missing_ok=True)
+            n_ok += 1
+        else:
+            write_json_atomic(
+                fail_dir / f"{o.job.key}.json", {"key": o.job.key, "params": o.job.kwargs, "error": err}
+            )
+            n_fail += 1
+        rows[o.job.key] = _row(o.job.key, o.job.kwargs, res, err, o.wall_time_s)
+        _write_table(out, list(rows.values()))
+        n = n_ok + n_fail
+        el = time.perf_counter() - t0
+        eta = el / n * (len(todo) - n)
+        state = (
+            "FAILED " + err.splitlines()[0][:120]
+            if err
+            else (f"success {res['success']} after {res['actions']} actions, {res['sim_time_s']:.1f} s sim")
+        )
+        echo(
+            f"[{n}/{len(todo)}] {o.job.key}: {state} ({o.wall_time_s:.1f} s; {n_fail} failed; "
+            f"{el:.0f} s elapsed, ~{eta:.0f} s to go)"
+        )
+    rows_l = [rows[k] for k in keys if k in rows]
+    _write_table(out, rows_l)
+    write_report(out, rows_l)
+    return rows_l
+
+
+def write_report(out: Path, rows: list[dict]) -> Path:
+    """``report.md``: success per condition (planner, mover, sensing) with its Wilson 95 % interval,
+    median actions and sim time; the split of the seeds; the failed jobs."""
+    import statistics
+
+    from lab.evaluation import split_of, wilson_interval
+    from lab.io import write_text_atomic
+
+    lines = ["# Sweep report", ""]
+    seeds = sorted({int(r["seed"]) for r in rows})
+    if seeds:
+        lines.append(f"Seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}): the {split_of(seeds)} split.")
+        lines.append("")
+    lines += [
+        "| planner | mover | sensing | success | Wilson 95 % | median actions | median sim s | errors |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    conds = sorted({(r["planner"], r["mover"], r["sensing"]) for r in rows})
+    for c in conds:
+        rs = [r for r in rows if (r["planner"], r["mover"], r["sensing"]) == c]
+        ran = [r for r in rs if not r["error"]]
+        k = sum(bool(r["success"]) for r in ran)
+        ci = wilson_interval(k, len(ran)) if ran else None
+        acts = [r["actions"] if r["success"] else r["max_actions"] for r in ran]
+        sims = [r["sim_time_s"] for r in ran]
+        lines.append(
+            f"| {c[0]} | {c[1]} | {c[2]} | {k}/{len(ran)} | "
+            + ("-" if ci is None else f"[{100 * ci[0]:.1f}, {100 * ci[1]:.1f}] %")
+            + f" | {statistics.median(acts) if acts else '-'} | "
+            + (f"{statistics.median(sims):.1f}" if sims else "-")
+            + f" | {len(rs) - len(ran)} |"
+        )
+    fails = [r for r in rows if r["error"]]
+    if fails:
+        lines += ["", "Failed jobs (`--resume` runs them again):", ""]
+        lines += [f"* {r['key']}: {r['error'].splitlines()[0]}" for r in fails]
+    lines.append("")
+    return write_text_atomic(out / "report.md", "\n".join(lines)) or out / "report.md"
+
+
+def print_split(seeds, file=sys.stdout) -> None:
+    from lab.evaluation import split_of
+
+    s = sorted(seeds)
+    print(f"split: {split_of(s)} (seeds {s[0]}-{s[-1]}, {len(s)} seeds)", file=file)
