@@ -33,8 +33,8 @@ check that over a 25-step run.
 a focal length or baseline off by ``s`` scales every triangulated point by ``1 + s``, and a pan-tilt
 zero off by a small rotation ``delta`` turns them all by ``Exp(delta)``. Treated as independent
 per-feature noise such an error averages away over the features, and the filter grows over-confident
-by as much (measured: NEES above its band on 28 % of the static-box frames under ``realistic``, tuning seeds 0-5). With
-:class:`CalibrationUncertainty` the model is ``d_j = (1 + s) Exp(delta) h_j(X) + n_j``, linearised as
+by as much (measured: NEES above its band on 28 % of the static-box frames under ``realistic``, tuning
+seeds 0-5; 9 % with the term). With :class:`CalibrationUncertainty` the model is ``d_j = (1 + s) Exp(delta) h_j(X) + n_j``, linearised as
 ``d_j = h_j + U_j c + n_j`` with ``c = [s, delta]`` and ``U_j = [h_j, -[h_j]_x]``: ``c`` joins the
 state for the update with its prior ``Sigma_c``, and is marginalised out after it. The same 6x6
 algebra runs in 10 dimensions (``C_j <- [C_j, U_j]``, ``Sigma_bar <- diag(Sigma_bar, Sigma_c)``),
