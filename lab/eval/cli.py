@@ -25,20 +25,11 @@ def _names(v) -> tuple[str, ...]:
 
 def identify_sweep(args):
     """The grid from the sweep file (``--sweep``) with the flags given on the command line over it."""
-    from lab.eval.sweep import IdentifySweep, load_sweep_file
+    from lab.eval.sweep import SWEEP_FIELDS, IdentifySweep, load_sweep_file
     from lab.evaluation import report_seeds
 
     spec = load_sweep_file(args.sweep) if args.sweep else {}
-    for name in (
-        "models",
-        "seeds",
-        "planners",
-        "movers",
-        "sensing",
-        "max_actions",
-        "max_time",
-        "keep_direction",
-    ):
+    for name in SWEEP_FIELDS:  # the sweep file's fields are the command line's flags
         v = getattr(args, name)
         if v is not None:
             spec[name] = v
