@@ -1,6 +1,8 @@
 """The filter's algebra against independent peers: filterpy's ExtendedKalmanFilter, a dense textbook
 update, SciPy's multivariate normal for Eq. (9); covariance properties with hypothesis; the bank."""
 
+import math
+
 import numpy as np
 import pytest
 from ekf_scenarios import CAMERA, cube, moving_run, observe
@@ -14,6 +16,7 @@ from lab.estimation import (
     EKFBank,
     EKFConfig,
     GateConfig,
+    ModelUncertainty,
     PoseEKF,
     UpdateOutcome,
     data_log_likelihood,
@@ -21,6 +24,7 @@ from lab.estimation import (
     measurement_covariance,
     measurement_jacobian,
     measurement_model,
+    model_offset_covariance,
     motion_jacobian,
     motion_model,
     process_noise_covariance,
@@ -199,6 +203,115 @@ def test_calibration_update_is_the_dense_update_with_correlated_feature_errors()
     plain.update(f.d_C, f.b_O, f.Sigma_d)
     assert np.linalg.eigvalsh(ekf.Sigma - plain.Sigma).min() > -1e-15
     assert np.trace(ekf.Sigma[:3, :3]) > 1.5 * np.trace(plain.Sigma[:3, :3])
+
+
+def test_calibration_error_is_considered_not_learned_across_frames():
+    """Two frames in a row against a dense Schmidt-Kalman (consider) reference: the joint covariance
+    over ``[x, c]`` gets the textbook update with the gain's ``c`` rows set to zero, so ``P_xc`` is
+    carried from frame to frame and ``Sigma_c`` never shrinks (``U`` by central differences through
+    SciPy). On a still scene seen 40 times the filter's lateral uncertainty then stays above what the
+    pan-tilt's pointing error allows, while dropping ``P_xc`` after each update (the frames' errors
+    independent) lets it shrink with the number of frames."""
+    rng = np.random.default_rng(11)
+    b_O, nrm = cube(rng)
+    X = np.array([0.05, -0.02, 1.2, 0.4, 0.3, -2.0])
+    cal = CalibrationUncertainty(scale_std=0.007, pointing_std_deg=0.05)
+    mu = X + rng.normal(0, [0.01, 0.01, 0.02, 0.02, 0.02, 0.02])
+    Pa = np.zeros((10, 10))
+    Pa[:6, :6] = np.diag([0.01, 0.01, 0.02, 0.03, 0.03, 0.03]) ** 2
+    Pa[6:, 6:] = cal.covariance()
+    ekf = PoseEKF(EKFConfig(gate=NO_GATE.gate, calibration=cal), rng=rng)
+    ekf.initialize(mu, Pa[:6, :6])
+    for _ in range(2):
+        f = observe(rng, X, b_O, nrm)
+        h = measurement_model(mu, f.b_O)
+        U = np.zeros((h.size, 4))
+        for j in range(4):
+            e = np.zeros(4)
+            e[j] = 1e-6
+            U[:, j] = (_calibrated_points(h, e) - _calibrated_points(h, -e)).reshape(-1) / 2e-6
+        H = np.hstack([measurement_jacobian(mu, f.b_O), U])
+        Sm = measurement_covariance(f.Sigma_d)
+        S = H @ Pa @ H.T + Sm
+        K = np.linalg.solve(S, H @ Pa).T
+        K[6:] = 0.0  # consider: c is not updated
+        mu = mu + K[:6] @ (f.d_C - h).reshape(-1)
+        I_KH = np.eye(10) - K @ H
+        Pa = I_KH @ Pa @ I_KH.T + K @ Sm @ K.T
+        res = ekf.update(f.d_C, f.b_O, f.Sigma_d)
+        assert res.applied, res.reason
+        assert (
+            abs(res.log_likelihood - multivariate_normal.logpdf(f.d_C.reshape(-1), h.reshape(-1), S)) < 1e-6
+        )
+        np.testing.assert_allclose(state_residual(ekf.mu, mu), 0.0, atol=1e-9)
+        np.testing.assert_allclose(ekf.Sigma, Pa[:6, :6], rtol=0, atol=1e-7 * np.abs(Pa[:6, :6]).max())
+        np.testing.assert_allclose(ekf.P_xc, Pa[:6, 6:], rtol=0, atol=1e-7 * np.abs(Pa[:6, 6:]).max())
+        np.testing.assert_allclose(Pa[6:, 6:], cal.covariance())  # the reference's own check
+
+    def still(config, forget=False):  # a still scene, fresh noise each frame (as the filter assumes)
+        ekf = PoseEKF(config, rng=np.random.default_rng(0))
+        ekf.initialize(X, np.diag([0.01] * 3 + [0.02] * 3) ** 2)
+        for _ in range(40):
+            f = observe(rng, X, b_O, nrm)
+            assert ekf.update(f.d_C, f.b_O, f.Sigma_d).applied
+            if forget:
+                ekf.P_xc = np.zeros_like(ekf.P_xc)  # the frames' calibration errors independent
+        return ekf
+
+    lateral = (math.radians(0.05) * np.linalg.norm(X[:3])) ** 2  # the pointing error 1.2 m away
+    considered = still(EKFConfig(gate=NO_GATE.gate, calibration=cal)).Sigma
+    forgetful = still(EKFConfig(gate=NO_GATE.gate, calibration=cal), forget=True).Sigma
+    assert considered[0, 0] > 0.8 * lateral and considered[1, 1] > 0.8 * lateral
+    assert forgetful[0, 0] < 0.25 * considered[0, 0]
+
+
+def test_model_offset_covariance_is_the_rigid_part_of_independent_point_errors():
+    """``Sigma_m`` against a Monte Carlo of SciPy's rigid fit (``Rotation.align_vectors``) to database
+    points moved by independent errors; and a filter on a still scene: its :attr:`estimate` (the pose
+    the features say) shrinks with the frames, its :attr:`object_estimate` keeps the database's share."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(4)
+    b_O, nrm = cube(rng)
+    b = b_O[:30]
+    sd = 0.003
+    Sigma_m = model_offset_covariance(b, sd)
+    m = []
+    c = b.mean(axis=0)
+    for _ in range(3000):
+        q = b + rng.normal(0.0, sd, b.shape)
+        R, _ = Rotation.align_vectors(q - q.mean(axis=0), b - c)  # q_j ~ R b_j + tau
+        m.append(np.concatenate([q.mean(axis=0) - R.apply(c), R.as_rotvec()]))
+    np.testing.assert_allclose(np.cov(np.array(m).T), Sigma_m, rtol=0, atol=0.1 * np.abs(Sigma_m).max())
+    np.testing.assert_allclose(np.diag(np.cov(np.array(m).T)), np.diag(Sigma_m), rtol=0.12)
+    assert not model_offset_covariance(b, 0.0).any()
+
+    X = np.array([0.05, -0.02, 1.2, 0.4, 0.3, -2.0])
+    ekf = PoseEKF(EKFConfig(gate=NO_GATE.gate, model=ModelUncertainty(sd)), rng=rng)
+    ekf.initialize(X, np.diag([0.01] * 3 + [0.02] * 3) ** 2)
+    np.testing.assert_array_equal(ekf.object_estimate.Sigma_rv, ekf.estimate.Sigma_rv)  # nothing to add yet
+    for _ in range(40):
+        f = observe(rng, X, b_O, nrm)
+        assert ekf.update(f.d_C, f.b_O, f.Sigma_d).applied
+    floor = model_offset_covariance(f.b_O, sd)
+    R = ekf.estimate.G_CO[:3, :3]
+    J = np.kron(np.eye(2), R)
+    np.testing.assert_allclose(
+        ekf.object_estimate.Sigma_rv, ekf.estimate.Sigma_rv + J @ floor @ J.T, atol=1e-15
+    )
+    np.testing.assert_allclose(ekf.object_estimate.mu, ekf.estimate.mu)
+    assert (
+        np.linalg.eigvalsh(ekf.object_estimate.Sigma_rv[:3, :3]).min()
+        > 0.9 * np.linalg.eigvalsh(floor[:3, :3]).min()
+    )
+    assert np.trace(ekf.estimate.Sigma_rv[:3, :3]) < 0.5 * np.trace(ekf.object_estimate.Sigma_rv[:3, :3])
+
+
+def test_model_uncertainty_refuses_bad_values():
+    for bad in (-0.01, float("nan"), True, "1"):
+        with pytest.raises(ValueError, match="point_std_m must be a finite number >= 0"):
+            ModelUncertainty(point_std_m=bad)
+    assert ModelUncertainty().is_none and not ModelUncertainty(0.002).is_none
 
 
 def test_calibration_uncertainty_refuses_bad_values_and_reads_the_camera():

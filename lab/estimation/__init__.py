@@ -20,10 +20,12 @@ from lab.estimation.ekf import (
     CalibrationUncertainty,
     DivergenceConfig,
     EKFConfig,
+    ModelUncertainty,
     PoseEKF,
     UpdateOutcome,
     UpdateResult,
     data_log_likelihood,
+    model_offset_covariance,
 )
 from lab.estimation.estimate import PoseEstimate, nees
 from lab.estimation.fit import InitResult, RansacConfig, fit_rigid_transform, ransac_pose
@@ -60,7 +62,9 @@ __all__ = [
     "UpdateOutcome",
     "UpdateResult",
     "CalibrationUncertainty",
+    "ModelUncertainty",
     "data_log_likelihood",
+    "model_offset_covariance",
     "gate_matches",
     "nees",
     "InitResult",

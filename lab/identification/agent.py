@@ -62,7 +62,14 @@ from collections.abc import Sequence
 import numpy as np
 
 from lab.errors import ConfigError
-from lab.estimation import CalibrationUncertainty, EKFBank, EKFConfig, OrientationChart, UpdateOutcome
+from lab.estimation import (
+    CalibrationUncertainty,
+    EKFBank,
+    EKFConfig,
+    ModelUncertainty,
+    OrientationChart,
+    UpdateOutcome,
+)
 from lab.geometry import G_to_pose6, Pose2D, relative_pose2d, wrap_angle
 from lab.identification.actions import ActionConfig, RingBlocked
 from lab.identification.bayes import uniform
@@ -175,6 +182,7 @@ class IdentificationAgent:
             EKFConfig(
                 chart=OrientationChart.ROTATION_VECTOR,
                 calibration=CalibrationUncertainty.of_camera(robot.camera),  # shared by a frame's features
+                model=ModelUncertainty(max(db.point_std_m for db in self.dbs)),  # by all frames
             ),
             rng=np.random.default_rng(seed),
         )

@@ -41,6 +41,7 @@ from lab.errors import ConfigError
 from lab.estimation import (
     CalibrationUncertainty,
     EKFConfig,
+    ModelUncertainty,
     OrientationChart,
     PoseEKF,
     PoseEstimate,
@@ -262,7 +263,7 @@ def make_matcher(db: FeatureDatabase) -> Matcher:
 
 
 def _stds(ekf: PoseEKF) -> tuple[float, float]:
-    S = ekf.Sigma_rv
+    S = ekf.object_estimate.Sigma_rv  # with the database's own error: where the object is
     pos = math.sqrt(max(0.0, float(np.linalg.eigvalsh(S[:3, :3])[-1])))
     rot = math.degrees(math.sqrt(max(0.0, float(np.linalg.eigvalsh(S[3:, 3:])[-1]))))
     return pos, rot
@@ -312,6 +313,7 @@ class _LocalSearch:
             chart=OrientationChart.ROTATION_VECTOR,
             process=cfg.process,
             calibration=CalibrationUncertainty.of_camera(robot.camera),  # shared by a frame's features
+            model=ModelUncertainty(db.point_std_m),  # the database's own error, shared by all frames
         )
         self.records: list[ViewRecord] = []
         self.best_reason, self.best_rank = "no view had enough matches", (-1, -1)
@@ -420,7 +422,7 @@ def _refine(robot, db, matcher, detector, ekf: PoseEKF, frame: StereoFrame, cfg:
     pos_std, rot_std = _stds(ekf)
     G_WO = prev.odom.G() @ prev.G_RC @ ekf.estimate.G_CO
     base = {
-        "estimate": ekf.estimate,
+        "estimate": ekf.object_estimate,
         "frame": prev,
         "n_inliers": last_used,
         "position_std_m": pos_std,
