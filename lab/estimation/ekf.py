@@ -54,9 +54,9 @@ training with stereo errors of their own, the same in every frame. Their rigid p
 ``m`` that no measurement can tell from the object's pose, so the filter tracks the pose the features
 say (:attr:`PoseEKF.estimate`, which predicts them: its gate, likelihood and NIS are the papers'), and
 reports the object's as that pose with ``Sigma_m`` added (:attr:`PoseEKF.object_estimate`). Measured
-with both terms (``benchmarks/bench_nees.py``): NEES in its 95 % band on 86.1 % of the static-box
-frames under ``realistic`` without the database's term, 88.0 % with 2 mm (tuning seeds 0-7; the
-report split's figure is in the benchmark's output and the closing notes).
+with both terms (``benchmarks/bench_nees.py``, ``realistic``): NEES in its 95 % band on 86.1 % of the
+static-box frames without the database's term and 88.0 % with 2 mm on tuning seeds 0-7, where 2 mm
+was chosen; 88.9 % on report seeds 100000-100007 (85.4 % with neither term carried across frames).
 
 With ``EKFConfig(chart=ROTATION_VECTOR)`` the same equations run with ``C`` and ``Sigma`` over
 ``[x_r, phi]`` (``phi`` a small rotation in C) and the correction is applied as
