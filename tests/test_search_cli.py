@@ -62,3 +62,22 @@ def test_search_run_finds_the_toy_block_and_keeps_the_contract(tmp_path):
         assert (figs / name).stat().st_size > 10_000, name
     assert len(list(figs.glob("map_*.png"))) == len(res["map_snapshots"])
     assert problems("search", res) == []  # lab/schemas/search.schema.json
+
+
+def test_outcome_in_words_says_found_success_and_the_missed_limit():
+    from lab.runs.search import outcome_in_words
+
+    base = {"found": True, "reason": "found", "position_error_m": 0.012, "orientation_error_deg": 0.8}
+    assert outcome_in_words({**base, "success": True}).startswith("found and a success: 1.2 cm and 0.8 deg")
+    far = {**base, "success": False, "position_error_m": 0.083}
+    assert outcome_in_words(far) == "found, but 8.3 cm from the true position: the limit is 5 cm"
+    both = {**far, "orientation_error_deg": 37.9}
+    assert outcome_in_words(both) == (
+        "found, but 8.3 cm from the true position: the limit is 5 cm; "
+        "and 37.9 deg off the true orientation: the limit is 10 deg"
+    )
+    assert outcome_in_words({"found": False, "reason": "time budget of 240 s used up"}) == (
+        "not found: time budget of 240 s used up"
+    )
+    robot = {"found": True, "position_error_m": None, "orientation_error_deg": None}
+    assert outcome_in_words(robot) == "found (no true pose to score it against)"

@@ -49,6 +49,32 @@ def test_fig5_and_fig6(trial, tmp_path):
     assert pano.shape == (240, 6 * 320, 3)
 
 
+def test_fig6_maps_share_one_scale_and_every_mark_is_named(trial):
+    """One colour scale over all snapshots (one colourbar, log), axes in metres, and a legend entry for
+    every kind of mark; the true object only where the truth is known."""
+    import dataclasses
+
+    fig = fig6_snapshots(trial)
+    maps = [a for a in fig.axes if a.images and a.get_xlabel() == "x [m]"]
+    assert maps
+    norms = {(a.images[0].norm.vmin, a.images[0].norm.vmax) for a in maps}
+    assert len(norms) == 1
+    vmin, vmax = norms.pop()
+    snaps = trial.trace.agent.snapshots
+    shown = [s for s in snaps if s.label == "global search"][:1] + [
+        s for s in snaps if s.label == "local search failed"
+    ][:6]
+    assert vmax == pytest.approx(max(float(s.P.max()) for s in shown)) and vmin == pytest.approx(1e-4 * vmax)
+    assert type(maps[0].images[0].norm).__name__ == "LogNorm"
+    assert sum(1 for a in fig.axes if a.get_label() == "<colorbar>") == 1
+    assert maps[0].get_ylabel() == "y [m]"
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert labels[:3] == ["robot (line: heading)", "cell just searched", "cells searched before"]
+    assert "true object" in labels
+    no_truth = dataclasses.replace(trial, true_pose=None)
+    assert "true object" not in [t.get_text() for t in fig6_snapshots(no_truth).legends[0].get_texts()]
+
+
 def test_draw_pose_draws_the_box_where_it_projects():
     cam = StereoCamera.from_fov()
     img = np.zeros((240, 320, 3), np.uint8)

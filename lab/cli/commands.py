@@ -173,8 +173,12 @@ def _cmd_search(args) -> int:
         )
         write_json_atomic(args.out / "search.json", data)
         print(f"wrote {len(files)} figures and search.json into {args.out}", file=sys.stderr)
-    keys = ("object", "found", "position_error_m", "orientation_error_deg", "path_length_m", "sim_time_s")
-    print(_json.dumps({k: data.get(k) for k in keys}, indent=2))
+    from lab.runs.search import outcome_in_words
+
+    keys = ("object", "found", "success", "position_error_m", "orientation_error_deg", "path_length_m")
+    summary = {k: data.get(k) for k in (*keys, "sim_time_s")}
+    summary["outcome"] = outcome_in_words(data)  # found / success / why, in words
+    print(_json.dumps(summary, indent=2))
     return 0
 
 

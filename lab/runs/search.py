@@ -47,6 +47,7 @@ __all__ = [
     "SearchTrace",
     "map_spec",
     "navigator_factory",
+    "outcome_in_words",
     "path_obstacles",
     "pose_errors",
     "run_search",
@@ -435,6 +436,36 @@ def _scored(object: str, out: AgentResult, truth: _TrialTruth, odom) -> dict:
         "camera_frame_error": cam,
         "odometry_error_m": math.hypot(odom.x - truth.robot_pose.x, odom.y - truth.robot_pose.y),
     }
+
+
+def outcome_in_words(data: dict) -> str:
+    """What a ``lab search`` result (its JSON fields) means, in one line for the console: found or
+    not, and whether it counts as a success against the truth, with the limit that it missed.
+
+    >>> outcome_in_words({"found": True, "success": False, "position_error_m": 0.083,
+    ...                   "orientation_error_deg": 2.0, "reason": "found"})
+    'found, but 8.3 cm from the true position: the limit is 5 cm'
+    """
+    if not data.get("found"):
+        return f"not found: {data.get('reason') or 'no reason recorded'}"
+    pe, oe = data.get("position_error_m"), data.get("orientation_error_deg")
+    if pe is None or oe is None:
+        return "found (no true pose to score it against)"
+    misses = []
+    if pe > SUCCESS_POSITION_M:
+        misses.append(
+            f"{100 * pe:.1f} cm from the true position: the limit is {100 * SUCCESS_POSITION_M:.0f} cm"
+        )
+    if oe > SUCCESS_ORIENTATION_DEG:
+        misses.append(
+            f"{oe:.1f} deg off the true orientation: the limit is {SUCCESS_ORIENTATION_DEG:.0f} deg"
+        )
+    if misses:
+        return "found, but " + "; and ".join(misses)
+    return (
+        f"found and a success: {100 * pe:.1f} cm and {oe:.1f} deg from the true pose "
+        f"(limits {100 * SUCCESS_POSITION_M:.0f} cm, {SUCCESS_ORIENTATION_DEG:.0f} deg)"
+    )
 
 
 @dataclass(frozen=True)

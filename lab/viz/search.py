@@ -213,8 +213,33 @@ def fig5_trial(result, costmap_state: np.ndarray | None = None, costmap_spec=Non
     return fig
 
 
+def _map_norm(maps):
+    """One colour scale for maps of a probability ``P``: logarithmic from 1e-4 of the largest cell up
+    (the mass the searches moved spans decades, a linear scale shows only the peak)."""
+    from matplotlib.colors import LogNorm
+
+    vmax = max(float(m.max()) for m in maps)
+    return LogNorm(vmin=max(vmax * 1e-4, 1e-12), vmax=max(vmax, 1e-11), clip=True)
+
+
+def _true_xy(result):
+    """The true object position (world x, y) of a trial, or None where there is no truth."""
+    pose = getattr(result, "true_pose", None)
+    if not pose or pose.get("position_m") is None:
+        return None
+    return pose["position_m"][0], pose["position_m"][1]
+
+
 def fig6_snapshots(result, max_snapshots: int = 6):
-    """The paper's Fig. 6: the first scan's panorama, and ``M_p`` after each failed local search."""
+    """The paper's Fig. 6: the first scan's panorama, and ``M_p`` after each failed local search.
+
+    All maps share one logarithmic colour scale (one colourbar), so a panel that looks brighter holds
+    more probability. Each panel marks the robot where the snapshot was taken, the cell just searched,
+    the cells searched before it and, where the truth is known (the simulator; the robot with
+    ``--truth``), the true object; the legend names every mark.
+    """
+    from matplotlib.lines import Line2D
+
     agent, spec = result.trace.agent, result.trace.spec
     snaps = [s for s in agent.snapshots if s.label == "local search failed"][:max_snapshots]
     first = next((s for s in agent.snapshots if s.label == "global search"), None)
@@ -222,31 +247,62 @@ def fig6_snapshots(result, max_snapshots: int = 6):
     n = max(1, len(maps))
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(3.0 * n, 6.5), layout="constrained")
-    gs = fig.add_gridspec(2, n, height_ratios=(1.0, 1.6))
+    fig = Figure(figsize=(2.6 * n + 1.2, 6.8), layout="constrained")
+    gs = fig.add_gridspec(2, n, height_ratios=(1.0, 1.7))
     top = fig.add_subplot(gs[0, :])
     if agent.globals_:
         top.imshow(panorama(agent.globals_[0]))
     top.set_title("panorama of the first scan (robot's left on the left)")
     top.axis("off")
+    norm = _map_norm([s.P for s in maps]) if maps else None
+    truth = _true_xy(result)
+    x0, x1, y0, y1 = spec.extent
+    searched: list[tuple[float, float]] = []
+    axes, im = [], None
     for k, s in enumerate(maps):
-        a = fig.add_subplot(gs[1, k])
-        x0, x1, y0, y1 = spec.extent
-        # each snapshot on its own scale (as the paper shows them): where the mass is, not how much
-        a.imshow(
-            s.P.T, origin="lower", extent=(x0, x1, y0, y1), cmap="viridis", vmin=0, vmax=float(s.P.max())
+        a = fig.add_subplot(gs[1, k], sharey=axes[0] if axes else None)
+        axes.append(a)
+        im = a.imshow(
+            np.maximum(s.P.T, norm.vmin), origin="lower", extent=(x0, x1, y0, y1), cmap="viridis", norm=norm
         )
+        if searched:
+            xs, ys = zip(*searched, strict=True)
+            a.plot(xs, ys, "s", mfc="none", mec="red", ms=5, mew=1)
         if s.cell is not None:
             cx, cy = spec.cell_to_world(*s.cell)
             a.plot(cx, cy, "x", color="red", ms=9, mew=2)
+            searched.append((cx, cy))
         if s.pose is not None:
-            a.plot(s.pose.x, s.pose.y, "o", color="white", ms=4)
-        a.set_title(
-            f"t = {s.t:.0f} s: {'after global search' if s.cell is None else f'{s.cell} searched'}",
-            fontsize=8,
+            a.plot(s.pose.x, s.pose.y, "o", color="white", mec="black", ms=5)
+            a.plot(
+                [s.pose.x, s.pose.x + 0.4 * math.cos(s.pose.theta)],
+                [s.pose.y, s.pose.y + 0.4 * math.sin(s.pose.theta)],
+                "-",
+                color="white",
+                lw=1.2,
+            )
+        if truth is not None:
+            a.plot(*truth, "*", color="gold", mec="black", ms=11)
+        what = "after the first global search" if s.cell is None else f"cell {s.cell} searched, not found"
+        a.set_title(f"t = {s.t:.0f} s\n{what}", fontsize=8)
+        a.set_xlabel("x [m]", fontsize=8)
+        a.tick_params(labelsize=7)
+        if k == 0:
+            a.set_ylabel("y [m]", fontsize=8)
+        else:
+            a.tick_params(labelleft=False)
+    if im is not None:
+        fig.colorbar(im, ax=axes, shrink=0.9, label="P(object in cell), log scale")
+    handles = [
+        Line2D([], [], ls="none", marker="o", color="white", mec="black", label="robot (line: heading)"),
+        Line2D([], [], ls="none", marker="x", color="red", mew=2, label="cell just searched"),
+        Line2D([], [], ls="none", marker="s", mfc="none", mec="red", label="cells searched before"),
+    ]
+    if truth is not None:
+        handles.append(
+            Line2D([], [], ls="none", marker="*", color="gold", mec="black", ms=11, label="true object")
         )
-        a.set_xticks([])
-        a.set_yticks([])
+    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False)
     return fig
 
 
@@ -257,13 +313,20 @@ def snapshot_figure(result, k: int):
     fig, ax = _figure(1, 1, size=(4.2, 5.0))
     a = ax[0, 0]
     im = _show_map(a, s.P, spec, f"M_p at t = {s.t:.0f} s, after {s.label}")
-    fig.colorbar(im, ax=a, shrink=0.8)
+    im.set_norm(_map_norm([snap.P for snap in agent.snapshots]))  # the same scale in every map_NN.png
+    im.set_data(np.maximum(s.P.T, im.norm.vmin))
+    fig.colorbar(im, ax=a, shrink=0.8, label="P(object in cell), log scale")
+    truth = _true_xy(result)
+    if truth is not None:
+        a.plot(*truth, "*", color="gold", mec="black", ms=11, label="true object")
     if len(traj):
         upto = traj[traj[:, 0] <= s.t + 1e-9]
-        a.plot(upto[:, 1], upto[:, 2], "-", color="magenta", lw=1.0)
+        a.plot(upto[:, 1], upto[:, 2], "-", color="magenta", lw=1.0, label="robot's path (odometry)")
     if s.cell is not None:
         cx, cy = spec.cell_to_world(*s.cell)
-        a.plot(cx, cy, "x", color="red", ms=9, mew=2)
+        a.plot(cx, cy, "x", color="red", ms=9, mew=2, label="cell searched")
+    a.lines[0].set_label("world origin")  # _show_map's first mark
+    a.legend(loc="upper left", fontsize=7, framealpha=0.8)
     return fig
 
 
