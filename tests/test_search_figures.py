@@ -18,12 +18,16 @@ from lab.viz.search import (
 )
 
 
-@pytest.fixture(scope="module")
-def trial():
+def _trial():
     scene = load_scene("lab_room")
     return run_search(
         "toy_block", 0, place=scene.body("toy_block").pose, max_time=120.0, navigate=truth_navigator
     )
+
+
+@pytest.fixture(scope="module")
+def trial():
+    return _trial()
 
 
 def test_fig2_shows_the_scan_peaks_and_the_map(trial):
@@ -99,3 +103,35 @@ def test_write_figures_writes_every_snapshot(trial, tmp_path):
     for f in files:
         assert f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f.stat().st_size > 5_000, f.name
     assert not list((tmp_path / "out").glob(".*tmp*"))  # atomic: no temporary file left behind
+
+
+_FRESH = """
+import json, sys
+sys.path.insert(0, {tests!r})
+import test_search_figures as t
+r = t._trial()
+print(json.dumps({{"events": [e.as_dict() for e in r.events], "estimated_pose": r.estimated_pose}}))
+"""
+
+
+def test_a_trial_repeats_after_another_and_in_a_fresh_process(trial):
+    """The same trial run again in this process (after the fixture's, and whatever this worker ran
+    before) and in a fresh interpreter gives the same events and the same estimated pose: no state
+    (random generators, caches, the renderer, the matchers) carries from one trial to the next."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    again = _trial()
+    code = _FRESH.format(tests=str(Path(__file__).parent))
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    fresh = json.loads(r.stdout.strip().splitlines()[-1])
+    first = [e.as_dict() for e in trial.events]
+    assert len(first) >= 3  # a global search, a drive and a local search at least
+    assert [e.as_dict() for e in again.events] == first
+    assert again.estimated_pose == trial.estimated_pose
+    assert fresh["events"] == json.loads(json.dumps(first)) and fresh["estimated_pose"] == json.loads(
+        json.dumps(trial.estimated_pose)
+    )
