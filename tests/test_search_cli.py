@@ -51,8 +51,11 @@ def test_search_run_finds_the_toy_block_and_keeps_the_contract(tmp_path):
         str(tmp_path / "figs"),
     )
     assert r.returncode == 0, r.stderr[-2000:]
+    steps = [line for line in r.stderr.splitlines() if line.startswith("lab search: t =")]
+    assert any(" global: " in line for line in steps) and any(" local (" in line for line in steps), r.stderr
     res = json.loads((tmp_path / "s.json").read_text())
     assert res["sensing"] == "ideal"
+    assert len(steps) == len(res["events"])  # one line per decision, as it happens
     assert res["found"] and res["position_error_m"] <= 0.05 and res["orientation_error_deg"] <= 10
     assert res["collisions"] == 0
     # --out: the figures and the same JSON
@@ -81,3 +84,20 @@ def test_outcome_in_words_says_found_success_and_the_missed_limit():
     )
     robot = {"found": True, "position_error_m": None, "orientation_error_deg": None}
     assert outcome_in_words(robot) == "found (no true pose to score it against)"
+
+
+def test_progress_prints_each_event_and_keeps_the_observer_before_it(capsys):
+    from types import SimpleNamespace
+
+    from lab.runs.search import _with_progress
+    from lab.search.agent import SearchEvent
+
+    seen = []
+    agent = SimpleNamespace(observer=lambda a, e: seen.append(e))
+    attached = []
+    _with_progress(attached.append)(agent)
+    assert attached == [agent]
+    e = SearchEvent(27.8, "local", (4, 13), "found: 4 confirming updates")
+    agent.observer(agent, e)
+    assert seen == [e]
+    assert capsys.readouterr().err == "lab search: t =   27.8 s  local (4, 13): found: 4 confirming updates\n"

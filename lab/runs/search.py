@@ -331,7 +331,8 @@ def run_search(
         make_robot(world=w, seed=seed, sensing=sensing) as run,
     ):
         robot = LocalizedRobot(run.robot, mode, landmarks, rng=np.random.default_rng([seed, 20]))
-        parts = (db, navigate, spec, cfg, seed, recorder, attach, (max_time, max_wall_time))
+        hook = _with_progress(attach) if progress else attach
+        parts = (db, navigate, spec, cfg, seed, recorder, hook, (max_time, max_wall_time))
         out, truth, budget, odom = _search(robot, w, object, *parts)
         profile = run.sensing
         estimate = robot.pose_estimate()
@@ -436,6 +437,31 @@ def _scored(object: str, out: AgentResult, truth: _TrialTruth, odom) -> dict:
         "camera_frame_error": cam,
         "odometry_error_m": math.hypot(odom.x - truth.robot_pose.x, odom.y - truth.robot_pose.y),
     }
+
+
+def progress_line(event: SearchEvent) -> str:
+    """One decision of the search, for the console: ``lab search: t =  27.8 s  local (4, 13): found...``."""
+    where = "" if event.cell is None else f" {tuple(event.cell)}"
+    return f"lab search: t = {event.t:6.1f} s  {event.kind}{where}: {event.detail}"
+
+
+def _with_progress(attach):
+    """An ``attach`` hook that also prints every event of the agent to stderr as it happens (after any
+    observer the recorder or ``attach`` set, which it keeps)."""
+
+    def hook(agent) -> None:
+        if attach is not None:
+            attach(agent)
+        before = agent.observer
+
+        def observer(a, event) -> None:
+            if before is not None:
+                before(a, event)
+            print(progress_line(event), file=sys.stderr, flush=True)
+
+        agent.observer = observer
+
+    return hook
 
 
 def outcome_in_words(data: dict) -> str:
