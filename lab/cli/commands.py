@@ -136,8 +136,6 @@ def _cmd_search(args) -> int:
         return 0
     if args.object not in names:
         raise LabError(f"unknown object {args.object!r}; searchable objects: {', '.join(names)}")
-    if args.robot is not None:
-        raise LabError("`lab search --robot` is not supported yet: the search runs in the simulator only")
     from lab.io import write_json_atomic
     from lab.runs.search import navigator_factory, run_search
 
@@ -160,21 +158,32 @@ def _cmd_search(args) -> int:
         record=args.record,
         sensing=_sensing(args),
         localization=args.localization,
+        robot_config=args.robot,
+        truth=args.truth,
     )
     data = res.to_json()
     if args.json is not None:
         write_json_atomic(args.json, data)
     if args.out is not None:
-        from lab.viz.search import write_figures
-
-        cm = navigators[0].costmap if navigators else None
-        files = write_figures(
-            res, args.out, None if cm is None else cm.state, None if cm is None else cm.spec
-        )
         write_json_atomic(args.out / "search.json", data)
-        print(f"wrote {len(files)} figures and search.json into {args.out}", file=sys.stderr)
-    keys = ("object", "found", "position_error_m", "orientation_error_deg", "path_length_m", "sim_time_s")
+        if args.robot is None:
+            from lab.viz.search import write_figures
+
+            cm = navigators[0].costmap if navigators else None
+            files = write_figures(
+                res, args.out, None if cm is None else cm.state, None if cm is None else cm.spec
+            )
+            print(f"wrote {len(files)} figures and search.json into {args.out}", file=sys.stderr)
+        else:
+            print(f"wrote search.json into {args.out} (the figures are the simulator's)", file=sys.stderr)
+    keys = ("object", "found", "success", "reason", "position_error_m", "orientation_error_deg")
+    keys += ("path_length_m", "sim_time_s")
     print(_json.dumps({k: data.get(k) for k in keys}, indent=2))
+    if res.interrupted:
+        where = args.json or (None if args.out is None else args.out / "search.json")
+        said = f": the result so far is in {where}" if where is not None else ""
+        print(f"lab search: interrupted, motors stopped{said}", file=sys.stderr)
+        return 130
     return 0
 
 
