@@ -122,6 +122,10 @@ def _cmd_identify(args) -> int:
     ] + (["watchdog_stops"] if args.robot is not None else [])
     summary = {k: res[k] for k in keys}
     print(_json.dumps(summary, indent=2))
+    if res["reason"] == "interrupted":
+        said = f": the result so far is in {args.json}" if args.json is not None else ""
+        print(f"lab identify: interrupted, motors stopped{said}", file=sys.stderr)
+        return 130
     return 0
 
 
