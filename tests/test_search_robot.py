@@ -219,3 +219,81 @@ def test_ctrl_c_during_a_rehearsed_identification_writes_the_result(monkeypatch,
     assert d["actions"] >= 1
     (emu,) = kept
     assert emu.create.wheel_speeds() == (0, 0)
+
+
+def _quick_search_parts():
+    """A search that drives within seconds: one view for the global search and for the navigator's first
+    scan (the same agent and navigator; the faults are about the robot's path, not about the search)."""
+    from lab.navigation.navigator import NavigatorConfig
+    from lab.search.agent import AgentConfig
+    from lab.search.global_search import GlobalSearchConfig
+
+    config = AgentConfig(global_search=GlobalSearchConfig(pans_deg=(0.0,), tilts_deg=(-30.0,)))
+    nav_config = NavigatorConfig(scan_pans=(0.0,))
+    return config, lambda robot, spec: navigator_factory(robot, spec, config=nav_config)
+
+
+def _hardware_robot(robot):
+    while not hasattr(robot, "read_state"):  # BudgetedRobot -> LocalizedRobot -> PlacedRobot -> Hardware
+        robot = robot.base
+    return robot
+
+
+FAULTS = {
+    # fault: (inject it, the robot's state at the end, the reason, the base's wheels at the end)
+    "cliff": (lambda e: e.create.cliff(2), "faulted", r"SafetyStop: safety stop \(cliff front-right\)", 0),
+    "stream stop": (lambda e: setattr(e.create, "mute_stream", True), "stale", r"no sensor stream", 0),
+    "PTU unplugged": (lambda e: e.ptu.unplug(), "disconnected", r"ConnectionLost: .*PTU", 0),
+    # the Create's OI has no link watchdog: unplugged, it keeps its last Drive Direct (hardware/README.md)
+    "base unplugged": (lambda e: e.create.unplug(), "disconnected", r"ConnectionLost: .*Create", None),
+}
+
+
+@pytest.mark.parametrize("fault", list(FAULTS))
+def test_a_device_fault_while_the_search_drives_ends_it_in_the_documented_state(monkeypatch, fault):
+    import re
+    import threading
+
+    inject, state, reason, wheels = FAULTS[fault]
+    kept = _keep_emulators(monkeypatch)
+    seen: dict = {}
+
+    def attach(agent):
+        hw = _hardware_robot(agent.robot)
+
+        def on_event(a, event):
+            if event.kind == "end":
+                seen.update(state=hw.state, ptu=list(kept[0].ptu.commands))
+
+        agent.observer = on_event
+
+    def inject_once_driving():
+        ok = wait_until(lambda: kept and kept[0].create.wheel_speeds() != (0, 0), 60.0, step=0.01)
+        seen["t"] = kept[0].ptu.now() if ok else None
+        if ok:
+            inject(kept[0])
+
+    threading.Thread(target=inject_once_driving, daemon=True).start()
+    config, navigate = _quick_search_parts()
+    res = run_search(
+        "cereal_box",
+        0,
+        place=(0.0, 0.6, 0.0, -90.0),  # 3.6 m ahead: the base is driving when the fault comes
+        max_time=60.0,
+        navigate=navigate,
+        config=config,
+        robot_config=REHEARSAL_TOML,
+        attach=attach,
+    )
+    (emu,) = kept
+    print(f"\n{fault}: state {seen.get('state')!r}; reason {res.reason!r}")
+    assert seen.get("t") is not None, f"the base never drove: {res.reason}"
+    assert not res.found and re.search(f"^stopped by a fault: .*{reason}", res.reason), res.reason
+    assert "\n" not in res.reason  # one clear message
+    assert seen["state"] == state
+    assert problems("search", json.loads(json.dumps(res.to_json()))) == []
+    if wheels is not None:
+        assert wait_until(lambda: emu.create.wheel_speeds() == (0, 0), 2.0), emu.create.wheel_speeds()
+    else:  # what can still be reached is stopped: the head was halted after the cable was pulled
+        assert emu.create.wheel_speeds() != (0, 0)
+        assert any(c.upper() == "H" for t, c in seen["ptu"] if t >= seen["t"]), seen["ptu"][-5:]

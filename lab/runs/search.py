@@ -37,7 +37,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from lab.errors import ConfigError
+from lab.errors import ConfigError, SafetyStop
 from lab.geometry import Pose2D, R_to_euler_zyx, Rz, se3, se3_inv
 from lab.navigation.astar import astar_to_region
 from lab.navigation.drive_loop import NavOutcome
@@ -666,16 +666,19 @@ def _place_object(scene: Scene, object: str, place, obstacles: bool, rng: np.ran
 # --- the navigation the search drives with -----------------------------------------------------------
 
 
-def navigator_factory(robot, spec, timeout_s: float = 120.0):
+def navigator_factory(robot, spec, timeout_s: float = 120.0, config=None):
     """``navigate`` for :func:`run_search`: scan once, then ``go_near`` each target.
 
-    The navigator's workspace is the floor the map ``spec`` covers (the scene's room). The returned
+    The navigator's workspace is the floor the map ``spec`` covers (the scene's room); ``config`` is its
+    :class:`~lab.navigation.navigator.NavigatorConfig` (default: the navigator's). The returned
     callable keeps its :class:`~lab.navigation.Navigator` as ``navigate.navigator`` (its costmap is what
     ``lab search --out`` draws under the trajectory). Each outcome carries the path A* plans first on the
-    current costmap (``path_xy``, for the figures; the navigator replans on the way).
+    current costmap (``path_xy``, for the figures; the navigator replans on the way). A drive that ends
+    in a safety stop (``SAFETY_STOP``: a cliff or a wheel drop; the robot is disarmed) raises
+    :class:`~lab.errors.SafetyStop`, which ends the search with that fault.
     """
     x0, x1, y0, y1 = (round(v, 9) for v in spec.extent)  # 30 x 0.2 m is 6.000000000000001 m
-    nav = Navigator(robot, bounds=(x0, y0, x1, y1))
+    nav = Navigator(robot, config=config, bounds=(x0, y0, x1, y1))
     state = {"scanned": False}
 
     def navigate(target_xy, min_distance: float, max_distance: float) -> NavigationResult:
@@ -684,6 +687,10 @@ def navigator_factory(robot, spec, timeout_s: float = 120.0):
             state["scanned"] = True
         first = astar_to_region(nav.planning_grid(), robot.odometry(), target_xy, max_distance, min_distance)
         r = nav.go_near(target_xy, min_distance, max_distance, timeout=timeout_s)
+        if r.outcome is NavOutcome.SAFETY_STOP:
+            # the robot stopped itself (cliff, wheel drop) and stays disarmed: the search cannot go on; the
+            # agent ends the run with this fault (without this, each next target failed at once)
+            raise SafetyStop(r.reason or r.outcome.value)
         arrived = r.outcome is NavOutcome.ARRIVED
         path = first.points_xy if first.found else None
         return NavigationResult(arrived, r.reason or r.outcome.name, r.pose, path)
