@@ -297,3 +297,30 @@ def test_a_device_fault_while_the_search_drives_ends_it_in_the_documented_state(
     else:  # what can still be reached is stopped: the head was halted after the cable was pulled
         assert emu.create.wheel_speeds() != (0, 0)
         assert any(c.upper() == "H" for t, c in seen["ptu"] if t >= seen["t"]), seen["ptu"][-5:]
+
+
+def test_on_the_real_robot_path_the_scoring_is_null_without_a_measured_truth(tmp_path):
+    """The real robot's path (a robot config whose camera is not the simulator's): here the emulators
+    with the synthetic camera, in which there is nothing to find. No truth: the scoring fields are null
+    and the JSON keeps the contract; with the operator's measured pose the run is scored against it."""
+    import dataclasses
+
+    from lab.hardware.config import load_config
+    from lab.hardware.emulators import start_emulators
+
+    with start_emulators(tmp_path / "links") as emu:
+        cfg = load_config(EMULATED_TOML).with_ports(base=emu.base_port, ptu=emu.ptu_port)
+        cfg = dataclasses.replace(cfg, base=dataclasses.replace(cfg.base, stale_timeout_s=0.5))  # shared GIL
+        kw = {"max_time": 2.0, "navigate": navigator_factory, "robot_config": cfg}
+        blind = run_search("book", 0, **kw).to_json()
+        measured = run_search("book", 0, truth=(-2.6, 2.9, 1.2, 0.0), **kw).to_json()
+        assert emu.create.wheel_speeds() == (0, 0)
+    for d in (blind, measured):
+        assert problems("search", json.loads(json.dumps(d))) == []
+        assert d["sensing"] == "hardware" and not d["found"] and "time budget" in d["reason"]
+        assert d["odometry_error_m"] is None and d["localization_error_m"] is None
+        assert d["camera_frame_error"] is None and d["surface"] is None
+    assert blind["true_pose"] is None and blind["success"] is None and blind["place"] is None
+    G = measured_pose(load_scene("lab_room"), "book", (-2.6, 2.9, 1.2, 0.0))
+    assert measured["true_pose"]["position_m"] == pytest.approx(list(G[:3, 3]), abs=1e-4)
+    assert measured["success"] is False and measured["place"] == [-2.6, 2.9, 1.2, 0.0]
