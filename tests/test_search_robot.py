@@ -193,7 +193,7 @@ def test_ctrl_c_during_a_rehearsed_search_stops_the_base_and_writes_the_result(t
     assert r["first_zero_after_sigint_t"] - r["sigint_t"] < 0.4
     d = json.loads(out.read_text())
     assert d["reason"] == "interrupted" and problems("search", d) == []
-    assert d["path_length_m"] > 0.0 and d["global_searches"] >= 1
+    assert d["global_searches"] >= 1  # the base had just set off: the path driven may still read 0
 
 
 def test_ctrl_c_during_a_rehearsed_identification_writes_the_result(monkeypatch, tmp_path, capsys):
