@@ -1523,6 +1523,53 @@ stack.close()                                     # the robots, the emulators an
     ),
     (
         "md",
+        r"""## The object search on the robot
+
+The search agent of notebook 03 also knows only the `Robot` interface, so `run_search` runs it on a robot
+as well: `robot_config=` is the one switch. In a rehearsal the lab room (`worlds/lab_room.toml`) is
+rendered from the emulators' state, the object placed where `place` says (or by the seed), as in the
+simulator. On the real robot, stand it at the room's start (the scene's `[robot] start`: its odometry
+starts there) and put the object where you like; there is no truth then, so the scoring fields
+(`true_pose`, the errors, `success`) are `None`, unless you measure the object's pose and give it as
+`truth=(x, y, z, yaw_deg)`. The robot's clock is the wall clock: the time budget is real seconds; when it
+is used up the base is stopped and the result says so. **Ctrl-C** ("interrupt kernel") stops the motors
+and returns what was found so far, with the reason `"interrupted"`. The command line does the same:
+`lab search --robot hardware/rehearsal.toml --object cereal_box --seed 3 --json r.json`.
+
+In fast mode the box stands 0.8 m in front of the robot and the colour scan and the navigator's first
+look take one view each (the same agent, fewer views).""",
+    ),
+    (
+        "code",
+        """\
+from lab.navigation.navigator import NavigatorConfig
+from lab.runs.search import navigator_factory, run_search
+from lab.search.agent import AgentConfig
+from lab.search.global_search import GlobalSearchConfig
+
+config, navigate = None, navigator_factory        # the agent's and the navigator's defaults
+place = (0.0, -1.6, 0.0, -90.0)                   # the cereal box 1.4 m in front of the robot's start
+if FAST:
+    config = AgentConfig(global_search=GlobalSearchConfig(pans_deg=(0.0,), tilts_deg=(-30.0,)))
+    navigate = lambda robot, spec: navigator_factory(robot, spec, config=NavigatorConfig(scan_pans=(0.0,)))
+    place = (0.0, -2.2, 0.0, -90.0)
+if EMULATED:
+    robot_config = REPO / "hardware" / "rehearsal.toml"
+else:                                             # the real robot: the object is where you put it
+    robot_config, place = (Path(CONFIG) if Path(CONFIG).is_absolute() else REPO / CONFIG), None
+res = run_search("cereal_box", seed=0, place=place, max_time=120.0, navigate=navigate, config=config,
+                 robot_config=robot_config)
+d = res.to_json()                                 # what `lab search --json` writes
+for e in d["events"]:
+    print(f"{e['t']:6.1f} s  {e['kind']:8s} {e['detail']}")
+print({k: d[k] for k in ("found", "success", "reason", "position_error_m", "orientation_error_deg",
+                         "path_length_m", "sim_time_s", "watchdog_stops")})
+if EMULATED:   # scored against the rendered world: the box where `place` put it
+    assert d["found"] and d["success"] and d["position_error_m"] < 0.05
+""",
+    ),
+    (
+        "md",
         r"""## Exercise
 
 1. Call `drive_for(hw, 0.2, 0.0, 2.0, dt=0.6)`: the command is re-sent every 0.6 s, just longer than the
@@ -1532,7 +1579,10 @@ stack.close()                                     # the robots, the emulators an
 3. The identification agent of notebook 02 uses only the `Robot` interface, so it runs on `hw` unchanged:
    `lab identify --robot hardware/rehearsal.toml --true-model 2 --mover static --max-actions 2` runs it in a
    rehearsal. Compare its control steps with the simulator's: here `step(dt)` waits `dt` *after* the
-   computation. What does that do to the watchdog (`hw.watchdog_stops`)?""",
+   computation. What does that do to the watchdog (`hw.watchdog_stops`)?
+4. Run the search with `max_time=10.0`: how does it end, and where is the base? Then run it again and
+   interrupt the kernel while the robot drives: what does `res.reason` say, and what did the emulated
+   Create's wheels receive (`emulators.create.drives()` of a rehearsal you open yourself)?""",
     ),
 ]
 

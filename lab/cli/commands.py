@@ -122,6 +122,10 @@ def _cmd_identify(args) -> int:
     ] + (["watchdog_stops"] if args.robot is not None else [])
     summary = {k: res[k] for k in keys}
     print(_json.dumps(summary, indent=2))
+    if res["reason"] == "interrupted":
+        said = f": the result so far is in {args.json}" if args.json is not None else ""
+        print(f"lab identify: interrupted, motors stopped{said}", file=sys.stderr)
+        return 130
     return 0
 
 
@@ -136,8 +140,6 @@ def _cmd_search(args) -> int:
         return 0
     if args.object not in names:
         raise LabError(f"unknown object {args.object!r}; searchable objects: {', '.join(names)}")
-    if args.robot is not None:
-        raise LabError("`lab search --robot` is not supported yet: the search runs in the simulator only")
     from lab.io import write_json_atomic
     from lab.runs.search import navigator_factory, run_search
 
@@ -160,25 +162,35 @@ def _cmd_search(args) -> int:
         record=args.record,
         sensing=_sensing(args),
         localization=args.localization,
+        robot_config=args.robot,
+        truth=args.truth,
     )
     data = res.to_json()
     if args.json is not None:
         write_json_atomic(args.json, data)
     if args.out is not None:
-        from lab.viz.search import write_figures
-
-        cm = navigators[0].costmap if navigators else None
-        files = write_figures(
-            res, args.out, None if cm is None else cm.state, None if cm is None else cm.spec
-        )
         write_json_atomic(args.out / "search.json", data)
-        print(f"wrote {len(files)} figures and search.json into {args.out}", file=sys.stderr)
+        if args.robot is None:
+            from lab.viz.search import write_figures
+
+            cm = navigators[0].costmap if navigators else None
+            files = write_figures(
+                res, args.out, None if cm is None else cm.state, None if cm is None else cm.spec
+            )
+            print(f"wrote {len(files)} figures and search.json into {args.out}", file=sys.stderr)
+        else:
+            print(f"wrote search.json into {args.out} (the figures are the simulator's)", file=sys.stderr)
     from lab.runs.search import outcome_in_words
 
-    keys = ("object", "found", "success", "position_error_m", "orientation_error_deg", "path_length_m")
-    summary = {k: data.get(k) for k in (*keys, "sim_time_s")}
+    keys = ("object", "found", "success", "reason", "position_error_m", "orientation_error_deg")
+    summary = {k: data.get(k) for k in (*keys, "path_length_m", "sim_time_s")}
     summary["outcome"] = outcome_in_words(data)  # found / success / why, in words
     print(_json.dumps(summary, indent=2))
+    if res.interrupted:
+        where = args.json or (None if args.out is None else args.out / "search.json")
+        said = f": the result so far is in {where}" if where is not None else ""
+        print(f"lab search: interrupted, motors stopped{said}", file=sys.stderr)
+        return 130
     return 0
 
 

@@ -26,7 +26,7 @@ def _sensing_argument(p: argparse.ArgumentParser) -> None:
         metavar="{realistic,ideal,FILE.toml}",
         help="the simulator's sensor errors (default: realistic: camera noise, calibration error, odometry "
         "drift, pan-tilt backlash; ideal: exact sensors, for teaching the mathematics; FILE.toml: a "
-        "[sensing] table, profile = \"realistic\" plus [sensing.camera], [sensing.odometry], "
+        '[sensing] table, profile = "realistic" plus [sensing.camera], [sensing.odometry], '
         "[sensing.pan_tilt] fields to change)",
     )
 
@@ -226,7 +226,12 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("paper", "lawnmower", "frontier"),
         help="where to search next (default: paper, the probability map's peak)",
     )
-    se.add_argument("--max-time", type=float, default=600.0, help="sim-time budget in seconds (default 600)")
+    se.add_argument(
+        "--max-time",
+        type=float,
+        default=600.0,
+        help="time budget in seconds: simulated time, or wall time on a robot (default 600)",
+    )
     se.add_argument("--json", type=Path, help="write the result JSON here")
     se.add_argument("--out", type=Path, help="write the figures here")
     se.add_argument(
@@ -234,7 +239,20 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         help="write an animation of the run (.gif, or .mp4 with ffmpeg): one frame per event",
     )
-    se.add_argument("--robot", type=Path, help="real robot: not supported for the search yet")
+    se.add_argument(
+        "--robot",
+        type=Path,
+        help="run on a robot: its hardware TOML config (hardware/robot.toml: the real robot, stood at the "
+        "room's start; hardware/rehearsal.toml: the device emulators with the room rendered from their "
+        "state, the object placed by --place or the seed); --max-time is then wall time",
+    )
+    se.add_argument(
+        "--truth",
+        type=lambda s: _floats(s, 4, "--truth"),
+        metavar="X,Y,Z,YAW_DEG",
+        help="the real robot: the object's measured pose in the room (as --place) to score the run against; "
+        "without it the scoring fields are null",
+    )
     _sensing_argument(se)
     _localization_argument(se)
 

@@ -164,7 +164,11 @@ def run_identify(
         truth = _record_truth(agent, session)
         t0 = 0.0 if session.kind is RobotKind.SIM else session.robot.now()
         sim_t0, loop_wall0, loop_cpu0 = session.robot.now(), time.perf_counter(), time.process_time()
-        identified = agent.run()
+        interrupted = False
+        try:
+            identified = agent.run()  # stops the robot on its way out
+        except KeyboardInterrupt:  # Ctrl-C: the motors are stopped; the record so far is the result
+            interrupted, identified = True, agent.identified
         loop = {  # the loop alone: no start-up (databases, tables, scene), no figures
             "sim": session.robot.now() - sim_t0,
             "wall": time.perf_counter() - loop_wall0,
@@ -177,11 +181,27 @@ def run_identify(
     wall, cpu = time.perf_counter() - t_wall, time.process_time() - t_cpu
     result = _episode_json(agent, session, true_model, identified, planner, seed, mover, t0)
     result.update(sim_time_s=elapsed, wall_time_s=wall, pose_error=error, **extra)
+    result["reason"] = _reason(agent, identified, interrupted)
     if session.kind is RobotKind.SIM:
         result.update(_speed_fields(elapsed, wall, cpu, loop))
     _finish_recording(recorder, result, progress)
     _write(result, json_path, out if figures else None, agent, session, [G_WO for _, G_WO in truth])
     return result
+
+
+#: The ``reason`` of an episode ended by Ctrl-C (SIGINT, a notebook's "interrupt kernel").
+INTERRUPTED = "interrupted"
+
+
+def _reason(agent: IdentificationAgent, identified, interrupted: bool) -> str:
+    """Why the episode ended, in words."""
+    if interrupted:
+        return INTERRUPTED
+    if identified is not None:
+        return "identified"
+    if agent.n_actions >= agent.config.max_actions:
+        return "action budget spent"
+    return "time budget used up"
 
 
 def _localized(session: RobotSession, robot_config, localization, seed: int):

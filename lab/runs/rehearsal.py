@@ -120,6 +120,9 @@ class SimRenderedStereoSource(StereoSource):
         The robot's clock (monotonic).
     dt_world : float [s]
         Largest sub-step of the world (movers) when it is brought up to the wall clock.
+    robot_start : Pose2D, optional
+        Where the base stands in the world when the emulator's pose is (0, 0, 0) (default: the config's
+        ``[sim] robot_start``; a search rehearsal gives its scene's start).
     """
 
     def __init__(
@@ -132,6 +135,7 @@ class SimRenderedStereoSource(StereoSource):
         *,
         clock: Callable[[], float] = time.monotonic,
         dt_world: float = 0.02,
+        robot_start: Pose2D | None = None,
     ):
         if np.any(np.asarray(calibration.D1) != 0) or np.any(np.asarray(calibration.D2) != 0):
             raise ConfigError(
@@ -150,7 +154,7 @@ class SimRenderedStereoSource(StereoSource):
         # rectified left C -> raw left L: x_C = R1 x_L, so G_CL = se3(R1); raw right: x_R = R x_L + T
         self._G_CL = se3(np.asarray(calibration.R1))
         self._G_LR = se3_inv(se3(np.asarray(calibration.R), np.asarray(calibration.T).reshape(3)))
-        self.robot_start = _pose_from(config.sim.robot_start)
+        self.robot_start = _pose_from(config.sim.robot_start) if robot_start is None else robot_start
         p = config.ptu
         self._sign = {"P": p.pan_sign, "T": p.tilt_sign}
         self._zero = {"P": math.radians(p.pan_zero_offset_deg), "T": math.radians(p.tilt_zero_offset_deg)}
@@ -250,6 +254,30 @@ class Rehearsal:
         return None if self.source is None else self.source.last_truth
 
 
+def _scene_world(scene, emu: EmulatorSet, cfg: HardwareConfig, calib: StereoCalibration):
+    """The world of ``scene`` and the camera that renders it, the robot standing as the scene's robot
+    (its start; its mast height as the camera's ``mount_R`` z): the world, the source and the config."""
+    import dataclasses
+
+    from lab.scene import Scene, load_scene
+    from lab.sim import SimWorld
+    from lab.sim.world import RenderSettings
+
+    sc = scene if isinstance(scene, Scene) else load_scene(scene)
+    mx, my, _ = cfg.camera.mount_R
+    camera = dataclasses.replace(cfg.camera, mount_R=(mx, my, float(sc.robot_mast_height)))
+    cfg = dataclasses.replace(cfg, camera=camera)
+    world = SimWorld(sc, RenderSettings(supersample=cfg.sim.supersample))
+    try:
+        source = SimRenderedStereoSource(
+            world, emu.create, emu.ptu, cfg, calib, robot_start=_pose_from(sc.robot_start)
+        )
+    except BaseException:
+        world.close()
+        raise
+    return world, source, cfg
+
+
 @contextlib.contextmanager
 def rehearsal(
     config: str | Path | HardwareConfig,
@@ -260,6 +288,8 @@ def rehearsal(
     box_yaw: float | None = None,
     link_dir: str | Path | None = None,
     on_event=None,
+    scene=None,
+    emulator_setup: Callable[[EmulatorSet], None] | None = None,
 ) -> Iterator[Rehearsal]:
     """Start the emulators (and, for ``[camera] source = "sim"``, the rendered world) and a
     :class:`~lab.hardware.robot.HardwareRobot` on them; stop everything on exit.
@@ -279,6 +309,14 @@ def rehearsal(
     link_dir : path, optional
         Where the emulators' port symlinks go (default: a fresh temporary folder, removed on exit, so a
         running ``lab hardware emulate`` is never disturbed).
+    scene : str or Scene, optional
+        Render this scene instead of the config's ``[sim] world`` with its carrier (the search's room with
+        its object placed: :func:`lab.runs.search.run_search`). The robot then stands as the scene's
+        robot: at the scene's ``[robot] start`` when the Create emulator's pose is (0, 0, 0), its camera's
+        pan-tilt axes at the scene's mast height (``mount_R`` z replaced). No carrier, no mover.
+    emulator_setup : callable, optional
+        ``emulator_setup(emulators)`` once the emulators run, before the robot connects: inject faults
+        (``emulators.ptu.garbage_every = 3``, ``emulators.create.known_packets = {...}``).
     """
     from lab.hardware.robot import HardwareRobot
 
@@ -291,8 +329,12 @@ def rehearsal(
     world = carrier = source = robot = None
     emu = start_emulators(link_dir)
     try:
+        if emulator_setup is not None:
+            emulator_setup(emu)
         cfg = cfg.with_ports(base=emu.base_port, ptu=emu.ptu_port)
-        if c.source == "sim":
+        if c.source == "sim" and scene is not None:
+            world, source, cfg = _scene_world(scene, emu, cfg, calib)
+        elif c.source == "sim":
             from lab.sim import SimWorld, box_model
             from lab.sim.movers import make_mover
             from lab.sim.world import RenderSettings
@@ -305,7 +347,7 @@ def rehearsal(
             source = SimRenderedStereoSource(world, emu.create, emu.ptu, cfg, calib)
             carrier.mover = make_mover(mover, carrier, observer_pose=source.base_pose_W, seed=seed)
         robot = HardwareRobot(cfg, camera_source=source, on_event=on_event)
-        yield Rehearsal(robot, emu, cfg, world, carrier, true_model if world is not None else None, source)
+        yield Rehearsal(robot, emu, cfg, world, carrier, true_model if carrier is not None else None, source)
     finally:
         if robot is not None:
             robot.close()

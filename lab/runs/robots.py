@@ -19,17 +19,19 @@ run to set up and score the scene.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
+import dataclasses
+import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 
 from lab.errors import ConfigError
-from lab.geometry import Pose2D
+from lab.geometry import Pose2D, wrap_angle
 from lab.hardware.config import HardwareConfig, load_config
-from lab.robot import Robot
+from lab.robot import Robot, StereoFrame
 
-__all__ = ["RobotKind", "RobotSession", "make_robot", "robot_kind"]
+__all__ = ["PlacedRobot", "RobotKind", "RobotSession", "make_robot", "robot_kind"]
 
 
 class RobotKind(Enum):
@@ -101,6 +103,8 @@ def make_robot(
     true_model: int = 1,
     mover: str = "static",
     sensing="ideal",
+    scene=None,
+    emulator_setup: Callable | None = None,
 ) -> Iterator[RobotSession]:
     """The robot a run drives, closed (devices stopped, emulators ended) on exit.
 
@@ -119,6 +123,10 @@ def make_robot(
     sensing : str or mapping
         The simulated robot's sensing profile (:func:`lab.sim.sensing.sensing_profile`); devices and a
         rehearsal's emulators have their own errors.
+    scene, emulator_setup :
+        A rehearsal's scene instead of its config's ``[sim]`` world and carrier (the search's room), and
+        a hook that injects faults into its emulators before the robot connects
+        (:func:`lab.runs.rehearsal.rehearsal`).
 
     Raises
     ------
@@ -137,10 +145,103 @@ def make_robot(
     if cfg.camera.source == "sim":
         from lab.runs.rehearsal import rehearsal
 
-        with rehearsal(cfg, true_model=true_model, mover=mover, seed=seed) as r:
+        kw = {"scene": scene, "emulator_setup": emulator_setup}
+        with rehearsal(cfg, true_model=true_model, mover=mover, seed=seed, **kw) as r:
             yield RobotSession(RobotKind.REHEARSAL, r.robot, r.world, r.carrier, r.config, r)
         return
     from lab.hardware.robot import HardwareRobot
 
     with HardwareRobot(cfg) as robot:
         yield RobotSession(RobotKind.HARDWARE, robot, config=cfg)
+
+
+class PlacedRobot(Robot):
+    """A robot whose odometry (and each frame's) is in the room's frame W: the base started at ``start``.
+
+    A real robot's wheel odometry starts at its own origin, (0, 0, 0) where it was switched on; the
+    search's map, costmap and scoring are in the room's frame W. Standing the robot at a known pose
+    ``start`` in W (the scene's ``[robot] start``) makes ``odometry() = start (+) odom``, the
+    composition ``G_W,odom = G_W,start G_start,odom``; everything else is passed on.
+
+    Parameters
+    ----------
+    base : Robot
+    start : Pose2D
+        Where the base stands in W while its own odometry reads (0, 0, 0).
+    """
+
+    def __init__(self, base: Robot, start: Pose2D):
+        self.base = base
+        self.start = start
+        self.cmd_timeout_s = base.cmd_timeout_s
+
+    def _in_room(self, p: Pose2D) -> Pose2D:
+        s = self.start
+        c, sn = math.cos(s.theta), math.sin(s.theta)
+        return Pose2D(s.x + c * p.x - sn * p.y, s.y + sn * p.x + c * p.y, wrap_angle(s.theta + p.theta))
+
+    def odometry(self) -> Pose2D:
+        return self._in_room(self.base.odometry())
+
+    def capture_stereo(self, after: float | None = None) -> StereoFrame:
+        frame = self.base.capture_stereo(after)
+        return dataclasses.replace(frame, odom=self._in_room(frame.odom))
+
+    # the rest of the Robot interface, passed on
+    @property
+    def camera(self):
+        return self.base.camera
+
+    @property
+    def pan_tilt_limits(self):
+        return self.base.pan_tilt_limits
+
+    @property
+    def base_limits(self):
+        return self.base.base_limits
+
+    def now(self) -> float:
+        return self.base.now()
+
+    def enable(self) -> None:
+        self.base.enable()
+
+    def disable(self) -> None:
+        self.base.disable()
+
+    @property
+    def enabled(self) -> bool:
+        return self.base.enabled
+
+    @property
+    def bumps(self) -> int:
+        return self.base.bumps
+
+    def pan_tilt(self):
+        return self.base.pan_tilt()
+
+    def command_pan_tilt(self, pan, tilt, speed=None) -> None:
+        self.base.command_pan_tilt(pan, tilt, speed)
+
+    def drive(self, v, omega) -> None:
+        self.base.drive(v, omega)
+
+    def stop(self) -> None:
+        self.base.stop()
+
+    def step(self, dt: float) -> None:
+        self.base.step(dt)
+
+    def estop(self) -> None:
+        self.base.estop()
+
+    def clear_estop(self) -> None:
+        self.base.clear_estop()
+
+    def close(self) -> None:
+        self.base.close()
+
+    def __getattr__(self, name):  # a hardware robot's extras (watchdog_stops, read_state, ...)
+        if name == "base":
+            raise AttributeError(name)
+        return getattr(self.base, name)

@@ -3,10 +3,32 @@
 :func:`run_search` is what ``lab search`` runs; :meth:`SearchResult.to_json` is exactly what it writes
 (the fields of the ``lab search`` contract in ``design.md``, and more). The agent never sees the truth:
 the object's true pose, the collision count and the errors are filled in here, after the run.
+
+The same agent runs on three robots (:func:`lab.runs.robots.make_robot`, ``robot_config``):
+
+============================  ==========================================  =================================
+robot                         the room and the object                     truth (scoring only)
+============================  ==========================================  =================================
+the simulator (no config)     the scene, the object placed by ``place``   the simulator's
+                              or the seed
+a rehearsal                   the same scene and placement, rendered      the rendered world (the object),
+(``hardware/rehearsal.toml``) from the device emulators' true state       the emulators (the base, head)
+the real robot                the real room; the map is the scene's       none, or the object's pose the
+(``hardware/robot.toml``)     floor, the robot stood at its start         operator measured (``truth``)
+============================  ==========================================  =================================
+
+On a robot the wheel odometry starts at (0, 0, 0); the robot stands at the scene's ``[robot] start``
+and :class:`~lab.runs.robots.PlacedRobot` puts its odometry in the room's frame. Its clock is the wall
+clock: the time budget (``max_time``) is wall time there, ``sim_time_s`` the robot's time from the start
+of the search, and the events' times are from that start too. Where there is no truth the scoring fields
+(``true_pose``, the errors, ``success``) are null, and ``collisions`` counts the bumps the robot's bumpers
+reported (:attr:`lab.robot.Robot.bumps`; in the simulator its contacts). Ctrl-C ends the search with the
+reason ``"interrupted"``, the motors stopped, and the result so far.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import sys
 import time
@@ -15,8 +37,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from lab.errors import ConfigError
-from lab.geometry import R_to_euler_zyx, se3_inv
+from lab.errors import ConfigError, SafetyStop
+from lab.geometry import Pose2D, R_to_euler_zyx, Rz, se3, se3_inv
 from lab.navigation.astar import astar_to_region
 from lab.navigation.drive_loop import NavOutcome
 from lab.navigation.grid import GridSpec
@@ -33,9 +55,17 @@ from lab.runs.placement import (
     searchable_objects,
     supports,
 )
-from lab.runs.robots import make_robot
+from lab.runs.robots import PlacedRobot, RobotKind, make_robot, robot_kind
 from lab.scene import BodySpec, Scene, load_scene
-from lab.search.agent import AgentConfig, AgentResult, NavigationResult, SearchAgent, SearchEvent, Strategy
+from lab.search.agent import (
+    INTERRUPTED,
+    AgentConfig,
+    AgentResult,
+    NavigationResult,
+    SearchAgent,
+    SearchEvent,
+    Strategy,
+)
 from lab.search.budget import BudgetedRobot
 from lab.search.probability_map import ProbabilityMap
 from lab.training.landmarks import trained_landmark_map
@@ -146,35 +176,39 @@ class SearchResult:
         The agent's claim.
     true_pose, estimated_pose : dict or None
         ``{"position_m": [x, y, z], "euler_zyx_deg": [alpha, beta, gamma]}`` of the object frame O in
-        the world (the estimate in the odometry frame, which the run started aligned with).
+        the world (the estimate in the odometry frame, which the run started aligned with). No true pose
+        on the real robot unless the operator measured it (``truth``).
     position_error_m, orientation_error_deg : float or None
-        Against the truth (None when not found).
+        Against the truth (None when not found, or without a truth).
     path_length_m : float
         Distance driven, from odometry.
     global_searches, local_searches : int
     collisions : int
-        Bumps, from the simulator's truth.
+        Bumps: the simulator's contacts; on a robot the bumps its bumpers reported.
     sim_time_s, wall_time_s : float [s]
+        The robot's time (the simulator's; on a robot, wall time from the start of the search).
     seed : int
     strategy : str
-    success : bool
-        Found within :data:`SUCCESS_POSITION_M` and :data:`SUCCESS_ORIENTATION_DEG`.
+    success : bool or None
+        Found within :data:`SUCCESS_POSITION_M` and :data:`SUCCESS_ORIENTATION_DEG` (None without a truth).
     reason : str
-        Why the run ended.
-    place : tuple of 4 floats
-        The object's placement ``(x, y, z_underside, yaw_deg)``.
-    surface : str
-        floor, table or shelf.
+        Why the run ended (:data:`~lab.search.agent.INTERRUPTED` after Ctrl-C).
+    place : tuple of 4 floats or None
+        The object's placement ``(x, y, z_underside, yaw_deg)`` (on the real robot: the measured truth,
+        or None).
+    surface : str or None
+        floor, table or shelf (None on the real robot).
     obstacles : tuple
         Placements of the extra obstacles (``--obstacles``).
     camera_frame_error : dict or None
         ``{"position_m", "orientation_deg"}``: the estimate's error in the camera frame at detection
         (the local search's own error; ``position_error_m`` adds the odometry's drift to it).
-    odometry_error_m : float
-        Distance between the odometry's and the true robot position at the end of the run.
-    localization_error_m : float
+    odometry_error_m : float or None
+        Distance between the odometry's and the true robot position at the end of the run (None on the
+        real robot).
+    localization_error_m : float or None
         Distance between the robot's pose estimate (odometry alone, or localized against the room's
-        landmarks) and the true robot position at the end of the run.
+        landmarks) and the true robot position at the end of the run (None on the real robot).
     localization : str
         ``odometry`` or ``landmarks`` (:mod:`lab.navigation.localization`).
     landmark_updates : int
@@ -186,12 +220,19 @@ class SearchResult:
     recording : str or None
         The animation written (``record``): one frame per event.
     sensing : str
-        The simulator's sensing profile the trial ran under.
+        The simulator's sensing profile the trial ran under; ``rehearsal`` or ``hardware`` on a robot.
+    robot : str
+        ``sim``, or the robot config's path.
+    watchdog_stops : int or None
+        How often the robot's watchdog stopped the base (None in the simulator).
+    t0 : float [s]
+        The robot's time at the start of the search (0 in the simulator): the JSON's event and snapshot
+        times are from it.
     """
 
     object: str
     found: bool
-    true_pose: dict
+    true_pose: dict | None
     estimated_pose: dict | None
     position_error_m: float | None
     orientation_error_deg: float | None
@@ -203,14 +244,14 @@ class SearchResult:
     wall_time_s: float
     seed: int
     strategy: str
-    success: bool
+    success: bool | None
     reason: str
-    place: tuple[float, float, float, float]
-    surface: str
+    place: tuple[float, float, float, float] | None
+    surface: str | None
     obstacles: tuple = ()
     camera_frame_error: dict | None = None
-    odometry_error_m: float = 0.0
-    localization_error_m: float = 0.0
+    odometry_error_m: float | None = 0.0
+    localization_error_m: float | None = 0.0
     localization: str = "odometry"
     landmark_updates: int = 0
     localization_note: str | None = None
@@ -218,10 +259,19 @@ class SearchResult:
     trace: SearchTrace | None = field(default=None, repr=False, compare=False)
     recording: str | None = None
     sensing: str = "ideal"
+    robot: str = "sim"
+    watchdog_stops: int | None = None
+    t0: float = 0.0
+
+    @property
+    def interrupted(self) -> bool:
+        """Ended by Ctrl-C (the result is what was found so far)."""
+        return self.reason == INTERRUPTED
 
     def to_json(self) -> dict:
         """The JSON ``lab search --json`` writes (plain types only)."""
         snaps = [] if self.trace is None else self.trace.agent.snapshots
+        t0 = self.t0
         return {
             "object": self.object,
             "found": bool(self.found),
@@ -237,23 +287,25 @@ class SearchResult:
             "wall_time_s": round(float(self.wall_time_s), 3),
             "seed": int(self.seed),
             "strategy": self.strategy,
-            "success": bool(self.success),
+            "success": None if self.success is None else bool(self.success),
             "reason": self.reason,
-            "place": [round(float(v), 4) for v in self.place],
+            "place": None if self.place is None else [round(float(v), 4) for v in self.place],
             "surface": self.surface,
             "obstacles": [[round(float(v), 4) for v in o] for o in self.obstacles],
             "camera_frame_error": self.camera_frame_error,
-            "odometry_error_m": round(float(self.odometry_error_m), 4),
-            "localization_error_m": round(float(self.localization_error_m), 4),
+            "odometry_error_m": _round(self.odometry_error_m, 4),
+            "localization_error_m": _round(self.localization_error_m, 4),
             "localization": self.localization,
             "landmark_updates": int(self.landmark_updates),
             "localization_note": self.localization_note,
-            "events": [e.as_dict() for e in self.events],
+            "events": [{**e.as_dict(), "t": round(e.t - t0, 3)} for e in self.events],
             "recording": self.recording,
             "sensing": self.sensing,
+            "robot": self.robot,
+            "watchdog_stops": self.watchdog_stops,
             "map_snapshots": [
                 {
-                    "t": round(s.t, 3),
+                    "t": round(s.t - t0, 3),
                     "label": s.label,
                     "cell": None if s.cell is None else list(s.cell),
                     "max_p": float(s.P.max()),
@@ -261,6 +313,10 @@ class SearchResult:
                 for s in snaps
             ],
         }
+
+
+def _round(v: float | None, digits: int) -> float | None:
+    return None if v is None else round(float(v), digits)
 
 
 def run_search(
@@ -281,8 +337,11 @@ def run_search(
     attach: Callable | None = None,
     sensing="realistic",
     localization="odometry",
+    robot_config=None,
+    truth=None,
+    emulator_setup: Callable | None = None,
 ) -> SearchResult:
-    """Run one search trial in the simulator and score it: the :class:`SearchResult`.
+    """Run one search trial (in the simulator, a rehearsal or on the robot) and score it.
 
     Parameters
     ----------
@@ -292,66 +351,107 @@ def run_search(
         Seeds the placement (when ``place`` is None), the obstacles, the sensor errors and RANSAC.
     place : (x, y, z_underside, yaw_deg), optional
         Where to put the object (checked: in the room, on a surface, clear of the other bodies and the
-        robot). Default: a seeded random valid placement.
+        robot). Default: a seeded random valid placement. Not on the real robot (the object is where
+        the operator put it).
     strategy : {"paper", "lawnmower", "frontier"}; max_time, max_wall_time : float [s]
-        Simulated-time budget (the run ends "not found" when it is used up); and, optionally, wall time.
+        Time budget of the robot's clock (simulated time; on a robot, wall time): the run ends "not
+        found" when it is used up; and, optionally, a wall-clock budget.
     navigate : callable ``(robot, spec) -> navigate``
         Required: the navigation callable (:mod:`lab.search.agent`) for the budgeted robot and the
         map's grid (:func:`navigator_factory`).
     obstacles : bool
-        Add boxes on the straight line from the start to the object (:func:`path_obstacles`).
+        Add boxes on the straight line from the start to the object (:func:`path_obstacles`); the
+        simulator and a rehearsal only.
     world, config, supersample :
         The scene; the agent's config (its ``strategy`` replaced); render supersampling (2: twice the
-        SIFT matches on the small objects as 1).
+        SIFT matches on the small objects as 1; a rehearsal renders with its config's ``[sim]
+        supersample``).
     progress, record, attach :
         Say when a database is built; write an animation of the live view (one frame per event);
         ``attach(agent)`` before the run (a notebook's ``LiveView.for_search(agent).widget``).
     sensing : str or mapping
-        The sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic).
+        The simulator's sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic).
     localization : {"landmarks", "odometry"}
         Where the robot's pose comes from (:class:`lab.navigation.localization.LocalizedRobot`): the
         odometry corrected by the room's posters, or odometry alone (default, until the localizer's effect
-        on the search is measured).
+        on the search is measured). The real robot has no landmark map in the scene's frame: odometry.
+    robot_config : path or HardwareConfig, optional
+        Run on this robot (:func:`lab.runs.robots.make_robot`): a rehearsal (``hardware/rehearsal.toml``)
+        or the real robot (``hardware/robot.toml``); None: the simulator.
+    truth : (x, y, z_underside, yaw_deg), optional
+        The real robot only: the object's pose as the operator measured it, in the room's frame (as
+        ``place``); the run is then scored against it.
+    emulator_setup : callable, optional
+        A rehearsal's fault injection (:func:`lab.runs.rehearsal.rehearsal`).
     """
     wall0 = time.perf_counter()
     strategy = Strategy.parse(strategy)
     scene = world if isinstance(world, Scene) else load_scene(world)
     recorder = _check_trial(scene, object, navigate, max_time, record)
+    kind = robot_kind(robot_config)  # a bad robot config is one clear line before anything starts
     mode = LocalizationMode.parse(localization)
+    note = None
+    if mode is LocalizationMode.LANDMARKS and kind is RobotKind.HARDWARE:
+        note = "no landmark map in the odometry's frame for this robot: the pose is odometry alone"
+        mode = LocalizationMode.ODOMETRY
     landmarks = trained_landmark_map(scene, progress=progress) if mode is LocalizationMode.LANDMARKS else None
     rng = np.random.default_rng(seed)
-    scene, place, surface, obstacle_poses = _place_object(scene, object, place, obstacles, rng)
+    if kind is RobotKind.HARDWARE:
+        G_WO_measured = _check_real_robot_trial(scene, object, place, obstacles, truth)
+        place, surface, obstacle_poses = (None if truth is None else tuple(float(v) for v in truth)), None, []
+    else:
+        if truth is not None:
+            raise ConfigError(
+                "--truth is the object's measured pose on the real robot; in the simulator and a rehearsal "
+                "the truth is known (put the object with --place)"
+            )
+        scene, place, surface, obstacle_poses = _place_object(scene, object, place, obstacles, rng)
+        G_WO_measured = None
     db = search_database(object, progress=progress)
     cfg = replace(config or AgentConfig(), strategy=strategy)
     spec = map_spec(scene)
-    from lab.sim import RenderSettings, SimWorld
-
-    with (
-        SimWorld(scene, RenderSettings(supersample=supersample)) as w,
-        make_robot(world=w, seed=seed, sensing=sensing) as run,
-    ):
-        robot = LocalizedRobot(run.robot, mode, landmarks, rng=np.random.default_rng([seed, 20]))
-        hook = _with_progress(attach) if progress else attach
+    with contextlib.ExitStack() as stack:
+        run, truth_of = _session(
+            stack,
+            kind,
+            robot_config,
+            scene,
+            object,
+            seed,
+            sensing,
+            supersample,
+            emulator_setup,
+            G_WO_measured,
+        )
+        base = run.robot
+        if kind is not RobotKind.SIM:  # its odometry starts at (0, 0, 0): the scene's start in the room
+            x, y, h = scene.robot_start
+            base = PlacedRobot(base, Pose2D(x, y, math.radians(h)))
+        robot = LocalizedRobot(base, mode, landmarks, rng=np.random.default_rng([seed, 20]))
+        t0 = 0.0 if kind is RobotKind.SIM else robot.now()
+        hook = _with_progress(attach, t0) if progress else attach
         parts = (db, navigate, spec, cfg, seed, recorder, hook, (max_time, max_wall_time))
-        out, truth, budget, odom = _search(robot, w, object, *parts)
+        out, truth_end, budget, odom = _search(robot, truth_of, *parts)
         profile = run.sensing
         estimate = robot.pose_estimate()
-    note = None
-    if mode is LocalizationMode.LANDMARKS and estimate.n_updates == 0:
+        watchdog = None if kind is RobotKind.SIM else int(run.robot.watchdog_stops)
+    if note is None and mode is LocalizationMode.LANDMARKS and estimate.n_updates == 0:
         note = "no landmark was seen: the pose is odometry alone"
+    if note is not None:
         print(f"lab: localization: {note}", file=sys.stderr)
+    rp = truth_end.robot_pose
     return SearchResult(
-        **_scored(object, out, truth, odom),
-        localization_error_m=math.hypot(
-            estimate.pose.x - truth.robot_pose.x, estimate.pose.y - truth.robot_pose.y
-        ),
+        **_scored(object, out, truth_end, odom),
+        localization_error_m=None
+        if rp is None
+        else math.hypot(estimate.pose.x - rp.x, estimate.pose.y - rp.y),
         localization=mode.value,
         landmark_updates=estimate.n_updates,
         localization_note=note,
         path_length_m=budget.path_length_m,
         global_searches=out.global_searches,
         local_searches=out.local_searches,
-        sim_time_s=truth.sim_time_s,
+        sim_time_s=truth_end.robot_time_s - t0,
         wall_time_s=time.perf_counter() - wall0,
         seed=int(seed),
         strategy=strategy.value,
@@ -362,10 +462,86 @@ def run_search(
         trace=SearchTrace(out, spec, np.array(budget.trajectory), scene, db),
         recording=None if recorder is None or (p := recorder.close()) is None else str(p),
         sensing=profile,
+        robot=run.name,
+        watchdog_stops=watchdog,
+        t0=t0,
     )
 
 
-def _search(robot, w, object, db, navigate, spec, cfg, seed, recorder, attach, budgets):
+@dataclass(frozen=True)
+class _TruthOf:
+    """Where a trial's truth comes from (scoring only; None where there is none: the real robot)."""
+
+    G_WO: Callable  # () -> the object in W (4 x 4) or None
+    G_WC: Callable  # () -> the camera in W at the last frame or None
+    robot_pose: Callable  # () -> Pose2D of the base in W or None
+    collisions: Callable  # () -> int
+
+
+def _session(stack, kind, robot_config, scene, object, seed, sensing, supersample, emulator_setup, G_WO):
+    """The trial's robot session (entered on ``stack``) and where its truth comes from."""
+    if kind is RobotKind.SIM:
+        from lab.sim import RenderSettings, SimWorld
+
+        w = stack.enter_context(SimWorld(scene, RenderSettings(supersample=supersample)))
+        run = stack.enter_context(make_robot(world=w, seed=seed, sensing=sensing))
+        t = w.truth
+        return run, _TruthOf(lambda: t.G_W(object), t.G_WC, t.robot_pose, lambda: int(t.collisions))
+    run = stack.enter_context(make_robot(robot_config, seed=seed, scene=scene, emulator_setup=emulator_setup))
+    bumps = lambda: int(run.robot.bumps)  # noqa: E731 - the bumpers' count: a robot's own collisions
+    if kind is RobotKind.REHEARSAL:
+        r = run.rehearsal
+
+        def G_WC():
+            last = r.truth()
+            return None if last is None else last.G_WC
+
+        return run, _TruthOf(lambda: run.world.truth.G_W(object), G_WC, r.source.base_pose_W, bumps)
+    none = lambda: None  # noqa: E731
+    return run, _TruthOf(lambda: G_WO, none, none, bumps)
+
+
+def _check_real_robot_trial(scene: Scene, object: str, place, obstacles: bool, truth):
+    """One clear error for what the real robot cannot do (place the object, add obstacles) or a bad
+    measured truth; returns the object's measured pose G_WO (None without ``truth``)."""
+    if place is not None:
+        raise ConfigError(
+            "--place puts the object in a simulated room; on the real robot the object is where you put it "
+            "(give its measured pose with --truth X,Y,Z,YAW_DEG to score the run)"
+        )
+    if obstacles:
+        raise ConfigError("--obstacles adds simulated boxes; on the real robot put real ones in its way")
+    if truth is None:
+        return None
+    return measured_pose(scene, object, truth)
+
+
+def measured_pose(scene: Scene, object: str, truth) -> np.ndarray:
+    """The object frame O in the room's frame W from a measured ``(x, y, z_underside, yaw_deg)``: the
+    object stands upright at ``(x, y)`` on a surface at height ``z``, turned by ``yaw`` about z (the
+    form of ``--place``; the frame's origin is the object's centre, as in the simulator).
+
+    Raises
+    ------
+    ConfigError
+        Not four finite numbers, a point outside the room's floor, or a negative height.
+    """
+    vals = tuple(truth) if isinstance(truth, (list, tuple, np.ndarray)) else ()
+    ok = len(vals) == 4 and all(isinstance(v, (int, float, np.floating, np.integer)) for v in vals)
+    if not ok or not all(math.isfinite(float(v)) for v in vals):
+        raise ConfigError(f"--truth must be X,Y,Z,YAW_DEG (4 finite numbers [m, m, m, deg]), got {truth!r}")
+    x, y, z, yaw = (float(v) for v in vals)
+    sx, sy = scene.room.size
+    if not (abs(x) < sx / 2 and abs(y) < sy / 2) or z < 0:
+        raise ConfigError(
+            f"--truth ({x:g}, {y:g}, {z:g}) is not on the room's floor or a surface above it: x within "
+            f"+-{sx / 2:g} m, y within +-{sy / 2:g} m (the room's frame, origin at its centre), z >= 0"
+        )
+    body = scene.with_pose(object, (x, y, z, yaw)).body(object)
+    return se3(Rz(body.yaw), np.array(body.centre))
+
+
+def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, attach, budgets):
     """The agent's run on the enabled robot within the time budgets (sim, wall), with the truth behind
     it read once it has ended: returns the agent's result, the truth, the budgeted robot and its
     odometry at the end."""
@@ -379,14 +555,15 @@ def _search(robot, w, object, db, navigate, spec, cfg, seed, recorder, attach, b
         LiveView.for_search(agent, rate_hz=None, recorder=recorder, widget=False)
     if attach is not None:
         attach(agent)
-    out = agent.run()
-    out = _relocalized_find(out, robot)
+    out = agent.run()  # the robot stopped on its way out (also after Ctrl-C: then reason "interrupted")
+    if out.reason != INTERRUPTED:
+        out = _relocalized_find(out, robot)
     truth = _TrialTruth(
-        G_WO=w.truth.G_W(object),
-        G_WC=w.truth.G_WC(),  # the head has not moved since the last frame of a found track
-        robot_pose=w.truth.robot_pose(),
-        collisions=int(w.truth.collisions),
-        sim_time_s=robot.now(),
+        G_WO=truth_of.G_WO(),
+        G_WC=truth_of.G_WC(),  # the head has not moved since the last frame of a found track
+        robot_pose=truth_of.robot_pose(),
+        collisions=truth_of.collisions(),
+        robot_time_s=robot.now(),
     )
     return out, truth, budget, robot.base.odometry()
 
@@ -418,36 +595,42 @@ def _relocalized_find(out: AgentResult, robot: LocalizedRobot) -> AgentResult:
 
 def _scored(object: str, out: AgentResult, truth: _TrialTruth, odom) -> dict:
     """The result's fields that compare the run with the truth: pose errors in W and in the camera
-    frame C (the perception error alone, without the odometry's drift), success, odometry error."""
+    frame C (the perception error alone, without the odometry's drift), success, odometry error; None
+    where there is no truth."""
     pe = oe = cam = None
-    if out.found:
+    if out.found and truth.G_WO is not None:
         pe, oe = pose_errors(out.G_WO, truth.G_WO)
-        cpe, coe = pose_errors(out.local.estimate.G_CO, se3_inv(truth.G_WC) @ truth.G_WO)
-        cam = {"position_m": round(cpe, 5), "orientation_deg": round(coe, 3)}
+        if truth.G_WC is not None:
+            cpe, coe = pose_errors(out.local.estimate.G_CO, se3_inv(truth.G_WC) @ truth.G_WO)
+            cam = {"position_m": round(cpe, 5), "orientation_deg": round(coe, 3)}
+    rp = truth.robot_pose
     return {
         "object": object,
         "found": out.found,
-        "true_pose": _pose_dict(truth.G_WO),
+        "true_pose": None if truth.G_WO is None else _pose_dict(truth.G_WO),
         "estimated_pose": None if out.G_WO is None else _pose_dict(out.G_WO),
         "position_error_m": None if pe is None else round(pe, 5),
         "orientation_error_deg": None if oe is None else round(oe, 3),
         "collisions": truth.collisions,
-        "success": bool(out.found and pe <= SUCCESS_POSITION_M and oe <= SUCCESS_ORIENTATION_DEG),
+        "success": None
+        if truth.G_WO is None
+        else bool(out.found and pe <= SUCCESS_POSITION_M and oe <= SUCCESS_ORIENTATION_DEG),
         "reason": out.reason,
         "camera_frame_error": cam,
-        "odometry_error_m": math.hypot(odom.x - truth.robot_pose.x, odom.y - truth.robot_pose.y),
+        "odometry_error_m": None if rp is None else math.hypot(odom.x - rp.x, odom.y - rp.y),
     }
 
 
-def progress_line(event: SearchEvent) -> str:
-    """One decision of the search, for the console: ``lab search: t =  27.8 s  local (4, 13): found...``."""
+def progress_line(event: SearchEvent, t0: float = 0.0) -> str:
+    """One decision of the search, for the console: ``lab search: t =  27.8 s  local (4, 13): found...``
+    (``t`` counted from ``t0``, the search's start on a robot's clock)."""
     where = "" if event.cell is None else f" {tuple(event.cell)}"
-    return f"lab search: t = {event.t:6.1f} s  {event.kind}{where}: {event.detail}"
+    return f"lab search: t = {event.t - t0:6.1f} s  {event.kind}{where}: {event.detail}"
 
 
-def _with_progress(attach):
+def _with_progress(attach, t0: float = 0.0):
     """An ``attach`` hook that also prints every event of the agent to stderr as it happens (after any
-    observer the recorder or ``attach`` set, which it keeps)."""
+    observer the recorder or ``attach`` set, which it keeps); times from ``t0``."""
 
     def hook(agent) -> None:
         if attach is not None:
@@ -457,7 +640,7 @@ def _with_progress(attach):
         def observer(a, event) -> None:
             if before is not None:
                 before(a, event)
-            print(progress_line(event), file=sys.stderr, flush=True)
+            print(progress_line(event, t0), file=sys.stderr, flush=True)
 
         agent.observer = observer
 
@@ -496,13 +679,13 @@ def outcome_in_words(data: dict) -> str:
 
 @dataclass(frozen=True)
 class _TrialTruth:
-    """The simulator's truth at the end of a trial: for scoring only."""
+    """The truth at the end of a trial, for scoring only (None where there is none)."""
 
-    G_WO: np.ndarray  # the object in W
-    G_WC: np.ndarray  # the camera in W at the last frame
-    robot_pose: object  # Pose2D of the base
+    G_WO: np.ndarray | None  # the object in W
+    G_WC: np.ndarray | None  # the camera in W at the last frame
+    robot_pose: object  # Pose2D of the base, or None
     collisions: int
-    sim_time_s: float
+    robot_time_s: float  # the robot's clock at the end
 
 
 def _check_trial(scene: Scene, object: str, navigate, max_time, record):
@@ -541,16 +724,19 @@ def _place_object(scene: Scene, object: str, place, obstacles: bool, rng: np.ran
 # --- the navigation the search drives with -----------------------------------------------------------
 
 
-def navigator_factory(robot, spec, timeout_s: float = 120.0):
+def navigator_factory(robot, spec, timeout_s: float = 120.0, config=None):
     """``navigate`` for :func:`run_search`: scan once, then ``go_near`` each target.
 
-    The navigator's workspace is the floor the map ``spec`` covers (the scene's room). The returned
+    The navigator's workspace is the floor the map ``spec`` covers (the scene's room); ``config`` is its
+    :class:`~lab.navigation.navigator.NavigatorConfig` (default: the navigator's). The returned
     callable keeps its :class:`~lab.navigation.Navigator` as ``navigate.navigator`` (its costmap is what
     ``lab search --out`` draws under the trajectory). Each outcome carries the path A* plans first on the
-    current costmap (``path_xy``, for the figures; the navigator replans on the way).
+    current costmap (``path_xy``, for the figures; the navigator replans on the way). A drive that ends
+    in a safety stop (``SAFETY_STOP``: a cliff or a wheel drop; the robot is disarmed) raises
+    :class:`~lab.errors.SafetyStop`, which ends the search with that fault.
     """
     x0, x1, y0, y1 = (round(v, 9) for v in spec.extent)  # 30 x 0.2 m is 6.000000000000001 m
-    nav = Navigator(robot, bounds=(x0, y0, x1, y1))
+    nav = Navigator(robot, config=config, bounds=(x0, y0, x1, y1))
     state = {"scanned": False}
 
     def navigate(target_xy, min_distance: float, max_distance: float) -> NavigationResult:
@@ -559,6 +745,10 @@ def navigator_factory(robot, spec, timeout_s: float = 120.0):
             state["scanned"] = True
         first = astar_to_region(nav.planning_grid(), robot.odometry(), target_xy, max_distance, min_distance)
         r = nav.go_near(target_xy, min_distance, max_distance, timeout=timeout_s)
+        if r.outcome is NavOutcome.SAFETY_STOP:
+            # the robot stopped itself (cliff, wheel drop) and stays disarmed: the search cannot go on; the
+            # agent ends the run with this fault (without this, each next target failed at once)
+            raise SafetyStop(r.reason or r.outcome.value)
         arrived = r.outcome is NavOutcome.ARRIVED
         path = first.points_xy if first.found else None
         return NavigationResult(arrived, r.reason or r.outcome.name, r.pose, path)

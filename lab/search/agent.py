@@ -71,6 +71,7 @@ from lab.vision.database import FeatureDatabase
 __all__ = [
     "AgentConfig",
     "AgentResult",
+    "INTERRUPTED",
     "MapSnapshot",
     "NavigationResult",
     "Navigate",
@@ -79,6 +80,10 @@ __all__ = [
     "Strategy",
 ]
 
+
+#: The reason of a run ended by Ctrl-C (SIGINT, a notebook's "interrupt kernel"): the robot is stopped and
+#: the record so far returned, as for any other end.
+INTERRUPTED = "interrupted"
 
 #: Errors from the robot that end a run with their reason instead of raising out of it.
 _DEVICE_FAULTS = (
@@ -355,8 +360,9 @@ class SearchAgent:
 
     # -- the loop ----------------------------------------------------------------------------------
     def run(self) -> AgentResult:
-        """Search until found, out of time (budget), out of places to look, or stopped by a device fault
-        (:class:`~lab.errors.LabError` from the robot: the reason names it); never raises for those."""
+        """Search until found, out of time (budget), out of places to look, stopped by a device fault
+        (:class:`~lab.errors.LabError` from the robot: the reason names it) or interrupted (Ctrl-C: the
+        reason is :data:`INTERRUPTED`); never raises for those, and stops the robot on the way out."""
         t0 = self.robot.now()
         found: LocalSearchResult | None = None
         reason = "action limit reached"
@@ -378,6 +384,8 @@ class SearchAgent:
             reason = str(e)
         except _DEVICE_FAULTS as e:  # a pan-tilt that never arrives, a safety stop, a lost link: end cleanly
             reason = f"stopped by a fault: {type(e).__name__}: {e}"
+        except KeyboardInterrupt:  # Ctrl-C: the operator's stop; the record so far is the result
+            reason = INTERRUPTED
         finally:
             try:
                 self.robot.stop()
