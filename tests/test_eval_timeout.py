@@ -29,7 +29,7 @@ def _check(outcomes, limit_s):
 
 
 def test_local_pool_stops_a_job_at_its_limit_and_goes_on():
-    _check(list(LocalPool(2, job_timeout_s=3.0).run(JOBS)), 3.0)
+    _check(list(LocalPool(2, job_timeout_s=1.5).run(JOBS)), 1.5)
 
 
 def test_dask_stops_a_job_at_its_limit_restarts_its_worker_and_goes_on():
@@ -37,9 +37,9 @@ def test_dask_stops_a_job_at_its_limit_restarts_its_worker_and_goes_on():
     from dask.distributed import Client, LocalCluster
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
-        ex = DaskExecutor(scheduler=c.scheduler_address, job_timeout_s=3.0)
+        ex = DaskExecutor(scheduler=c.scheduler_address, job_timeout_s=1.5)
         try:
-            _check(list(ex.run(JOBS)), 3.0)
+            _check(list(ex.run(JOBS)), 1.5)
             # the worker that held the abandoned job was restarted: nothing of it still runs
             with Client(c) as client:
                 client.wait_for_workers(2, timeout=60)

@@ -26,7 +26,7 @@ def _sensing_argument(p: argparse.ArgumentParser) -> None:
         metavar="{realistic,ideal,FILE.toml}",
         help="the simulator's sensor errors (default: realistic: camera noise, calibration error, odometry "
         "drift, pan-tilt backlash; ideal: exact sensors, for teaching the mathematics; FILE.toml: a "
-        "[sensing] table, profile = \"realistic\" plus [sensing.camera], [sensing.odometry], "
+        '[sensing] table, profile = "realistic" plus [sensing.camera], [sensing.odometry], '
         "[sensing.pan_tilt] fields to change)",
     )
 
@@ -322,7 +322,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="grade a submission of an assignment (Gradescope results.json)",
         description="Run an assignment's graded tests on a submission, each test in its own limited process, "
         "print a summary and write Gradescope's results.json. With --batch, grade a folder with one "
-        "subfolder per student and write one CSV of scores.",
+        "subfolder per student and write one CSV of scores; with --workers N or --scheduler ADDRESS (a Dask "
+        "cluster), grade that class one submission per job, in parallel (--batch implied).",
     )
     g.add_argument(
         "assignment",
@@ -340,6 +341,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--csv", type=Path, help="with --batch: the scores CSV (default SUBMISSION/scores.csv)")
     g.add_argument("--out", type=Path, help="with --batch: write OUT/STUDENT/ASSIGNMENT.json for each")
     g.add_argument("--jobs", type=int, default=None, help="tests run at once (default: min(4, CPUs))")
+    _executor_arguments(g)  # --workers/--scheduler: a class (--batch implied), one submission per job
     g.add_argument(
         "--timeout-scale", type=float, default=1.0, help="multiply every time limit (slow machine)"
     )
