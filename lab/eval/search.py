@@ -8,7 +8,7 @@ surface_index])`` (the object's index in ``lab search --list-objects``, the surf
 the job runs. These are the placements ``benchmarks/eval_search.py`` has always used.
 
 **Scoring.** Each job's JSON is the ``lab search --json`` result (its map snapshots left out: they
-are for figures) plus ``shortest_path_m``, the shortest collision-free path from the start to local
+are for figures) plus ``obstacles_on_path`` (the boxes were asked for) and ``shortest_path_m``, the shortest collision-free path from the start to local
 search range of the object on the scene's true occupancy (evaluation only, the robot never sees it),
 from which the report computes SPL (success weighted by path length).
 """
@@ -185,6 +185,7 @@ def search_job(
     )
     d = r.to_json()
     d["n_snapshots"] = len(d.pop("map_snapshots", []))
+    d["obstacles_on_path"] = bool(obstacles)  # asked for (``obstacles`` lists the boxes that fit)
     lc = AgentConfig().local_search
     sp = shortest_path_m(r.trace.scene, place, lc.max_distance_m, lc.min_distance_m)
     d["shortest_path_m"] = round(sp, 4) if math.isfinite(sp) else None

@@ -1,0 +1,83 @@
+"""The issue's acceptance for class grading: a generated class of 20 submissions (for each assignment the
+reference solution, the untouched template and every seeded bug of ``tests/grade_cases.py``), graded
+with ``lab grade all CLASS/`` on this machine (``--batch``), through a local pool (``--workers N``) and
+through a real Dask cluster (``LocalCluster(processes=True)``, via ``--scheduler``): are the CSV and
+every results.json the same (timings aside)? Prints the wall time of each, measured one after the other.
+
+Run: ``nice .venv/bin/python benchmarks/grade_class_dask.py [--workers 2]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # the kept wrong submissions
+
+from grade_cases import make_class  # noqa: E402
+
+from lab.cli import main as lab  # noqa: E402
+
+
+def _results(each: Path) -> dict:
+    out = {}
+    for p in sorted(each.glob("*/*.json")):
+        d = json.loads(p.read_text())
+        d.pop("execution_time")
+        for t in d["tests"]:
+            t["extra_data"].pop("duration_s")
+        out[f"{p.parent.name}/{p.name}"] = d
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workers", type=int, default=2, help="local pool and Dask workers (default 2)")
+    args = ap.parse_args()
+    from dask.distributed import LocalCluster
+
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        klass = tmp / "class"
+        students = make_class(klass)
+        print(f"{len(students)} submissions; CPUs {os.cpu_count()}; load average {os.getloadavg()[0]:.1f}")
+        runs = {
+            "this machine (--batch)": ["--batch"],
+            f"local pool (--workers {args.workers})": ["--workers", str(args.workers)],
+        }
+        got, times = {}, {}
+        for name, extra in runs.items():
+            t0 = time.perf_counter()
+            rc = lab(["grade", "all", str(klass), *extra, "--csv", str(tmp / f"{len(got)}.csv"),
+                      "--out", str(tmp / f"each{len(got)}"), "--quiet"])  # fmt: skip
+            times[name] = time.perf_counter() - t0
+            got[name] = (rc, (tmp / f"{len(got)}.csv").read_text(), _results(tmp / f"each{len(got)}"))
+        with LocalCluster(
+            n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None
+        ) as c:
+            name = f"Dask cluster of {args.workers} (--scheduler)"
+            i = len(got)
+            t0 = time.perf_counter()
+            rc = lab(["grade", "all", str(klass), "--scheduler", c.scheduler_address, "--csv",
+                      str(tmp / f"{i}.csv"), "--out", str(tmp / f"each{i}"), "--quiet"])  # fmt: skip
+            times[name] = time.perf_counter() - t0
+            got[name] = (rc, (tmp / f"{i}.csv").read_text(), _results(tmp / f"each{i}"))
+        ref_name = next(iter(got))
+        ref = got[ref_name]
+        print(f"{'how':36s} {'exit':>4s} {'wall s':>7s}  same CSV and results.json as {ref_name}")
+        for name, (rc, text, res) in got.items():
+            same = text == ref[1] and res == ref[2]
+            print(f"{name:36s} {rc:4d} {times[name]:7.1f}  {'yes' if same else 'NO'}")
+        totals = [line.rsplit(",", 2)[-2] for line in ref[1].splitlines()[1:]]
+        print(f"scores (of {len(totals)} students x 4 assignments): totals {', '.join(totals)}")
+        print(f"load average after: {os.getloadavg()[0]:.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
