@@ -4,7 +4,7 @@ against the local pool), and the per-job overhead of each engine on empty jobs, 
 side in one run.
 
 The sweep's jobs are real but cheap identification episodes (``lab eval identify``: models 0-3 x ten
-seeds of the tuning split, the circle planner, a static box, one planning action, 12 s of simulated
+seeds of the tuning split, the circle planner, a static box, one planning action, 4 s of simulated
 time, ideal sensing); each sweep is timed from the command's start to its end (worker start-up
 included, as a user waits for it) and every job's JSON is checked to be the same in the three sweeps
 (timings aside). The empty-job overhead is the median over ``--rounds`` rounds (alternating engines) of
@@ -35,7 +35,7 @@ from lab.cli import main as lab
 from lab.eval.executor import DaskExecutor, Job, LocalPool
 
 SWEEP = ["--models", "0-3", "--planners", "circle", "--movers", "static", "--max-actions", "1",
-         "--max-time", "12", "--sensing", "ideal"]  # fmt: skip
+         "--max-time", "4", "--sensing", "ideal"]  # fmt: skip
 VOLATILE = ("wall_time_s", "cpu_time_s", "real_time_factor", "real_time_factor_cpu", "loop_wall_time_s",
             "loop_cpu_time_s", "real_time_factor_wall", "real_time_factor_loop_cpu")  # fmt: skip
 

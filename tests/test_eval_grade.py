@@ -69,3 +69,38 @@ def test_bad_class_grading_is_refused_in_one_line_before_anything_starts(tmp_pat
         assert not scores.exists()
     assert main(["grade", "stereo", str(tmp_path / "nobody"), "--workers", "2"]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+class _LosesAlice:
+    """An executor whose worker dies under alice's job; the others are graded here, in this process."""
+
+    name = "a test executor"
+
+    def run(self, jobs):
+        from lab.eval.executor import Outcome
+
+        for j in jobs:
+            if j.key.startswith("alice:"):
+                yield Outcome(j, None, "KilledWorker: the worker died", 1.0)
+            else:
+                yield Outcome(j, j.fn(**j.kwargs), None, 1.0)
+
+
+def test_a_submission_that_cannot_be_graded_costs_that_student_only(tmp_path, capsys):
+    import argparse
+
+    from lab.eval.grade import grade_class
+    from lab.grading import get_assignment
+
+    a = get_assignment("stereo")
+    klass = tmp_path / "class"
+    for student in ("alice", "bob"):
+        (klass / student).mkdir(parents=True)
+        (klass / student / a.module).write_text(a.module_path.read_text())
+    args = argparse.Namespace(assignments=None, jobs=1, timeout_scale=1.0, insecure=False, quiet=False,
+                              out=None, csv=tmp_path / "scores.csv")  # fmt: skip
+    assert grade_class(args, [a], klass, _LosesAlice()) == 1
+    rows = list(csv.DictReader((tmp_path / "scores.csv").open()))
+    assert [(r["student"], r["total"]) for r in rows] == [("bob", "6")]  # alice's grade is not made up
+    err = capsys.readouterr().err
+    assert "alice: stereo FAILED to grade: KilledWorker" in err and "left out of" in err and "alice" in err
