@@ -15,7 +15,8 @@ from lab.scene import load_scene
 SWEEP = ["--objects", "toy_block,book", "--surfaces", "floor", "--seeds", "3", "--strategies", "paper",
          "--obstacles", "no", "--sensing", "ideal", "--max-time", "0.5"]  # fmt: skip
 VOLATILE = ("wall_time_s", "cpu_time_s")
-ADDED = ("n_snapshots", "shortest_path_m", "obstacles_on_path")  # what a sweep's job adds to the `lab search` JSON
+# what a sweep's job adds to the `lab search` JSON
+ADDED = ("n_snapshots", "shortest_path_m", "obstacles_on_path")
 
 
 def _strip(d: dict) -> dict:

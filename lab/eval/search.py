@@ -7,11 +7,11 @@ surface_index])`` (the object's index in ``lab search --list-objects``, the surf
 ``lab.runs.placement.SURFACES``), the same for every strategy, with and without obstacles, wherever
 the job runs. These are the placements ``benchmarks/eval_search.py`` has always used.
 
-**Scoring.** Each job's JSON is the ``lab search --json`` result (its map snapshots left out: they
-are for figures) plus ``obstacles_on_path`` (the boxes were asked for) and ``shortest_path_m``, the shortest collision-free path from the start to local
-search range of the object on the scene's true occupancy (evaluation only, the robot never sees it),
-from which the report computes SPL (success weighted by path length).
-"""
+**Scoring.** Each job's JSON is the ``lab search --json`` result (its map snapshots left out: they are
+for figures) plus ``obstacles_on_path`` (the boxes were asked for) and ``shortest_path_m``, the shortest
+collision-free path from the start to local search range of the object on the scene's true occupancy
+(evaluation only, the robot never sees it), from which the report computes SPL (success weighted by path
+length)."""
 
 from __future__ import annotations
 
