@@ -5,15 +5,17 @@ Run (from the repository root; resumable: an episode whose JSON exists is not ru
     nice .venv/bin/python benchmarks/eval_identify.py --out out/eval_identify --jobs 2
     nice .venv/bin/python benchmarks/eval_identify.py --out out/eval_identify --planners lut --seeds 0-4
     .venv/bin/python benchmarks/eval_identify.py --out out/eval_identify --report-only
+    .venv/bin/python benchmarks/eval_identify.py --out out/eval_identify --scheduler tcp://HOST:8786
 
-Every episode is one ``lab identify --json`` in its own process (the command-line contract is what is
-measured). The report prints, per planner: successes (the true model ends as the argmax with
-``P >= 0.95`` held for the dwell, within the action budget), the distribution of planning actions and of
-simulated time, the true model's final pose error, the real-time factors (sim time / wall time of the
-whole process, measured under whatever load the machine had: the report prints the load average; and of
-the loop alone, start-up and figures excluded, per wall second and per CPU second), and the ratio of
-the median actions of ``lut`` to ``random`` over the seeds both ran. It writes the same as JSON
-(``summary.json``).
+The episodes are run by ``lab eval identify`` (:mod:`lab.eval`: a local pool of ``--jobs`` processes, or
+a Dask cluster with ``--scheduler``; each episode's ``lab identify --json`` result in ``OUT/jobs/``),
+with this script's report-split defaults. The report prints, per planner: successes (the true model ends
+as the argmax with ``P >= 0.95`` held for the dwell, within the action budget), the distribution of
+planning actions and of simulated time, the true model's final pose error, the real-time factors (sim
+time / wall time of the whole job, measured under whatever load the machine had; and of the loop alone,
+start-up and figures excluded, per wall second and per CPU second; the load average printed is the
+machine's when the report is printed), and the ratio of the median actions of ``lut`` to ``random`` over
+the seeds both ran. It writes the same as JSON (``summary.json``).
 
 An episode that did not identify its model counts ``max_actions`` actions (a lower bound: the budget
 ran out), and the report lists every failure with its final probabilities.
@@ -29,65 +31,36 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
-import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from lab.evaluation import parse_seeds, report_seeds, split_of, wilson_interval
 
 
-def episode_path(out: Path, planner: str, model: int, seed: int) -> Path:
-    return out / planner / f"m{model}_s{seed}.json"
+def episode_path(
+    out: Path, planner: str, model: int, seed: int, mover="evasive", sensing="realistic"
+) -> Path:
+    """Where ``lab eval identify --out OUT`` writes this episode's JSON."""
+    from lab.eval.sweep import identify_key
+
+    return out / "jobs" / f"{identify_key(planner, mover, sensing, model, seed)}.json"
 
 
-def run_episode(out: Path, planner: str, model: int, seed: int, args) -> dict | None:
-    path = episode_path(out, planner, model, seed)
-    if path.is_file():
-        return json.loads(path.read_text())
-    path.parent.mkdir(parents=True, exist_ok=True)
-    cmd = [
-        sys.executable,
-        "-m",
-        "lab",
-        "identify",
-        "--true-model",
-        str(model),
-        "--seed",
-        str(seed),
-        "--mover",
-        args.mover,
-        "--planner",
-        planner,
-        "--max-actions",
-        str(args.max_actions),
-        "--max-time",
-        str(args.max_time),
-        "--json",
-        str(path),
-    ]
+def run_episodes(args, planners) -> int:
+    """``lab eval identify`` over the grid, resuming what ``--out`` already holds."""
+    from lab.cli import main as lab
+
+    argv = ["eval", "identify", "--models", ",".join(map(str, args.models)),
+            "--seeds", ",".join(map(str, args.seeds)), "--planners", ",".join(planners),
+            "--movers", args.mover, "--sensing", args.sensing, "--max-actions", str(args.max_actions),
+            "--max-time", str(args.max_time), "--out", str(args.out), "--resume"]  # fmt: skip
     if args.keep_direction is not None:
-        cmd += ["--keep-direction", str(args.keep_direction)]
-    cmd += ["--sensing", args.sensing]
-    t0 = time.perf_counter()
-    r = subprocess.run(cmd, capture_output=True, text=True)
-    load = os.getloadavg()[0]
-    if r.returncode != 0 or not path.is_file():
-        print(
-            f"{planner} M{model} seed {seed}: FAILED TO RUN (exit {r.returncode}): {r.stderr[-400:]}",
-            flush=True,
-        )
-        return None
-    res = json.loads(path.read_text())
-    res["load_avg_1min"] = load  # the machine's load when the episode ended (the RTF depends on it)
-    path.write_text(json.dumps(res))
-    print(
-        f"{planner:6s} M{model} seed {seed}: identified {res['identified_model']} after {res['actions']} "
-        f"actions, {res['sim_time_s']:.1f} s sim, {time.perf_counter() - t0:.0f} s wall (load {load:.1f})",
-        flush=True,
-    )
-    return res
+        argv += ["--keep-direction", str(args.keep_direction)]
+    if args.scheduler is not None:
+        argv += ["--scheduler", args.scheduler]
+    else:
+        argv += ["--workers", str(max(1, args.jobs))]
+    return lab(argv)
 
 
 def _dist(xs) -> dict:
@@ -111,13 +84,15 @@ def reached(res: dict, threshold: float = 0.95) -> bool:
     return any(h["posterior"][k] >= threshold for h in res["history"])
 
 
-def summarise(out: Path, planners, models, seeds, max_actions: int) -> dict:
+def summarise(
+    out: Path, planners, models, seeds, max_actions: int, mover="evasive", sensing="realistic"
+) -> dict:
     summary: dict = {"planners": {}, "models": models, "seeds": seeds, "split": split_of(seeds)}
     for planner in planners:
         rows = []
         for m in models:
             for s in seeds:
-                p = episode_path(out, planner, m, s)
+                p = episode_path(out, planner, m, s, mover, sensing)
                 if p.is_file():
                     rows.append(json.loads(p.read_text()))
         ok = [r for r in rows if r["success"] and r["actions"] <= max_actions]
@@ -161,7 +136,7 @@ def summarise(out: Path, planners, models, seeds, max_actions: int) -> dict:
             "real_time_factor_loop_cpu": _dist(
                 [r["real_time_factor_loop_cpu"] for r in rows if r.get("real_time_factor_loop_cpu")]
             ),
-            "load_avg_1min": _dist([r["load_avg_1min"] for r in rows if "load_avg_1min" in r]),
+            "load_avg_1min": _dist([os.getloadavg()[0]] if rows else []),
             "per_model": per_model,
             "episode_keys": sorted((r["true_model"], r["seed"]) for r in rows),
         }
@@ -173,7 +148,7 @@ def summarise(out: Path, planners, models, seeds, max_actions: int) -> dict:
         def med(planner):
             acts = []
             for m, s in sorted(both):
-                r = json.loads(episode_path(out, planner, m, s).read_text())
+                r = json.loads(episode_path(out, planner, m, s, mover, sensing).read_text())
                 acts.append(r["actions"] if r["success"] else max_actions)
             return statistics.median(acts) if acts else None
 
@@ -247,14 +222,15 @@ def main(argv=None) -> int:
         help="the agent's keep_direction ratio (default: the agent's, 0.5; 1 = Eq. (6)'s argmax)",
     )
     ap.add_argument("--jobs", type=int, default=1, help="episodes run side by side (default 1)")
+    ap.add_argument("--scheduler", help="a Dask scheduler's address (tcp://HOST:8786), or 'local'")
     ap.add_argument("--report-only", action="store_true", help="summarise the JSONs already in --out")
     args = ap.parse_args(argv)
     planners = [p for p in args.planners.split(",") if p]
     if not args.report_only:
-        todo = [(p, m, s) for p in planners for s in args.seeds for m in args.models]
-        with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-            list(pool.map(lambda job: run_episode(args.out, *job, args), todo))
-    summary = summarise(args.out, planners, args.models, args.seeds, args.max_actions)
+        run_episodes(args, planners)  # failed episodes are listed by it; --resume-like reruns retry them
+    summary = summarise(
+        args.out, planners, args.models, args.seeds, args.max_actions, args.mover, args.sensing
+    )
     print_table(summary)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "summary.json").write_text(json.dumps(summary, indent=2))

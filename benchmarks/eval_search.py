@@ -3,11 +3,15 @@
 Run from the repository root (each trial is a full closed-loop run in the simulator, with the stereo-
 costmap navigator that ``lab search`` uses; expect one to three minutes of CPU per trial)::
 
-    python benchmarks/eval_search.py run --out eval.jsonl [--strategies paper,lawnmower,frontier]
+    python benchmarks/eval_search.py run --out out/eval_search [--strategies paper,lawnmower,frontier]
         [--seeds 100000,100001] [--sensing realistic|ideal]
         [--obstacles both|no|yes] [--surfaces floor,table,shelf] [--max-time 300]
-        [--shard K/N]
-    python benchmarks/eval_search.py report eval.jsonl
+        [--workers N | --scheduler tcp://HOST:8786]
+    python benchmarks/eval_search.py report out/eval_search [more folders, or old .jsonl files]
+
+``run`` is ``lab eval search`` (:mod:`lab.eval.search`: the same trials, placements and scoring, on a
+local pool or a Dask cluster, resumable) with this script's report-split defaults; ``report`` reads the
+sweep's ``jobs/`` (and ``failed/``) and prints what follows.
 
 **Trials.** Three textured objects (cereal_box, book, toy_block) x three heights (floor, table_a or
 table_b at 0.75 m, the shelf at 1.2 m) x the seeds: each (object, surface, seed) is one seeded random
@@ -19,9 +23,9 @@ Two seeds give the issue's 18 placements; by default the report split's (seeds 1
 :mod:`lab.evaluation`), under the ``realistic`` sensing profile (``--sensing``). A trial that runs out
 of ``--max-time`` (simulated seconds) is a failure: a slow baseline fails by its budget.
 
-``run`` appends one JSON line per trial (the ``lab search`` JSON without its map snapshots, plus
-``shortest_path_m``) and skips trials already in the file, so a killed run can be resumed; ``--shard
-K/N`` runs every N-th trial from the K-th (for several processes writing separate files).
+``run`` writes one JSON per trial into ``OUT/jobs/`` (the ``lab search`` JSON without its map
+snapshots, plus ``shortest_path_m``) and skips trials already there, so a killed run can be resumed;
+several machines share the work through ``--scheduler`` (the old ``--shard K/N`` is gone).
 
 **Report** (``report FILE...``), per strategy and obstacle setting and overall:
 
@@ -43,40 +47,15 @@ import json
 import math
 import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
-from lab.evaluation import report_seeds, split_of, wilson_interval
+from lab.eval.search import spl
+from lab.evaluation import report_seeds, wilson_interval
 
 OBJECTS = ("cereal_box", "book", "toy_block")
 SURFACES = ("floor", "table", "shelf")
-
-
-def trial_list(strategies, seeds, obstacles, surfaces=SURFACES) -> list[dict]:
-    """Every trial: the shelf's last (the slowest: its failures run to the budget), strategies
-    interleaved on the same placement."""
-    obst = {"no": (False,), "yes": (True,), "both": (False, True)}[obstacles]
-    out = []
-    for s_i, surface in enumerate(SURFACES):
-        if surface not in surfaces:
-            continue
-        for seed in seeds:
-            for o_i, name in enumerate(OBJECTS):
-                for ob in obst:
-                    for strat in strategies:
-                        out.append(
-                            {
-                                "object": name,
-                                "surface": surface,
-                                "seed": seed,
-                                "obstacles": ob,
-                                "strategy": strat,
-                                "placement_key": [seed, o_i, s_i],
-                            }
-                        )
-    return out
 
 
 def key(d: dict) -> tuple:
@@ -89,114 +68,50 @@ def label(d: dict) -> str:
     return f"{d['strategy']:9s} {d['object']:10s} {d['surface']:5s} seed {d['seed']} {obst:12s}"
 
 
-def shortest_path_m(scene, place, local_max_m: float, local_min_m: float) -> float:
-    """Length [m] of the shortest collision-free path from the robot's start to local-search range of
-    the object, on the scene's true occupancy (every body but posters, and the walls) grown by the
-    robot's radius. Evaluation only."""
-    from lab.navigation import Costmap, GridSpec, astar_to_region
-    from lab.robot import BaseLimits
-    from lab.runs.placement import footprint
-
-    sx, sy = scene.room.size
-    spec = GridSpec.from_bounds(-sx / 2, -sy / 2, sx / 2, sy / 2, 0.05)
-    X, Y = spec.cell_centers()
-    pts = np.stack([X.ravel(), Y.ravel()], axis=1)
-    occ = np.zeros(len(pts), bool)
-    for b in scene.bodies:
-        if b.role in ("decor", "object"):
-            continue
-        poly = footprint(b)
-        edges = np.roll(poly, -1, axis=0) - poly
-        rel = pts[:, None, :] - poly[None, :, :]
-        cross = edges[None, :, 0] * rel[:, :, 1] - edges[None, :, 1] * rel[:, :, 0]
-        occ |= np.all(cross >= 0, axis=1) | np.all(cross <= 0, axis=1)
-    occ = occ.reshape(spec.shape)
-    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True
-    grid = Costmap.from_occupancy(spec, occ).inflated(BaseLimits().radius)
-    rx, ry, _ = scene.robot_start
-    path = astar_to_region(grid, (rx, ry), (place[0], place[1]), local_max_m, local_min_m)
-    return float(path.length) if path.found else math.nan
-
-
-def run_one(t: dict, max_time: float, max_wall: float | None, sensing: str = "realistic") -> dict:
-    from lab.runs.placement import random_placement
-    from lab.runs.search import navigator_factory, path_obstacles, run_search
-    from lab.scene import load_scene
-    from lab.search.agent import AgentConfig
-
-    scene = load_scene("lab_room")
-    place = random_placement(scene, t["object"], np.random.default_rng(t["placement_key"]), t["surface"])
-    w0 = time.perf_counter()
-    try:
-        r = run_search(
-            t["object"],
-            t["seed"],
-            place=place,
-            strategy=t["strategy"],
-            max_time=max_time,
-            navigate=navigator_factory,
-            obstacles=t["obstacles"],
-            max_wall_time=max_wall,
-            sensing=sensing,
-        )
-        d = r.to_json()  # with its events: what it visited and why it failed
-        d["n_snapshots"] = len(d.pop("map_snapshots", []))
-        with_obst = r.trace.scene
-    except Exception as e:  # a crash is a failed trial, recorded with its reason
-        d = {
-            "error": f"{type(e).__name__}: {e}",
-            "found": False,
-            "success": False,
-            "collisions": 0,
-            "path_length_m": 0.0,
-        }
-        with_obst = scene.with_pose(t["object"], place)
-        if t["obstacles"]:
-            with_obst, _ = path_obstacles(with_obst, t["object"], place, np.random.default_rng(t["seed"]))
-    lc = AgentConfig().local_search
-    d["obstacle_poses"] = d.get("obstacles", [])
-    d.update({k: t[k] for k in ("object", "surface", "seed", "obstacles", "strategy")})
-    d["place"] = [round(float(v), 4) for v in place]
-    d["shortest_path_m"] = round(shortest_path_m(with_obst, place, lc.max_distance_m, lc.min_distance_m), 4)
-    d["eval_wall_s"] = round(time.perf_counter() - w0, 1)
-    return d
-
-
 def cmd_run(args) -> int:
-    from lab.io import write_text_atomic
+    from lab.cli import main as lab
 
-    strategies = [s.strip() for s in args.strategies.split(",") if s.strip()]
-    seeds = [int(s) for s in args.seeds.split(",")]
-    surfaces = [s.strip() for s in args.surfaces.split(",") if s.strip()]
-    bad = sorted(set(surfaces) - set(SURFACES))
-    if bad:
-        raise SystemExit(f"unknown surface(s) {', '.join(bad)}; surfaces: {', '.join(SURFACES)}")
-    trials = trial_list(strategies, seeds, args.obstacles, surfaces)
-    print(f"split: {split_of(seeds)} (seeds {', '.join(map(str, seeds))}); sensing {args.sensing}", flush=1)
-    k, n = (int(v) for v in args.shard.split("/"))
-    if not 0 <= k < n:
-        raise SystemExit(f"--shard K/N needs 0 <= K < N (K counts from 0), got {args.shard}")
-    trials = trials[k::n]
-    out = Path(args.out)
-    done = set()
-    lines = []
-    if out.exists():
-        lines = out.read_text().splitlines()
-        done = {key(json.loads(line)) for line in lines if line.strip()}
-    todo = [t for t in trials if key(t) not in done]
-    print(f"{len(trials)} trials in this shard, {len(todo)} to run", flush=True)
-    for t in todo:
-        d = run_one(t, args.max_time, args.max_wall_time, args.sensing)
-        lines.append(json.dumps(d))
-        write_text_atomic(out, "\n".join(lines) + "\n")
-        print(
-            f"{label(d)}: success {d.get('success')} found {d.get('found')} pe {d.get('position_error_m')} "
-            f"oe {d.get('orientation_error_deg')} path {d.get('path_length_m', 0):.1f} m "
-            f"(shortest {d['shortest_path_m']}) sim {d.get('sim_time_s')} s wall {d['eval_wall_s']} s "
-            f"coll {d.get('collisions')} {d.get('reason', d.get('error', ''))}",
-            flush=True,
+    argv = ["eval", "search", "--objects", ",".join(OBJECTS), "--surfaces", args.surfaces,
+            "--seeds", args.seeds, "--strategies", args.strategies, "--obstacles", args.obstacles,
+            "--sensing", args.sensing, "--max-time", str(args.max_time), "--out", str(args.out),
+            "--resume"]  # fmt: skip
+    if args.max_wall_time is not None:
+        argv += ["--max-wall-time", str(args.max_wall_time)]
+    if args.workers is not None:
+        argv += ["--workers", str(args.workers)]
+    if args.scheduler is not None:
+        argv += ["--scheduler", args.scheduler]
+    return lab(argv)
+
+
+def read_trials(path: Path) -> list[dict]:
+    """The trials of a ``lab eval search`` folder (finished ones from ``jobs/``, crashed ones from
+    ``failed/`` as failures with their error), or of an old ``run`` JSON-lines file."""
+    path = Path(path)
+    if path.is_file():
+        return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    rows = []
+    for p in sorted((path / "jobs").glob("*.json")):
+        d = json.loads(p.read_text())
+        d["obstacle_poses"] = d.get("obstacles", [])
+        d["obstacles"] = bool(d["obstacles_on_path"])
+        rows.append(d)
+    for p in sorted((path / "failed").glob("*.json")):
+        f = json.loads(p.read_text())
+        prm = f["params"]
+        rows.append(
+            {
+                **{k: prm[k] for k in ("object", "surface", "seed", "obstacles", "strategy")},
+                "error": f["error"],
+                "found": False,
+                "success": False,
+                "collisions": 0,
+                "path_length_m": 0.0,
+                "obstacle_poses": [],
+                "shortest_path_m": None,
+            }  # fmt: skip
         )
-    return 0
+    return rows
 
 
 def n_obstacles_placed(d: dict) -> int:
@@ -212,17 +127,6 @@ def n_obstacles_placed(d: dict) -> int:
     place = tuple(d["place"])
     scene = load_scene("lab_room").with_pose(d["object"], place)
     return len(path_obstacles(scene, d["object"], place, np.random.default_rng(int(d["seed"])))[1])
-
-
-def spl(rows) -> float:
-    vals = []
-    for d in rows:
-        l, p = d.get("shortest_path_m"), d.get("path_length_m", 0.0)
-        if not d.get("success") or l is None or not math.isfinite(l):
-            vals.append(0.0)
-        else:
-            vals.append(l / max(p, l, 1e-9))
-    return float(np.mean(vals)) if vals else math.nan
 
 
 def summary_line(label: str, rows) -> str:
@@ -243,7 +147,7 @@ def summary_line(label: str, rows) -> str:
 def cmd_report(args) -> int:
     rows = []
     for p in args.files:
-        rows += [json.loads(line) for line in Path(p).read_text().splitlines() if line.strip()]
+        rows += read_trials(p)
     by = {}
     for d in rows:
         by.setdefault(key(d), d)  # first record of a trial wins
@@ -317,7 +221,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run")
-    r.add_argument("--out", required=True)
+    r.add_argument("--out", required=True, help="the sweep's folder (lab eval search --out)")
     r.add_argument("--strategies", default="paper,lawnmower,frontier")
     r.add_argument(
         "--seeds",
@@ -329,9 +233,10 @@ def main(argv=None) -> int:
     r.add_argument("--surfaces", default=",".join(SURFACES), help="a subset of floor,table,shelf")
     r.add_argument("--max-time", type=float, default=300.0, help="simulated-time budget per trial [s]")
     r.add_argument("--max-wall-time", type=float, default=None, help="wall-clock cap per trial [s]")
-    r.add_argument("--shard", default="0/1", help="K/N: every N-th trial from the K-th (K from 0 to N-1)")
+    r.add_argument("--workers", type=int, help="worker processes (default 1)")
+    r.add_argument("--scheduler", help="a Dask scheduler's address (tcp://HOST:8786), or 'local'")
     rep = sub.add_parser("report")
-    rep.add_argument("files", nargs="+")
+    rep.add_argument("files", nargs="+", help="lab eval search folders (or old run .jsonl files)")
     args = ap.parse_args(argv)
     return cmd_run(args) if args.cmd == "run" else cmd_report(args)
 

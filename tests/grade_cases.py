@@ -202,3 +202,28 @@ CASES = [
         {ALL: "importing search.py failed: NameError: name 'astar' is not defined"},
     ),
 ]
+
+
+def make_class(folder, names: tuple[str, ...] | None = None) -> list[str]:
+    """A generated class in ``folder``: for each assignment in ``names`` (default all) a student with
+    the reference solution, one with the untouched student template, and one per wrong submission
+    above; each student folder holds that one module. Returns the student names."""
+    from pathlib import Path
+
+    from lab.grading import list_assignments
+    from lab.grading.release import release
+
+    folder = Path(folder)
+    chosen = [a for a in list_assignments() if names is None or a.name in names]
+    templates = folder.parent / f".{folder.name}-release"
+    release(chosen, templates, force=True)
+    students = []
+    for a in chosen:
+        ref = a.module_path.read_text()
+        subs = {f"{a.name}_reference": ref, f"{a.name}_template": (templates / a.name / a.module).read_text()}
+        subs.update({f"{a.name}_{c.name}": c.source(ref) for c in CASES if c.assignment == a.name})
+        for student, text in subs.items():
+            (folder / student).mkdir(parents=True)
+            (folder / student / a.module).write_text(text)
+            students.append(student)
+    return students

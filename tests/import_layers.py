@@ -55,6 +55,7 @@ RULES = (
     Rule("pictures never run experiments or train", ("lab.viz",), ("lab.training", "lab.runs", "lab.cli")),
     Rule("training runs no experiment", ("lab.training",), ("lab.runs", "lab.cli", "lab.viz")),
     Rule("runs are called by the command line, not the other way", ("lab.runs",), ("lab.cli",)),
+    Rule("sweeps are called by the command line, not the other way", ("lab.eval",), ("lab.cli",)),
     Rule(
         "the grader stands apart (it grades code, it runs no robot)",
         ("lab.grading",),

@@ -279,7 +279,22 @@ def _cmd_demo(args) -> int:
 def _cmd_grade(args) -> int:
     from lab.grading.cli import run_grade
 
-    return run_grade(args)
+    if args.workers is None and args.scheduler is None:
+        return run_grade(args)
+    # a class through the executor of `lab eval`: one job per student and assignment
+    args.batch = True
+
+    def batch(chosen, folder, args):
+        from lab.eval.executor import make_executor
+        from lab.eval.grade import grade_class
+
+        ex = make_executor(args.workers, args.scheduler, 0, args.job_timeout)
+        try:
+            return grade_class(args, chosen, folder, ex)
+        finally:
+            ex.close()
+
+    return run_grade(args, batch=batch)
 
 
 def _cmd_eval(args) -> int:

@@ -43,6 +43,31 @@ def _localization_argument(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _executor_arguments(p: argparse.ArgumentParser) -> None:
+    """Where independent jobs run: ``--workers N`` local processes, or ``--scheduler`` (Dask)."""
+    p.add_argument("--workers", type=int, help="worker processes on this machine (default 1)")
+    p.add_argument(
+        "--scheduler",
+        help="a Dask scheduler's address (tcp://HOST:8786, from `dask scheduler`), or 'local' for a local "
+        "Dask cluster of --workers processes (needs pip install 'lab[cluster]')",
+    )
+    p.add_argument(
+        "--job-timeout",
+        type=float,
+        default=3600.0,
+        metavar="SECONDS",
+        help="a job still running after this wall time is stopped and recorded as failed (default 3600)",
+    )
+
+
+def _sweep_run_arguments(p: argparse.ArgumentParser) -> None:
+    """The output and the executor of a ``lab eval`` sweep."""
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--resume", action="store_true", help="run only the jobs without a result in --out")
+    _executor_arguments(p)
+    p.add_argument("--retries", type=int, default=0, help="Dask re-runs a job that raised this often")
+
+
 def _episode_arguments(p: argparse.ArgumentParser, movers: tuple[str, ...], max_time: float) -> None:
     """The arguments of one identification episode, shared by ``lab demo`` and ``lab identify``."""
     p.add_argument(
@@ -315,7 +340,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="grade a submission of an assignment (Gradescope results.json)",
         description="Run an assignment's graded tests on a submission, each test in its own limited process, "
         "print a summary and write Gradescope's results.json. With --batch, grade a folder with one "
-        "subfolder per student and write one CSV of scores.",
+        "subfolder per student and write one CSV of scores; with --workers N or --scheduler ADDRESS (a Dask "
+        "cluster), grade that class one submission per job, in parallel (--batch implied).",
     )
     g.add_argument(
         "assignment",
@@ -333,6 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--csv", type=Path, help="with --batch: the scores CSV (default SUBMISSION/scores.csv)")
     g.add_argument("--out", type=Path, help="with --batch: write OUT/STUDENT/ASSIGNMENT.json for each")
     g.add_argument("--jobs", type=int, default=None, help="tests run at once (default: min(4, CPUs))")
+    _executor_arguments(g)  # --workers/--scheduler: a class (--batch implied), one submission per job
     g.add_argument(
         "--timeout-scale", type=float, default=1.0, help="multiply every time limit (slow machine)"
     )
@@ -354,7 +381,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev = sub.add_parser(
         "eval",
         help="run an evaluation sweep (seeded episodes) on a process pool or a Dask cluster",
-        description="Run a grid of seeded episodes (models x seeds x planners x movers x sensing), locally "
+        description="Run a grid of seeded episodes (identify: models x seeds x planners x movers x sensing; "
+        "search: objects x placements x seeds x strategies x obstacles x sensing), locally "
         "(--workers N processes) or on a Dask cluster (--scheduler tcp://HOST:8786, or 'local' for a local "
         "one); writes OUT/jobs/KEY.json per job as it finishes, OUT/results.csv and OUT/report.md.",
     )
@@ -369,11 +397,18 @@ def build_parser() -> argparse.ArgumentParser:
     ei.add_argument("--max-actions", type=int, help="planning actions budget per episode (default 8)")
     ei.add_argument("--max-time", type=float, help="sim-time budget per episode [s] (default 240)")
     ei.add_argument("--keep-direction", type=float, help="the agent's keep_direction (default 0.5)")
-    ei.add_argument("--out", type=Path, required=True, help="output folder")
-    ei.add_argument("--resume", action="store_true", help="run only the jobs without a result in --out")
-    ei.add_argument("--workers", type=int, help="worker processes (default 1)")
-    ei.add_argument("--scheduler", help="a Dask scheduler's address (tcp://HOST:8786), or 'local'")
-    ei.add_argument("--retries", type=int, default=0, help="Dask re-runs a job that raised this often")
+    _sweep_run_arguments(ei)
+    es = evs.add_parser("search", help="search trials (`lab search`)")
+    es.add_argument("--sweep", type=Path, help="a TOML file with the grid (flags given here override it)")
+    es.add_argument("--objects", help="comma-separated (default cereal_box,book,toy_block)")
+    es.add_argument("--surfaces", help="placements: a subset of floor,table,shelf (default all three)")
+    es.add_argument("--seeds", help="e.g. 100000-100001 (default: the report split's first 2)")
+    es.add_argument("--strategies", help="comma-separated: paper, lawnmower, frontier (default all three)")
+    es.add_argument("--obstacles", help="no, yes or both (default both): boxes on the straight path")
+    es.add_argument("--sensing", help="comma-separated: realistic, ideal (default realistic)")
+    es.add_argument("--max-time", type=float, help="sim-time budget per trial [s] (default 300)")
+    es.add_argument("--max-wall-time", type=float, help="the trial's own wall-clock cap [s] (default none)")
+    _sweep_run_arguments(es)
 
     a = sub.add_parser(
         "assignments",

@@ -1,4 +1,4 @@
-"""The handler of ``lab eval identify`` (its options: :mod:`lab.cli.parser`)."""
+"""The handlers of ``lab eval identify`` and ``lab eval search`` (their options: :mod:`lab.cli.parser`)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from pathlib import Path
 
 from lab.errors import ConfigError
 
-__all__ = ["run_eval"]
+__all__ = ["identify_sweep", "run_eval", "search_sweep"]
 
 
 def _ints(v, what: str) -> tuple[int, ...]:
@@ -23,16 +23,24 @@ def _names(v) -> tuple[str, ...]:
     return tuple(v) if isinstance(v, list) else tuple(s.strip() for s in str(v).split(",") if s.strip())
 
 
-def identify_sweep(args):
-    """The grid from the sweep file (``--sweep``) with the flags given on the command line over it."""
-    from lab.eval.sweep import SWEEP_FIELDS, IdentifySweep, load_sweep_file
-    from lab.evaluation import report_seeds
+def _spec(args, fields) -> dict:
+    """The sweep file's fields (``--sweep``) with the flags given on the command line over them."""
+    from lab.eval.sweep import load_sweep_file
 
-    spec = load_sweep_file(args.sweep) if args.sweep else {}
-    for name in SWEEP_FIELDS:  # the sweep file's fields are the command line's flags
+    spec = load_sweep_file(args.sweep, fields) if args.sweep else {}
+    for name in fields:  # the sweep file's fields are the command line's flags
         v = getattr(args, name)
         if v is not None:
             spec[name] = v
+    return spec
+
+
+def identify_sweep(args):
+    """The grid of ``lab eval identify``, checked."""
+    from lab.eval.sweep import SWEEP_FIELDS, IdentifySweep
+    from lab.evaluation import report_seeds
+
+    spec = _spec(args, SWEEP_FIELDS)
     sw = IdentifySweep(
         models=_ints(spec.get("models", "0-3"), "models"),
         seeds=_ints(spec["seeds"], "seeds") if "seeds" in spec else tuple(report_seeds(25)),
@@ -47,23 +55,51 @@ def identify_sweep(args):
     return sw
 
 
+def search_sweep(args):
+    """The grid of ``lab eval search``, checked."""
+    from lab.eval.search import SEARCH_FIELDS, SearchSweep
+    from lab.evaluation import report_seeds
+
+    spec = _spec(args, SEARCH_FIELDS)
+    wall = spec.get("max_wall_time")
+    sw = SearchSweep(
+        objects=_names(spec.get("objects", "cereal_box,book,toy_block")),
+        surfaces=_names(spec.get("surfaces", "floor,table,shelf")),
+        seeds=_ints(spec["seeds"], "seeds") if "seeds" in spec else tuple(report_seeds(2)),
+        strategies=_names(spec.get("strategies", "paper,lawnmower,frontier")),
+        obstacles=str(spec.get("obstacles", "both")),
+        sensing=_names(spec.get("sensing", "realistic")),
+        max_time=float(spec.get("max_time", 300.0)),
+        max_wall_time=None if wall is None else float(wall),
+    )
+    sw.check()
+    return sw
+
+
 def run_eval(args) -> int:
     from lab.eval.executor import make_executor
-    from lab.eval.sweep import print_split, run_sweep
+    from lab.eval.sweep import IDENTIFY, print_split, run_sweep
 
-    if args.eval_command != "identify":
-        raise ConfigError(f"unknown sweep {args.eval_command!r}; sweeps: identify")
+    if args.eval_command == "identify":
+        sw, kind = identify_sweep(args), IDENTIFY  # every check before anything starts
+    elif args.eval_command == "search":
+        from lab.eval.search import SEARCH
+
+        sw, kind = search_sweep(args), SEARCH
+    else:
+        raise ConfigError(f"unknown sweep {args.eval_command!r}; sweeps: identify, search")
     if args.retries < 0:
         raise ConfigError(f"--retries must be >= 0, got {args.retries}")
-    sw = identify_sweep(args)  # every check before anything starts
+    if args.job_timeout is not None and not args.job_timeout > 0:
+        raise ConfigError(f"--job-timeout must be > 0 s, got {args.job_timeout:g}")
     jobs = sw.jobs()
     out = Path(args.out)
     if not args.resume and (out / "results.csv").exists():
         raise ConfigError(f"{out} already holds a sweep: --resume to complete it, or another --out")
     print_split(sw.seeds)
-    ex = make_executor(args.workers, args.scheduler, args.retries)
+    ex = make_executor(args.workers, args.scheduler, args.retries, args.job_timeout)
     try:
-        rows = run_sweep(out, jobs, ex, resume=args.resume, echo=lambda s: print(s, flush=True))
+        rows = run_sweep(out, jobs, ex, resume=args.resume, echo=lambda s: print(s, flush=True), kind=kind)
     finally:
         ex.close()
     failed = sum(bool(r["error"]) for r in rows)

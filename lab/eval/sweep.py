@@ -1,9 +1,12 @@
 """A sweep: a grid of seeded jobs, run by an executor, each job's JSON written as it finishes.
 
-``OUT/jobs/KEY.json`` is a finished job's result (the ``lab identify --json`` schema, checked against
-``lab/schemas`` by :mod:`lab.contract`); ``OUT/failed/KEY.json`` a failed one's error; ``OUT/results.csv``
-one row per job (rewritten after each), ``OUT/report.md`` the success rates with Wilson 95 %
-intervals per condition. ``resume=True`` runs only the jobs without a result (the failed ones again).
+``OUT/jobs/KEY.json`` is a finished job's result (the ``lab identify --json`` or ``lab search --json``
+schema, checked against ``lab/schemas`` by :mod:`lab.contract`); ``OUT/failed/KEY.json`` a failed one's
+error; ``OUT/results.csv`` one row per job (rewritten after each), ``OUT/report.md`` the success rates
+with Wilson 95 % intervals per condition. ``resume=True`` runs only the jobs without a result (the
+failed ones again). What differs between ``lab eval identify`` and ``lab eval search`` (the table's
+columns, the report's conditions and medians) is a :class:`SweepKind`: :data:`IDENTIFY` here,
+:data:`lab.eval.search.SEARCH`.
 
 **Seeds.** Job ``(model, planner, mover, sensing, seed)`` runs the episode ``lab identify --seed
 SEED`` would, wherever it runs: every generator of the episode is ``numpy.random.default_rng(SEED)``,
@@ -25,8 +28,18 @@ from pathlib import Path
 from lab.errors import ConfigError
 from lab.eval.executor import Job, Outcome
 
-__all__ = ["IdentifySweep", "identify_job", "job_seed_sequence", "load_sweep_file", "run_sweep"]
+__all__ = [
+    "IDENTIFY",
+    "IdentifySweep",
+    "SweepKind",
+    "identify_job",
+    "identify_key",
+    "job_seed_sequence",
+    "load_sweep_file",
+    "run_sweep",
+]
 
+#: The columns of ``lab eval identify``'s results.csv.
 CSV_FIELDS = (
     "key",
     "true_model",
@@ -41,6 +54,51 @@ CSV_FIELDS = (
     "sim_time_s",
     "wall_time_s",
     "error",
+)
+
+
+@dataclass(frozen=True)
+class SweepKind:
+    """What one kind of sweep puts in its table and report.
+
+    ``schema``: the :mod:`lab.contract` schema each job's JSON keeps; ``columns``: results.csv's
+    columns (``key``, ``error`` and ``wall_time_s`` among them), the others read from the job's
+    parameters (``params``) or its result; ``conditions``: the parameters a report row is grouped
+    by; ``medians``: ``(header, function of the rows that ran -> value)`` columns of the report;
+    ``state``: a finished job's progress line."""
+
+    name: str
+    schema: str
+    columns: tuple[str, ...]
+    params: tuple[str, ...]
+    conditions: tuple[str, ...]
+    medians: tuple = ()
+    state: object = None
+
+
+def _med(xs, fmt="{:.1f}"):
+    import statistics
+
+    xs = [x for x in xs if x is not None]
+    return fmt.format(statistics.median(xs)) if xs else "-"
+
+
+def _median_actions(rows) -> str:
+    return _med([r["actions"] if r["success"] else r["max_actions"] for r in rows], "{:g}")
+
+
+IDENTIFY = SweepKind(
+    name="identify",
+    schema="identify",
+    columns=CSV_FIELDS,
+    params=("true_model", "planner", "mover", "sensing", "seed", "max_actions"),
+    conditions=("planner", "mover", "sensing"),
+    medians=(
+        # an episode that did not identify its model counts its whole budget (a lower bound)
+        ("median actions", _median_actions),
+        ("median sim s", lambda rs: _med([r["sim_time_s"] for r in rs])),
+    ),
+    state=lambda r: f"success {r['success']} after {r['actions']} actions, {r['sim_time_s']:.1f} s sim",
 )
 
 
@@ -107,8 +165,13 @@ class IdentifySweep:
                                 sensing=sensing,
                                 keep_direction=self.keep_direction,
                             )
-                            out.append(Job(f"{planner}_{mover}_{sensing}_m{m}_s{seed}", identify_job, kw))
+                            out.append(Job(identify_key(planner, mover, sensing, m, seed), identify_job, kw))
         return out
+
+
+def identify_key(planner: str, mover: str, sensing: str, model: int, seed: int) -> str:
+    """An identification job's name: ``OUT/jobs/KEY.json``."""
+    return f"{planner}_{mover}_{sensing}_m{model}_s{seed}"
 
 
 SWEEP_FIELDS = (
@@ -123,8 +186,9 @@ SWEEP_FIELDS = (
 )
 
 
-def load_sweep_file(path: Path) -> dict:
-    """A TOML sweep file's fields (``[sweep]`` table or top level): lists, or strings like the flags'."""
+def load_sweep_file(path: Path, fields: tuple[str, ...] = SWEEP_FIELDS) -> dict:
+    """A TOML sweep file's ``fields`` (``[sweep]`` table or top level): lists, or strings like the
+    flags'. An unknown field is an error naming the allowed ones."""
     try:
         data = tomllib.loads(Path(path).read_text())
     except FileNotFoundError:
@@ -132,10 +196,10 @@ def load_sweep_file(path: Path) -> dict:
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"sweep file {path} is not valid TOML: {e}") from None
     data = data.get("sweep", data)
-    unknown = sorted(set(data) - set(SWEEP_FIELDS))
+    unknown = sorted(set(data) - set(fields))
     if unknown:
         raise ConfigError(
-            f"sweep file {path}: unknown field(s) {', '.join(unknown)}; fields: {', '.join(SWEEP_FIELDS)}"
+            f"sweep file {path}: unknown field(s) {', '.join(unknown)}; fields: {', '.join(fields)}"
         )
     return data
 
@@ -147,11 +211,11 @@ def identify_job(**kwargs) -> dict:
     return run_identify(figures=False, **kwargs)
 
 
-def _row(key: str, job_kw: dict, res: dict | None, error: str | None, wall: float | None) -> dict:
-    row = {k: job_kw.get(k) for k in ("true_model", "planner", "mover", "sensing", "seed", "max_actions")}
+def _row(kind: SweepKind, key: str, job_kw: dict, res: dict | None, error: str | None, wall) -> dict:
+    row = {k: job_kw.get(k) for k in kind.params}
     row["key"] = key
     if res is not None:
-        row.update({k: res.get(k) for k in ("success", "identified_model", "actions", "sim_time_s")})
+        row.update({k: res.get(k) for k in kind.columns if k not in kind.params and k != "key"})
         row["wall_time_s"] = res.get("wall_time_s", wall)
     else:
         row.update(success=False, wall_time_s=wall)
@@ -159,28 +223,30 @@ def _row(key: str, job_kw: dict, res: dict | None, error: str | None, wall: floa
     return row
 
 
-def _write_table(out: Path, rows: list[dict]) -> Path:
-    from lab.io import write_text_atomic
+def _write_table(out: Path, rows: list[dict], kind: SweepKind = IDENTIFY) -> Path:
+    from lab.io import write_bytes_atomic, write_text_atomic
 
+    fields = kind.columns
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, extrasaction="ignore", lineterminator="\n")
+    w = csv.DictWriter(buf, fieldnames=fields, extrasaction="ignore", lineterminator="\n")
     w.writeheader()
     for r in sorted(rows, key=lambda r: r["key"]):
-        w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in CSV_FIELDS})
+        w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in fields})
     write_text_atomic(out / "results.csv", buf.getvalue())
     try:  # Parquet too, when pyarrow is there
         import pyarrow as pa
         import pyarrow.parquet as pq
-
-        pq.write_table(
-            pa.Table.from_pylist([{k: r.get(k) for k in CSV_FIELDS} for r in rows]), out / "results.parquet"
-        )
     except ImportError:
-        pass
+        return out / "results.csv"
+    sink = pa.BufferOutputStream()
+    pq.write_table(pa.Table.from_pylist([{k: r.get(k) for k in fields} for r in rows]), sink)
+    write_bytes_atomic(out / "results.parquet", sink.getvalue().to_pybytes())
     return out / "results.csv"
 
 
-def run_sweep(out: Path, jobs: list[Job], executor, resume: bool = False, echo=print) -> list[dict]:
+def run_sweep(
+    out: Path, jobs: list[Job], executor, resume: bool = False, echo=print, kind: SweepKind = IDENTIFY
+) -> list[dict]:
     """Run ``jobs`` (those without a result in ``out`` when ``resume``) and write the table; the rows."""
     from lab.contract import problems
     from lab.io import write_json_atomic
@@ -197,7 +263,7 @@ def run_sweep(out: Path, jobs: list[Job], executor, resume: bool = False, echo=p
     for j in jobs:
         p = done_dir / f"{j.key}.json"
         if resume and p.is_file():
-            rows[j.key] = _row(j.key, j.kwargs, json.loads(p.read_text()), None, None)
+            rows[j.key] = _row(kind, j.key, j.kwargs, json.loads(p.read_text()), None, None)
         else:
             todo.append(j)
     echo(f"{len(jobs)} jobs, {len(jobs) - len(todo)} done before, {len(todo)} to run on {executor.name}")
@@ -208,7 +274,7 @@ def run_sweep(out: Path, jobs: list[Job], executor, resume: bool = False, echo=p
         o: Outcome
         res, err = o.result, o.error
         if res is not None:
-            bad = problems("identify", res)
+            bad = problems(kind.schema, res)
             if bad:
                 res, err = None, f"ContractError: {bad[0]}"
         if res is not None:
@@ -220,58 +286,45 @@ def run_sweep(out: Path, jobs: list[Job], executor, resume: bool = False, echo=p
                 fail_dir / f"{o.job.key}.json", {"key": o.job.key, "params": o.job.kwargs, "error": err}
             )
             n_fail += 1
-        rows[o.job.key] = _row(o.job.key, o.job.kwargs, res, err, o.wall_time_s)
-        _write_table(out, list(rows.values()))
+        rows[o.job.key] = _row(kind, o.job.key, o.job.kwargs, res, err, o.wall_time_s)
+        _write_table(out, list(rows.values()), kind)
         n = n_ok + n_fail
         el = time.perf_counter() - t0
         eta = el / n * (len(todo) - n)
-        state = (
-            "FAILED " + err.splitlines()[0][:120]
-            if err
-            else (f"success {res['success']} after {res['actions']} actions, {res['sim_time_s']:.1f} s sim")
-        )
+        state = "FAILED " + err.splitlines()[0][:120] if err else kind.state(res)
         echo(
             f"[{n}/{len(todo)}] {o.job.key}: {state} ({o.wall_time_s:.1f} s; {n_fail} failed; "
             f"{el:.0f} s elapsed, ~{eta:.0f} s to go)"
         )
     rows_l = [rows[k] for k in keys if k in rows]
-    _write_table(out, rows_l)
-    write_report(out, rows_l)
+    _write_table(out, rows_l, kind)
+    write_report(out, rows_l, kind)
     return rows_l
 
 
-def write_report(out: Path, rows: list[dict]) -> Path:
-    """``report.md``: success per condition (planner, mover, sensing) with its Wilson 95 % interval,
-    median actions and sim time; the split of the seeds; the failed jobs."""
-    import statistics
-
+def write_report(out: Path, rows: list[dict], kind: SweepKind = IDENTIFY) -> Path:
+    """``report.md``: success per condition (``kind.conditions``, e.g. planner, mover, sensing) with its
+    Wilson 95 % interval and the kind's medians; the split of the seeds; the failed jobs."""
     from lab.evaluation import split_of, wilson_interval
     from lab.io import write_text_atomic
 
-    lines = ["# Sweep report", ""]
+    lines = [f"# Sweep report: lab eval {kind.name}", ""]
     seeds = sorted({int(r["seed"]) for r in rows})
     if seeds:
         lines.append(f"Seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}): the {split_of(seeds)} split.")
         lines.append("")
-    lines += [
-        "| planner | mover | sensing | success | Wilson 95 % | median actions | median sim s | errors |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    conds = sorted({(r["planner"], r["mover"], r["sensing"]) for r in rows})
+    heads = [*kind.conditions, "success", "Wilson 95 %", *(h for h, _ in kind.medians), "errors"]
+    lines += ["| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
+    conds = sorted({tuple(str(r[c]) for c in kind.conditions) for r in rows})
     for c in conds:
-        rs = [r for r in rows if (r["planner"], r["mover"], r["sensing"]) == c]
+        rs = [r for r in rows if tuple(str(r[k]) for k in kind.conditions) == c]
         ran = [r for r in rs if not r["error"]]
         k = sum(bool(r["success"]) for r in ran)
         ci = wilson_interval(k, len(ran)) if ran else None
-        acts = [r["actions"] if r["success"] else r["max_actions"] for r in ran]
-        sims = [r["sim_time_s"] for r in ran]
-        lines.append(
-            f"| {c[0]} | {c[1]} | {c[2]} | {k}/{len(ran)} | "
-            + ("-" if ci is None else f"[{100 * ci[0]:.1f}, {100 * ci[1]:.1f}] %")
-            + f" | {statistics.median(acts) if acts else '-'} | "
-            + (f"{statistics.median(sims):.1f}" if sims else "-")
-            + f" | {len(rs) - len(ran)} |"
-        )
+        cells = [*c, f"{k}/{len(ran)}", "-" if ci is None else f"[{100 * ci[0]:.1f}, {100 * ci[1]:.1f}] %"]
+        cells += [f(ran) if ran else "-" for _, f in kind.medians]
+        cells.append(str(len(rs) - len(ran)))
+        lines.append("| " + " | ".join(cells) + " |")
     fails = [r for r in rows if r["error"]]
     if fails:
         lines += ["", "Failed jobs (`--resume` runs them again):", ""]
@@ -280,8 +333,9 @@ def write_report(out: Path, rows: list[dict]) -> Path:
     return write_text_atomic(out / "report.md", "\n".join(lines)) or out / "report.md"
 
 
-def print_split(seeds, file=sys.stdout) -> None:
+def print_split(seeds, file=None) -> None:
     from lab.evaluation import split_of
 
+    file = file or sys.stdout
     s = sorted(seeds)
     print(f"split: {split_of(s)} (seeds {s[0]}-{s[-1]}, {len(s)} seeds)", file=file)

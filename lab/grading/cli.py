@@ -31,8 +31,11 @@ def run_check_sandbox(args) -> int:
     return 0 if ok else 1
 
 
-def run_grade(args) -> int:
-    """``lab grade ASSIGNMENT SUBMISSION``: one submission, or a class with ``--batch``."""
+def run_grade(args, batch=None) -> int:
+    """``lab grade ASSIGNMENT SUBMISSION``: one submission, or a class with ``--batch``.
+
+    ``batch(chosen, folder, args) -> exit status`` grades the class instead of this machine's loop
+    (``lab grade ... --workers/--scheduler``: :func:`lab.eval.grade.grade_class`), after the same checks."""
     if getattr(args, "check_sandbox", False):
         return run_check_sandbox(args)
     if args.assignment is None or args.submission is None:
@@ -44,7 +47,8 @@ def run_grade(args) -> int:
     insecure = getattr(args, "insecure", False)
     choose_sandbox(insecure)  # refuses here, once, before any grading, when there is no sandbox
     if args.batch:
-        return _batch(chosen, sub, args)
+        _check_batch(sub, args)
+        return (batch or _batch)(chosen, sub, args)
     if len(chosen) != 1:
         raise ConfigError("grade one assignment at a time (several, or 'all', only with --batch)")
     report = grade_submission(
@@ -59,13 +63,16 @@ def run_grade(args) -> int:
     return 0
 
 
-def _batch(chosen: list[Assignment], folder: Path, args) -> int:
+def _check_batch(folder: Path, args) -> None:
     if args.json:
         raise ConfigError(
             "--json is for one submission; with --batch use --csv (and --out for each results.json)"
         )
     if not folder.is_dir():
         raise ConfigError(f"with --batch, {folder} must be a folder with one subfolder per student")
+
+
+def _batch(chosen: list[Assignment], folder: Path, args) -> int:
     students = sorted(
         p for p in folder.iterdir() if p.is_dir() and not p.is_symlink() and not p.name.startswith(".")
     )

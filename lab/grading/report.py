@@ -142,6 +142,27 @@ class GradeReport:
             },
         }
 
+    @classmethod
+    def from_gradescope(cls, assignment: Assignment, data: dict, error: str | None) -> GradeReport:
+        """The report whose :meth:`to_gradescope` is ``data`` (a report graded elsewhere, e.g. on a
+        cluster's worker, sent back as its results.json): each test found by its id in the suite."""
+        by_id = {t.id: t for t in assignment.load_suite().tests}
+        results = [
+            TestResult(
+                by_id[t["extra_data"]["id"]],
+                float(t["score"]),
+                t["status"],
+                t["output"],
+                float(t["extra_data"]["duration_s"]),
+                tuple(t["extra_data"].get("refused", ())),
+            )
+            for t in data["tests"]
+        ]
+        extra = data["extra_data"]
+        return cls(
+            assignment, extra["submission"], results, float(data["execution_time"]), error, extra["sandbox"]
+        )
+
     def write_json(self, path: str | Path) -> Path:
         """Write results.json atomically (a temporary file, flushed to disk, renamed over the target),
         then read it back: an error if what is there is not what was meant to be written."""

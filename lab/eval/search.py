@@ -1,0 +1,250 @@
+"""``lab eval search``: a grid of search trials (objects x placements x seeds x strategies x obstacles
+x sensing profiles), run by :func:`lab.eval.sweep.run_sweep` like ``lab eval identify``.
+
+**Placements.** A trial's placement is the surface it names (``floor``, ``table``, ``shelf``) and a
+seeded random spot on it: ``random_placement`` with ``numpy.random.default_rng([seed, object_index,
+surface_index])`` (the object's index in ``lab search --list-objects``, the surface's in
+``lab.runs.placement.SURFACES``), the same for every strategy, with and without obstacles, wherever
+the job runs. These are the placements ``benchmarks/eval_search.py`` has always used.
+
+**Scoring.** Each job's JSON is the ``lab search --json`` result (its map snapshots left out: they are
+for figures) plus ``obstacles_on_path`` (the boxes were asked for) and ``shortest_path_m``, the shortest
+collision-free path from the start to local search range of the object on the scene's true occupancy
+(evaluation only, the robot never sees it), from which the report computes SPL (success weighted by path
+length)."""
+
+from __future__ import annotations
+
+import math
+import statistics
+from dataclasses import dataclass
+
+from lab.errors import ConfigError
+from lab.eval.executor import Job
+from lab.eval.sweep import SweepKind
+
+__all__ = ["SEARCH", "SEARCH_FIELDS", "SearchSweep", "search_job", "search_key", "shortest_path_m", "spl"]
+
+#: The fields of a ``lab eval search`` sweep file (the flags' names).
+SEARCH_FIELDS = (
+    "objects",
+    "surfaces",
+    "seeds",
+    "strategies",
+    "obstacles",
+    "sensing",
+    "max_time",
+    "max_wall_time",
+)
+
+STRATEGIES = ("paper", "lawnmower", "frontier")
+OBSTACLES = {"no": (False,), "yes": (True,), "both": (False, True)}
+
+
+def search_key(strategy: str, obstacles: bool, sensing: str, object: str, surface: str, seed: int) -> str:
+    """A search job's name: ``OUT/jobs/KEY.json``."""
+    return f"{strategy}_{'obst' if obstacles else 'free'}_{sensing}_{object}_{surface}_s{seed}"
+
+
+@dataclass(frozen=True)
+class SearchSweep:
+    """The grid of ``lab eval search``."""
+
+    objects: tuple[str, ...] = ("cereal_box", "book", "toy_block")
+    surfaces: tuple[str, ...] = ("floor", "table", "shelf")
+    seeds: tuple[int, ...] = ()
+    strategies: tuple[str, ...] = STRATEGIES
+    obstacles: str = "both"
+    sensing: tuple[str, ...] = ("realistic",)
+    max_time: float = 300.0
+    max_wall_time: float | None = None
+
+    def check(self) -> None:
+        from lab.runs.placement import SURFACES, searchable_objects
+
+        if not self.seeds:
+            raise ConfigError("the seed range is empty: give --seeds like 100000-100001 (or seeds = [...])")
+        known = searchable_objects()
+        for o in self.objects:
+            if o not in known:
+                raise ConfigError(f"unknown object {o!r}; searchable objects: {', '.join(known)}")
+        if not self.objects:
+            raise ConfigError(f"no objects: give --objects like {','.join(known[:2])}")
+        for s in self.surfaces:
+            if s not in SURFACES:
+                raise ConfigError(f"unknown surface {s!r}; surfaces: {', '.join(SURFACES)}")
+        if not self.surfaces:
+            raise ConfigError(f"no surfaces: give --surfaces like {','.join(SURFACES)}")
+        for s in self.strategies:
+            if s not in STRATEGIES:
+                raise ConfigError(f"unknown strategy {s!r}; strategies: {', '.join(STRATEGIES)}")
+        if not self.strategies:
+            raise ConfigError(f"no strategies: give --strategies like {','.join(STRATEGIES)}")
+        if self.obstacles not in OBSTACLES:
+            raise ConfigError(f"obstacles must be one of {', '.join(OBSTACLES)}, got {self.obstacles!r}")
+        for s in self.sensing:
+            if s not in ("realistic", "ideal"):
+                raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal")
+        if not self.max_time > 0:
+            raise ConfigError(f"max_time must be > 0 s, got {self.max_time}")
+        if self.max_wall_time is not None and not self.max_wall_time > 0:
+            raise ConfigError(f"max_wall_time must be > 0 s, got {self.max_wall_time}")
+
+    def jobs(self) -> list[Job]:
+        """Every trial; the shelf's last (the slowest), strategies next to each other on a placement."""
+        from lab.runs.placement import SURFACES, searchable_objects
+
+        objects = searchable_objects()
+        out = []
+        for surface in sorted(self.surfaces, key=SURFACES.index):
+            for seed in self.seeds:
+                for name in self.objects:
+                    for ob in OBSTACLES[self.obstacles]:
+                        for sensing in self.sensing:
+                            for strategy in self.strategies:
+                                kw = dict(
+                                    object=name,
+                                    surface=surface,
+                                    seed=seed,
+                                    strategy=strategy,
+                                    obstacles=ob,
+                                    sensing=sensing,
+                                    max_time=self.max_time,
+                                    max_wall_time=self.max_wall_time,
+                                    placement_key=[seed, objects.index(name), SURFACES.index(surface)],
+                                )
+                                key = search_key(strategy, ob, sensing, name, surface, seed)
+                                out.append(Job(key, search_job, kw))
+        return out
+
+
+def shortest_path_m(scene, place, local_max_m: float, local_min_m: float) -> float:
+    """Length [m] of the shortest collision-free path from the robot's start to local-search range
+    (``local_min_m`` .. ``local_max_m``) of the object at ``place``, on the scene's true occupancy (every
+    body but posters and the object, and the walls) grown by the robot's radius: A* on a 5 cm grid.
+    NaN when there is none. Evaluation only."""
+    import numpy as np
+
+    from lab.navigation import Costmap, GridSpec, astar_to_region
+    from lab.robot import BaseLimits
+    from lab.runs.placement import footprint
+
+    sx, sy = scene.room.size
+    spec = GridSpec.from_bounds(-sx / 2, -sy / 2, sx / 2, sy / 2, 0.05)
+    X, Y = spec.cell_centers()
+    pts = np.stack([X.ravel(), Y.ravel()], axis=1)
+    occ = np.zeros(len(pts), bool)
+    for b in scene.bodies:
+        if b.role in ("decor", "object"):
+            continue
+        poly = footprint(b)  # convex: a cell is inside when it is on one side of every edge
+        edges = np.roll(poly, -1, axis=0) - poly
+        rel = pts[:, None, :] - poly[None, :, :]
+        cross = edges[None, :, 0] * rel[:, :, 1] - edges[None, :, 1] * rel[:, :, 0]
+        occ |= np.all(cross >= 0, axis=1) | np.all(cross <= 0, axis=1)
+    occ = occ.reshape(spec.shape)
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True
+    grid = Costmap.from_occupancy(spec, occ).inflated(BaseLimits().radius)
+    rx, ry, _ = scene.robot_start
+    path = astar_to_region(grid, (rx, ry), (place[0], place[1]), local_max_m, local_min_m)
+    return float(path.length) if path.found else math.nan
+
+
+def search_job(
+    object: str,
+    surface: str,
+    seed: int,
+    strategy: str,
+    obstacles: bool,
+    sensing: str,
+    max_time: float,
+    max_wall_time: float | None,
+    placement_key: list[int],
+) -> dict:
+    """One search trial in this worker process (its own PyBullet client): the ``lab search --json``
+    result without its map snapshots, with ``shortest_path_m``."""
+    import numpy as np
+
+    from lab.runs.placement import random_placement
+    from lab.runs.search import navigator_factory, run_search
+    from lab.scene import load_scene
+    from lab.search.agent import AgentConfig
+
+    scene = load_scene("lab_room")
+    place = random_placement(scene, object, np.random.default_rng(placement_key), surface)
+    r = run_search(
+        object,
+        seed,
+        place=place,
+        strategy=strategy,
+        max_time=max_time,
+        navigate=navigator_factory,
+        obstacles=obstacles,
+        max_wall_time=max_wall_time,
+        sensing=sensing,
+    )
+    d = r.to_json()
+    d["n_snapshots"] = len(d.pop("map_snapshots", []))
+    d["obstacles_on_path"] = bool(obstacles)  # asked for (``obstacles`` lists the boxes that fit)
+    lc = AgentConfig().local_search
+    sp = shortest_path_m(r.trace.scene, place, lc.max_distance_m, lc.min_distance_m)
+    d["shortest_path_m"] = round(sp, 4) if math.isfinite(sp) else None
+    return d
+
+
+def spl(rows) -> float:
+    """Success weighted by path length: the mean of ``S_i l_i / max(p_i, l_i)`` (``l_i`` the shortest
+    path, ``p_i`` the driven one); NaN without rows."""
+    vals = []
+    for d in rows:
+        lo, p = d.get("shortest_path_m"), d.get("path_length_m") or 0.0
+        ok = d.get("success") and lo not in (None, "") and math.isfinite(float(lo))
+        vals.append(float(lo) / max(float(p), float(lo), 1e-9) if ok else 0.0)
+    return sum(vals) / len(vals) if vals else math.nan
+
+
+def _median(xs) -> str:
+    xs = [float(x) for x in xs if x not in (None, "")]
+    return f"{statistics.median(xs):.1f}" if xs else "-"
+
+
+SEARCH = SweepKind(
+    name="search",
+    schema="search",
+    columns=(
+        "key",
+        "object",
+        "surface",
+        "strategy",
+        "obstacles",
+        "sensing",
+        "seed",
+        "max_time",
+        "success",
+        "found",
+        "path_length_m",
+        "shortest_path_m",
+        "position_error_m",
+        "orientation_error_deg",
+        "collisions",
+        "global_searches",
+        "local_searches",
+        "sim_time_s",
+        "wall_time_s",
+        "reason",
+        "error",
+    ),
+    params=("object", "surface", "strategy", "obstacles", "sensing", "seed", "max_time"),
+    conditions=("strategy", "obstacles", "sensing"),
+    medians=(
+        ("found", lambda rs: str(sum(bool(r["found"]) for r in rs))),
+        ("SPL", lambda rs: f"{spl(rs):.3f}"),
+        ("median path m", lambda rs: _median(r["path_length_m"] for r in rs)),
+        ("median sim s", lambda rs: _median(r["sim_time_s"] for r in rs)),
+        ("collisions", lambda rs: str(sum(int(r["collisions"] or 0) for r in rs))),
+    ),
+    state=lambda res: (
+        f"success {res['success']} (found {res['found']}), path {res['path_length_m']:.1f} m, "
+        f"{res['sim_time_s']:.1f} s sim: {res['reason']}"
+    ),
+)

@@ -1,0 +1,87 @@
+"""`lab eval search`: each job's JSON is what `lab search` writes for the same object, seed and
+placement (the placement drawn from the job's own seed sequence); --resume runs only what is missing;
+bad input stops in one line before anything starts."""
+
+import csv
+import json
+
+import numpy as np
+
+from lab.cli import main
+from lab.runs.placement import random_placement, searchable_objects
+from lab.scene import load_scene
+
+# two tiny trials: ideal sensing, half a second of simulated time (the first scan's start)
+SWEEP = ["--objects", "toy_block,book", "--surfaces", "floor", "--seeds", "3", "--strategies", "paper",
+         "--obstacles", "no", "--sensing", "ideal", "--max-time", "0.5"]  # fmt: skip
+VOLATILE = ("wall_time_s", "cpu_time_s")
+# what a sweep's job adds to the `lab search` JSON
+ADDED = ("n_snapshots", "shortest_path_m", "obstacles_on_path")
+
+
+def _strip(d: dict) -> dict:
+    d = {k: v for k, v in d.items() if k not in VOLATILE + ADDED and k != "map_snapshots"}
+    d["events"] = [{k: v for k, v in e.items() if "wall" not in k} for e in d["events"]]
+    return d
+
+
+def test_eval_search_jobs_are_lab_search_runs_and_resume_runs_only_the_missing(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    assert main(["eval", "search", *SWEEP, "--out", str(out)]) == 0
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    assert [r["key"] for r in rows] == [
+        "paper_free_ideal_book_floor_s3",
+        "paper_free_ideal_toy_block_floor_s3",
+    ]
+    scene = load_scene("lab_room")
+    for r in rows:
+        job = json.loads((out / "jobs" / f"{r['key']}.json").read_text())
+        # the placement: the trial's seed, the object's index in --list-objects, the floor's (0)
+        rng = np.random.default_rng([3, searchable_objects().index(r["object"]), 0])
+        place = random_placement(scene, r["object"], rng, "floor")
+        assert job["place"] == [round(v, 4) for v in place] and job["surface"] == "floor"
+        # the peer: `lab search` at that placement, same seed, same budget
+        peer = tmp_path / f"{r['object']}.json"
+        argv = ["search", "--object", r["object"], "--seed", "3", "--place=" + ",".join(map(repr, place)),
+                "--sensing", "ideal", "--max-time", "0.5", "--json", str(peer)]  # fmt: skip
+        assert main(argv) == 0
+        assert _strip(job) == _strip(json.loads(peer.read_text()))
+        assert r["success"] == "False" and float(r["sim_time_s"]) == job["sim_time_s"] >= 0.5
+        assert float(r["path_length_m"]) == job["path_length_m"] and r["error"] == ""
+        assert 0.0 < job["shortest_path_m"] < 8.0  # the start to local-search range, round the furniture
+    report = (out / "report.md").read_text()
+    assert "| paper | False | ideal | 0/2 | [0.0, 65.8] % |" in report and "tuning split" in report
+
+    # --resume: only the job whose JSON is gone runs again, and gives the same result
+    first = json.loads((out / "jobs" / "paper_free_ideal_book_floor_s3.json").read_text())
+    (out / "jobs" / "paper_free_ideal_book_floor_s3.json").unlink()
+    capsys.readouterr()
+    assert main(["eval", "search", *SWEEP, "--out", str(out), "--resume"]) == 0
+    assert "2 jobs, 1 done before, 1 to run on local pool" in capsys.readouterr().out
+    again = json.loads((out / "jobs" / "paper_free_ideal_book_floor_s3.json").read_text())
+    assert _strip(again) == _strip(first)
+
+
+def test_bad_search_sweeps_are_refused_in_one_line_before_anything_starts(tmp_path, capsys):
+    out = tmp_path / "o"
+    bad_file = tmp_path / "s.toml"
+    bad_file.write_text('[sweep]\nobjects = ["book"]\nstrategy = ["paper"]\n')
+    cases = [
+        (["--seeds", "", "--out", str(out)], "the seed range is empty"),
+        (["--seeds", "5-3", "--out", str(out)], "5-3"),
+        (
+            ["--sweep", str(bad_file), "--out", str(out)],
+            "unknown field(s) strategy; fields: objects, surfaces",
+        ),
+        ([*SWEEP, "--objects", "teapot", "--out", str(out)], "unknown object 'teapot'; searchable objects:"),
+        ([*SWEEP, "--surfaces", "roof", "--out", str(out)], "unknown surface 'roof'; surfaces: floor"),
+        ([*SWEEP, "--strategies", "dfs", "--out", str(out)], "unknown strategy 'dfs'; strategies: paper"),
+        ([*SWEEP, "--obstacles", "some", "--out", str(out)], "obstacles must be one of no, yes, both"),
+        ([*SWEEP, "--scheduler", "tcp://127.0.0.1:9", "--out", str(out)], "cannot reach the Dask scheduler"),
+        ([*SWEEP, "--job-timeout", "0", "--out", str(out)], "--job-timeout must be > 0 s"),
+    ]
+    for argv, msg in cases:
+        assert main(["eval", "search", *argv]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and msg in err[0], (argv, err)
+        assert not out.exists()
