@@ -12,7 +12,7 @@ from lab.robot import StereoCamera
 from lab.sim import RenderSettings, SimWorld, load_box_models, viewpoint_G_WC
 from lab.training.databases import TrainingParams, get_database, train_database
 from lab.vision.database import load_database, save_database
-from lab.vision.matching import Matcher
+from lab.vision.matching import Matcher, _k_smallest, _k_smallest_by_partition
 from lab.vision.rectify import StereoCalibration, StereoRectifier, load_calibration
 from lab.vision.stereo import StereoParams, stereo_features, triangulate
 
@@ -149,6 +149,42 @@ def test_matcher_flann_agrees_with_exact_search(dbs):
         np.testing.assert_array_equal(x, y)
     with pytest.raises(ConfigError, match="neighbours must be two"):
         Matcher(db).match(f, neighbours=(idx[:, :3], idx[:, :3].astype(float)))
+
+
+def test_exact_search_is_the_argpartition_search_bit_for_bit(dbs):
+    """The k nearest by repeated argmin (ties re-done by argpartition) equal the argpartition search,
+    indices and distances, on real frames against every database (ties common: databases store some
+    descriptors twice and squared distances of SIFT's integer descriptors are integers), and on a
+    synthetic matrix made of ties; their values are the dense sort's."""
+    with SimWorld("box_database") as w:
+        w.add_carrier(load_box_models()[2], Pose2D(0, 0, 0), box_yaw=0.5)
+        frames = [
+            stereo_features(*w.render_stereo(viewpoint_G_WC((c, s, 0.7), (0, 0, 0.49)), CAM), CAM)
+            for c, s in RING[::3]
+        ]
+    n_ties = 0
+    for f in frames:
+        q = f.descriptors.astype(np.float32)
+        for db in dbs.values():
+            m = Matcher(db, method="brute", k=8)
+            d2 = np.einsum("ij,ij->i", q, q)[:, None] + m._D_sq[None, :] - 2.0 * q @ m._D.T
+            a, b = _k_smallest(d2, 8), _k_smallest_by_partition(d2, k=8)
+            np.testing.assert_array_equal(a[0], b[0])
+            np.testing.assert_array_equal(a[1], b[1])
+            np.testing.assert_array_equal(a[1], np.sort(d2, axis=1)[:, :8])  # a dense peer
+            s = np.sort(d2, axis=1)[:, :9]
+            n_ties += int(np.count_nonzero((s[:, 1:] == s[:, :-1]).any(axis=1)))
+    assert n_ties > 10  # the tie path was exercised
+    rng = np.random.default_rng(0)
+    d2 = rng.integers(0, 6, (200, 50)).astype(np.float32)  # nearly every row has ties
+    for k in (1, 3, 8, 49):
+        a, b = _k_smallest(d2, k), _k_smallest_by_partition(d2, k=k)
+        np.testing.assert_array_equal(a[0], b[0])
+        np.testing.assert_array_equal(a[1], b[1])
+    d2 = rng.permutation(200 * 50).reshape(200, 50).astype(float)  # no ties: the argmin path alone
+    a, b = _k_smallest(d2, 8), _k_smallest_by_partition(d2, k=8)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[0], np.argsort(d2, axis=1)[:, :8])
 
 
 def test_training_is_deterministic_and_remembers_visibility(dbs):
