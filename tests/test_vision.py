@@ -14,7 +14,14 @@ from lab.training.databases import TrainingParams, get_database, train_database
 from lab.vision.database import load_database, save_database
 from lab.vision.matching import Matcher, _k_smallest, _k_smallest_by_partition
 from lab.vision.rectify import StereoCalibration, StereoRectifier, load_calibration
-from lab.vision.stereo import StereoParams, stereo_features, triangulate
+from lab.vision.stereo import (
+    StereoParams,
+    _epipolar_matches,
+    _epipolar_matches_dense,
+    sift,
+    stereo_features,
+    triangulate,
+)
 
 CAM = StereoCamera.from_fov(320, 240, 60.0, 0.12)
 RING = [(math.cos(a), math.sin(a)) for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)]
@@ -91,6 +98,57 @@ def test_right_image_in_a_second_thread_gives_the_same_features():
     assert len(a) > 50
     for x, y in ((a.points_C, b.points_C), (a.descriptors, b.descriptors), (a.uv, b.uv)):
         np.testing.assert_array_equal(x, y)
+
+
+def test_epipolar_matching_over_the_allowed_pairs_is_the_dense_matrix_s():
+    """The sparse epipolar matcher (allowed pairs only) returns the dense distance matrix's matches,
+    index for index: on rendered pairs, with the camera noise of the realistic profile, and on
+    synthetic keypoints made of ties (rows shared by many keypoints, descriptors of 0..3)."""
+    from lab.sim.sensing import corrupt_stereo, sensing_profile
+
+    errors = sensing_profile("realistic").camera
+
+    params, det = StereoParams(), sift()
+    rng = np.random.default_rng(0)
+    n_matches = 0
+    with SimWorld("box_database") as w:
+        w.add_carrier(load_box_models()[0], Pose2D(0, 0, 0), box_yaw=0.2)
+        for cx, cy in RING[::2]:
+            left, right = w.render_stereo(viewpoint_G_WC((cx, cy, 0.7), (0, 0, 0.49)), CAM)
+            for noisy in (False, True):
+                if noisy:
+                    draw = errors.draw(rng, CAM, (0.3, 0.2, -1.0))
+                    left, right = corrupt_stereo(left, right, errors, draw, rng)
+                kl, dl = det.detectAndCompute(cv2.cvtColor(left, cv2.COLOR_RGB2GRAY), None)
+                kr, dr = det.detectAndCompute(cv2.cvtColor(right, cv2.COLOR_RGB2GRAY), None)
+                a = _epipolar_matches(kl, dl, kr, dr, params)
+                b = _epipolar_matches_dense(kl, dl, kr, dr, params)
+                np.testing.assert_array_equal(a[0], b[0])
+                np.testing.assert_array_equal(a[1], b[1])
+                n_matches += len(a[0])
+    assert n_matches > 500
+    n_synthetic = 0
+    for _ in range(20):
+        n_l, n_r = rng.integers(1, 60, 2)
+        kl = [cv2.KeyPoint(float(rng.uniform(0, 320)), float(rng.integers(0, 6)), 3.0) for _ in range(n_l)]
+        kr = [
+            cv2.KeyPoint(
+                float(rng.uniform(0, 320)), float(rng.integers(0, 6)) + rng.choice([0, 0.5, 1.5, 2]), 3.0
+            )
+            for _ in range(n_r)
+        ]
+        dl = rng.integers(0, 4, (n_l, 128)).astype(np.float32)
+        dr = rng.integers(0, 4, (n_r, 128)).astype(np.float32)
+        for p in (params, StereoParams(ratio=1.0)):
+            a, b = _epipolar_matches(kl, dl, kr, dr, p), _epipolar_matches_dense(kl, dl, kr, dr, p)
+            np.testing.assert_array_equal(a[0], b[0])
+            np.testing.assert_array_equal(a[1], b[1])
+            n_synthetic += len(a[0])
+    assert n_synthetic > 20
+    # descriptors that are not small integers take the dense path
+    a = _epipolar_matches(kl, dl + 0.25, kr, dr, params)
+    b = _epipolar_matches_dense(kl, dl + 0.25, kr, dr, params)
+    np.testing.assert_array_equal(a[0], b[0])
 
 
 def test_triangulation_agrees_with_opencv():
