@@ -211,9 +211,10 @@ def test_matcher_flann_agrees_with_exact_search(dbs):
 
 def test_exact_search_is_the_argpartition_search_bit_for_bit(dbs):
     """The k nearest by repeated argmin (ties re-done by argpartition) equal the argpartition search,
-    indices and distances, on real frames against every database (ties common: databases store some
-    descriptors twice and squared distances of SIFT's integer descriptors are integers), and on a
-    synthetic matrix made of ties; their values are the dense sort's."""
+    indices and distances, and the alias table the direct alias test, on real frames against every
+    database (ties common: databases store some descriptors twice and squared distances of SIFT's
+    integer descriptors are integers), and on a synthetic matrix made of ties; their values are the
+    dense sort's."""
     with SimWorld("box_database") as w:
         w.add_carrier(load_box_models()[2], Pose2D(0, 0, 0), box_yaw=0.5)
         frames = [
@@ -232,6 +233,13 @@ def test_exact_search_is_the_argpartition_search_bit_for_bit(dbs):
             np.testing.assert_array_equal(a[1], np.sort(d2, axis=1)[:, :8])  # a dense peer
             s = np.sort(d2, axis=1)[:, :9]
             n_ties += int(np.count_nonzero((s[:, 1:] == s[:, :-1]).any(axis=1)))
+            # the alias table (one matrix product) is the direct descriptor distance, pair for pair
+            direct = np.linalg.norm(m._D[a[0]] - m._D[a[0][:, :1]], axis=2) < m.alias_distance
+            np.testing.assert_array_equal(m._aliases(a[0]), direct)
+            chunked = Matcher(db, method="brute", k=8)
+            chunked._D = chunked._D + np.float32(0.25)  # not integers: the table by the direct expression
+            direct = np.linalg.norm(chunked._D[a[0]] - chunked._D[a[0][:, :1]], axis=2) < m.alias_distance
+            np.testing.assert_array_equal(chunked._aliases(a[0]), direct)
     assert n_ties > 10  # the tie path was exercised
     rng = np.random.default_rng(0)
     d2 = rng.integers(0, 6, (200, 50)).astype(np.float32)  # nearly every row has ties

@@ -13,7 +13,7 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.vision.database import FeatureDatabase
-from lab.vision.stereo import Features3D
+from lab.vision.stereo import Features3D, _small_integers
 
 __all__ = ["Correspondences", "Matcher"]
 
@@ -161,6 +161,7 @@ class Matcher:
         self.k = min(k, len(db))
         self._D = np.ascontiguousarray(db.descriptors, dtype=np.float32)
         self._checks = checks
+        self._alias_table: np.ndarray | None = None  # (N, N) bool, on first use (_aliases)
         if method == "flann" and len(db) < 64:  # FLANN asserts on tiny indexes; exact search is as fast there
             self.method = method = "brute"
         if method == "flann" and len(db) >= 2:
@@ -181,6 +182,34 @@ class Matcher:
         else:
             idx, part = _k_smallest_by_partition(d2, np.tile(np.arange(len(self._D)), (len(q), 1)))
         return idx, np.sqrt(np.maximum(part, 0.0))
+
+    _ALIAS_TABLE_MAX = 4096  # database features up to which the alias table is kept (16 MB at most)
+
+    def _aliases(self, idx: np.ndarray) -> np.ndarray:
+        """(n, k) bool: neighbour ``idx[m, c]``'s descriptor lies within ``alias_distance`` of the nearest
+        one's, ``idx[m, 0]``, read from a table of every pair of the database's features made on first
+        use (databases up to ``_ALIAS_TABLE_MAX`` features; larger ones compute it directly).
+
+        For SIFT's integer descriptors the table's squared distances come from one matrix product:
+        integers below 2^24, exact in float32 however summed, so the table is the direct
+        ``norm(D_a - D_b) < alias_distance``'s, pair for pair; other descriptors fill it in chunks by
+        that very expression."""
+        if len(self._D) > self._ALIAS_TABLE_MAX:
+            return np.linalg.norm(self._D[idx] - self._D[idx[:, :1]], axis=2) < self.alias_distance
+        if self._alias_table is None:
+            D = self._D
+            if _small_integers(D):
+                sq = np.einsum("ij,ij->i", D, D)
+                d2 = np.maximum(sq[:, None] + sq[None, :] - 2.0 * D @ D.T, 0.0)
+                self._alias_table = np.sqrt(d2) < self.alias_distance
+            else:
+                table = np.empty((len(D), len(D)), bool)
+                for a in range(0, len(D), 64):
+                    table[a : a + 64] = (
+                        np.linalg.norm(D[a : a + 64, None, :] - D[None], axis=2) < self.alias_distance
+                    )
+                self._alias_table = table
+        return self._alias_table[idx[:, :1], idx]
 
     def match(
         self, features: Features3D, neighbours: tuple[np.ndarray, np.ndarray] | None = None
@@ -209,7 +238,7 @@ class Matcher:
                 )
         n, k = idx.shape
         # aliases: neighbours whose database descriptor is close to the nearest one's
-        alias = np.linalg.norm(self._D[idx] - self._D[idx[:, :1]], axis=2) < self.alias_distance
+        alias = self._aliases(idx)
         if self.alias_radius > 0:  # the same physical point, seen from far-apart training views
             P = self.db.points_O
             alias |= np.linalg.norm(P[idx] - P[idx[:, :1]], axis=2) < self.alias_radius
