@@ -152,7 +152,7 @@ def staged_perceive(agent: IdentificationAgent, frame, params: StereoParams, det
     searched = zip(agent.matchers, agent.scorers, strict=True)
     pairs = [m.match(f, _shared(m, s, f)).pairs(f, s.db) for m, s in searched]
     marks.append(_now())
-    updates = tuple(agent.bank.update(i, *pairs[i]) for i in range(len(agent.bank)))
+    updates = agent.bank.update_all(pairs)
     marks.append(_now())
     states = [state_for_scoring(p, u) for p, u in zip(predicted, updates, strict=True)]
     belief = calc_current_entropy(agent.P, f, agent.scorers, states, agent.scoring, agent.turns)
@@ -237,8 +237,7 @@ def bank_against_filterpy(n_steps: int, n_features: int = 50):
 
     def banked(fr):
         bank.predict(fr[0], fr[1], fr[2], dt)
-        for i in range(4):
-            bank.update(i, fr[3], fr[4], fr[5])
+        bank.update_all([fr[3:6]] * 4)
 
     def filterpy_step(fr):
         u = fr[:3]
