@@ -36,33 +36,7 @@ from lab.estimation import (  # noqa: E402
     motion_model,
     process_noise_covariance,
 )
-from lab.estimation.synthetic import box_surface_points, noisy_points, stereo_covariance  # noqa: E402
-from lab.geometry import Pose2D, pose6_to_G, relative_pose2d  # noqa: E402
-from lab.robot import StereoCamera  # noqa: E402
-
-
-def make_frames(n_steps: int, n_features: int, seed: int = 0):
-    """Inputs for n_steps filter steps: (G_RC_prev, G_RC, G_odom, d_C, b_O, Sigma_d) per step."""
-    rng = np.random.default_rng(seed)
-    cam = StereoCamera.from_fov(320, 240, 60.0, baseline=0.12)
-    b_all, _ = box_surface_points(rng, 40, 0.28)
-    X = np.array([0.05, 0.02, 1.1, 0.6, -0.4, 1.8])
-    frames = []
-    pan_prev, robot_prev = 0.0, Pose2D(0.0, 0.0, 0.0)
-    for k in range(n_steps):  # the robot rocks back and forth and the head pans: the object stays in view
-        pan = 0.05 * np.sin(0.1 * k)
-        robot = Pose2D(0.1 * np.sin(0.05 * k), 0.0, 0.05 * np.sin(0.03 * k))
-        G_odom = relative_pose2d(robot_prev, robot)
-        X_k = motion_model(X, cam.G_RC(pan_prev, -0.2), cam.G_RC(pan, -0.2), G_odom)
-        idx = rng.choice(len(b_all), n_features, replace=False)
-        G = pose6_to_G(X_k)
-        p = b_all[idx] @ G[:3, :3].T + G[:3, 3]
-        S = stereo_covariance(p, cam.fx, cam.baseline, 0.3, 0.5)
-        frames.append(
-            (cam.G_RC(pan_prev, -0.2), cam.G_RC(pan, -0.2), G_odom, noisy_points(rng, p, S), b_all[idx], S)
-        )
-        X, pan_prev, robot_prev = X_k, pan, robot
-    return X, frames
+from lab.estimation.synthetic import rocking_robot_frames  # noqa: E402
 
 
 def median_us(steps, frames, warmup=20):
@@ -83,7 +57,7 @@ def main():
     ap.add_argument("--features", type=int, default=50)
     args = ap.parse_args()
     X0 = np.array([0.05, 0.02, 1.1, 0.6, -0.4, 1.8])
-    _, frames = make_frames(args.steps, args.features)
+    _, frames = rocking_robot_frames(args.steps, args.features)
     Sigma0 = np.diag([0.01] * 3 + [0.02] * 3) ** 2
     dt = 0.1
 

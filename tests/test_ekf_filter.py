@@ -17,6 +17,7 @@ from lab.estimation import (
     EKFConfig,
     GateConfig,
     ModelUncertainty,
+    OrientationChart,
     PoseEKF,
     UpdateOutcome,
     data_log_likelihood,
@@ -402,6 +403,101 @@ def test_bank_applies_one_motion_to_all_and_updates_each_model_alone():
     np.testing.assert_array_equal(after[0].mu, snapshot[0].mu)  # model 0 untouched
     assert not np.array_equal(after[1].mu, snapshot[1].mu)
     assert bank.log_likelihoods[1] == res.log_likelihood and bank.log_likelihoods[0] is None
+
+
+def test_batched_bank_equals_four_filterpy_filters_over_25_steps():
+    """The bank's batched update (update_all) and its one-motion predict against 4 filterpy EKFs fed
+    the same data, each model with its own start and its own matches: states, covariances and log
+    likelihoods equal to 1e-9 at every step."""
+    rng = np.random.default_rng(21)
+    b_O, nrm = cube(rng)
+    run = moving_run(rng, n_steps=26)
+    Sigma0 = np.diag([0.02] * 3 + [0.05] * 3) ** 2
+    starts = [run.X_true[0] + 0.01 * rng.standard_normal(6) for _ in range(4)]
+    bank = EKFBank(4, NO_GATE, rng=np.random.default_rng(0))
+    fps = []
+    for f, mu0 in zip(bank.filters, starts, strict=True):
+        f.initialize(mu0, Sigma0)
+        fp = FilterpyEKFWithOurMotion(dim_x=6, dim_z=3)
+        fp.x, fp.P = mu0[:, None].copy(), Sigma0.copy()
+        fps.append(fp)
+    for k in range(1, len(run.X_true)):
+        u = (run.G_RC[k - 1], run.G_RC[k], run.G_odom[k - 1])
+        bank.predict(*u, run.dt)
+        frames = [observe(rng, run.X_true[k], b_O, nrm, n_max=5 + (k + i) % 12) for i in range(4)]
+        results = bank.update_all([(f.d_C, f.b_O, f.Sigma_d) for f in frames])
+        for ekf, fp, f, res in zip(bank.filters, fps, frames, results, strict=True):
+            fp.F = motion_jacobian(fp.x[:, 0], *u)
+            fp.Q = process_noise_covariance(
+                motion_model(fp.x[:, 0], *u), run.G_RC[k], u[2], run.dt, NO_GATE.process
+            )
+            fp.predict(u=u)
+            fp.update(
+                f.d_C.reshape(-1, 1),
+                lambda x, b: measurement_jacobian(x[:, 0], b),
+                lambda x, b: measurement_model(x[:, 0], b).reshape(-1, 1),
+                R=measurement_covariance(f.Sigma_d),
+                args=f.b_O,
+                hx_args=f.b_O,
+            )
+            assert res.applied and res.n_used == len(f.d_C)
+            np.testing.assert_allclose(state_residual(ekf.mu, fp.x[:, 0]), 0.0, atol=1e-9)
+            np.testing.assert_allclose(ekf.Sigma, fp.P, rtol=0, atol=1e-9 * np.abs(fp.P).max())
+            assert abs(res.log_likelihood - fp.log_likelihood) < 1e-9 * abs(fp.log_likelihood)
+            assert abs(res.nis - fp.mahalanobis**2) < 1e-9 * res.nis
+
+
+def test_batched_bank_update_is_each_filter_s_own_update():
+    """update_all against update(i, ...) filter by filter, in the identification's configuration
+    (rotation-vector chart, calibration error, gate, RANSAC initialisation): the same outcomes, used
+    rows and (to round-off) states, NIS and likelihoods, through initialisations, skipped frames (too
+    few matches, a broken row) and gated-out wrong matches."""
+    rng = np.random.default_rng(8)
+    b_O, nrm = cube(rng)
+    run = moving_run(rng, n_steps=20)
+    cfg = EKFConfig(
+        chart=OrientationChart.ROTATION_VECTOR,
+        calibration=CalibrationUncertainty(scale_std=0.007, pointing_std_deg=0.05),
+    )
+    batched, alone = (
+        EKFBank(4, cfg, rng=np.random.default_rng(3)),
+        EKFBank(4, cfg, rng=np.random.default_rng(3)),
+    )
+    outcomes = set()
+    for k in range(1, len(run.X_true)):
+        u = (run.G_RC[k - 1], run.G_RC[k], run.G_odom[k - 1])
+        pa, pb = batched.predict(*u, run.dt), alone.predict(*u, run.dt)
+        for x, y in zip(pa, pb, strict=True):
+            assert (x is None) == (y is None)
+            if x is not None:  # the states differ by the updates' round-off
+                np.testing.assert_allclose(x.mu, y.mu, rtol=0, atol=1e-12)
+                np.testing.assert_allclose(
+                    x.Sigma_rv, y.Sigma_rv, rtol=0, atol=1e-12 * np.abs(y.Sigma_rv).max()
+                )
+        matches = []
+        for i in range(4):
+            f = observe(rng, run.X_true[k], b_O, nrm, n_max=2 if (k + i) % 7 == 0 else 12)
+            d = f.d_C.copy()
+            if (k + i) % 5 == 0:
+                d[0] += 0.3  # a wrong match: gated out
+            if (k + i) % 6 == 0:
+                d[1] = np.nan  # a broken row: dropped
+            matches.append((d, f.b_O, f.Sigma_d))
+        ra = batched.update_all(matches)
+        rb = [alone.update(i, *m) for i, m in enumerate(matches)]
+        for x, y, fa, fb in zip(ra, rb, batched.filters, alone.filters, strict=True):
+            outcomes.add(x.outcome)
+            assert (x.outcome, x.reason, x.n_used) == (y.outcome, y.reason, y.n_used)
+            np.testing.assert_array_equal(x.inliers, y.inliers)
+            if fa.mu is not None:
+                np.testing.assert_allclose(fa.mu, fb.mu, rtol=0, atol=1e-12)
+                np.testing.assert_allclose(fa.P, fb.P, rtol=0, atol=1e-12 * np.abs(fb.P).max())
+            if x.applied:
+                assert x.nis == pytest.approx(y.nis, rel=1e-10)
+                assert x.log_likelihood == pytest.approx(y.log_likelihood, rel=1e-12)
+    assert {UpdateOutcome.INITIALIZED, UpdateOutcome.UPDATED, UpdateOutcome.SKIPPED} <= outcomes
+    with pytest.raises(ValueError, match="one match set per model"):
+        batched.update_all(matches[:2])
 
 
 def test_estimates_are_read_only_snapshots():

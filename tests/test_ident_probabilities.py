@@ -248,6 +248,90 @@ def test_pose_sharing_scores_a_model_without_a_filter_at_the_others_pose(scene):
     assert own.P[1] < 0.2 and own.P[0] > 0.3  # without sharing, no pose means no explanation
 
 
+def _dense_explain(scorer, f, est):
+    """The explanation of the scoring's docstring, one measured feature and candidate at a time: the k
+    nearest descriptors by a full sort, the candidates within the descriptor distance, each gated by
+    its Euclidean residual and its Mahalanobis distance under C_l Sigma_bar C_l^T + Sigma_d (C_l from
+    finite differences of the measurement model in the rotation-vector chart, S inverted densely), the
+    nearest in Mahalanobis distance kept (the first on exact ties)."""
+    from lab.estimation import measurement_model, retract_rv
+    from lab.estimation.fit import chi2_quantile
+
+    cfg = scorer.config
+    n = len(f)
+    idx_db, m2_out, ld_out = np.full(n, -1), np.full(n, np.inf), np.full(n, -np.inf)
+    D = scorer.db.descriptors.astype(float)
+    mu, Sig = np.asarray(est.mu, float), np.asarray(est.Sigma_rv, float)
+    vis = scorer.visible(est)
+    for m in range(n):
+        dist = np.linalg.norm(D - f.descriptors[m].astype(float), axis=1)
+        best = None
+        for l in np.argsort(dist, kind="stable")[: scorer.k_neighbours]:
+            if not dist[l] < cfg.max_descriptor_distance or (vis is not None and not vis[l]):
+                continue
+            b = scorer.db.points_O[l : l + 1]
+            h = measurement_model(mu, b)[0]
+            C = np.zeros((3, 6))
+            for a in range(6):  # central differences of H along the chart's coordinates
+                e = np.zeros(6)
+                e[a] = 1e-6
+                C[:, a] = (
+                    measurement_model(retract_rv(mu, e), b)[0] - measurement_model(retract_rv(mu, -e), b)[0]
+                ) / 2e-6
+            r = f.points_C[m] - h
+            Sm = C @ Sig @ C.T + f.covariances[m]
+            m2 = float(r @ np.linalg.inv(Sm) @ r)
+            if np.linalg.norm(r) > cfg.dist_max_m or m2 > chi2_quantile(cfg.gate_prob, 3):
+                continue
+            if best is None or m2 < best[0]:
+                best = (m2, l, -0.5 * (m2 + np.linalg.slogdet(Sm)[1] + 3 * math.log(2 * math.pi)))
+        if best is not None:
+            m2_out[m], idx_db[m], ld_out[m] = best
+    return idx_db, m2_out, ld_out
+
+
+def test_the_vectorised_explanation_is_the_dense_per_candidate_one(scene):
+    """explain_many (all poses at once, Euclidean gate first, closed-form 3x3 Cholesky) against the
+    per-candidate reference, at right, look-alike, nearly-gated and wrong poses, with and without the
+    visibility test; and explain / score at one pose are explain_many's."""
+    dbs, _ = scene
+    rng = np.random.default_rng(11)
+    vis_cfg = ScoringConfig(visibility_deg=15.0).for_camera(S.CAMERA)
+    scorers = [ModelScorer(db, ScoringConfig().for_camera(S.CAMERA)) for db in dbs[:2]]
+    scorers += [ModelScorer(dbs[1], vis_cfg)]
+    counts = []
+    for az, yaw in ((10.0, 0.0), (180.0, 0.0), (135.0, 30.0)):
+        G_WO, G_WC = S.box_pose(yaw), S.camera_at(az)
+        f = S.observe(dbs[1], G_WO, G_WC, rng)
+        Sig = np.diag([1e-4] * 3 + [1e-3] * 3)
+        poses = [
+            S.estimate(G_WO, G_WC, Sig),
+            S.estimate(G_WO @ S.se3(S.Rz(math.pi / 2)), G_WC, Sig),  # a look-alike turn
+            S.estimate(G_WO @ S.se3(S.Rz(0.12), (0.03, -0.02, 0.02)), G_WC, Sig),  # off: some gated out
+            S.estimate(G_WO @ S.se3(None, (0.5, 0.0, 0.0)), G_WC, Sig),  # wrong: nothing
+            None,
+        ]
+        for sc in scorers:
+            many = sc.explain_many(f, poses)
+            assert many[-1].n_explained == 0
+            for est, e in zip(poses[:-1], many[:-1], strict=True):
+                idx_db, m2, ld = _dense_explain(sc, f, est)
+                np.testing.assert_array_equal(e.idx_db, idx_db)
+                np.testing.assert_array_equal(e.explained, idx_db >= 0)
+                np.testing.assert_allclose(e.m2, m2, rtol=1e-6, atol=1e-9)  # finite differences: 1e-6
+                np.testing.assert_allclose(e.log_density, ld, rtol=1e-9, atol=1e-6)
+                one = sc.explain(f, est)
+                for a, b in ((one.idx_db, e.idx_db), (one.m2, e.m2), (one.log_density, e.log_density)):
+                    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+            counts.append([e.n_explained for e in many])
+            scores = sc.score_many(f, poses)
+            for est, s in zip(poses, scores, strict=True):
+                assert s.log_likelihood == pytest.approx(sc.score(f, est).log_likelihood, rel=1e-12)
+    counts = np.array(counts)  # (scorer x view, pose)
+    assert counts[:, 0].max() > 20 and counts[:, 1].max() > 20  # the right pose and a look-alike turn
+    assert np.any((counts[:, 2] > 0) & (counts[:, 2] < counts[:, 0]))  # the gate cut some, not all
+
+
 def test_joint_and_per_feature_forms_agree_on_clean_data(scene):
     dbs, scorers = scene
     rng = np.random.default_rng(6)

@@ -130,7 +130,9 @@ def test_an_unknown_sensing_profile_is_one_clear_line(tmp_path):
     r = subprocess.run(
         [sys.executable, "-m", "lab", "identify", "--sensing", str(bad_file)], capture_output=True, text=True
     )
-    assert r.returncode == 2 and "room.toml: sensing.odometry.spin_slip must be a finite number >= 0" in r.stderr
+    assert (
+        r.returncode == 2 and "room.toml: sensing.odometry.spin_slip must be a finite number >= 0" in r.stderr
+    )
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     with pytest.raises(ConfigError, match="perfect"):
         run_identify(2, seed=0, planner="circle", max_actions=0, figures=False, sensing="perfect")

@@ -12,9 +12,16 @@ from lab.robot import StereoCamera
 from lab.sim import RenderSettings, SimWorld, load_box_models, viewpoint_G_WC
 from lab.training.databases import TrainingParams, get_database, train_database
 from lab.vision.database import load_database, save_database
-from lab.vision.matching import Matcher
+from lab.vision.matching import Matcher, _k_smallest, _k_smallest_by_partition
 from lab.vision.rectify import StereoCalibration, StereoRectifier, load_calibration
-from lab.vision.stereo import StereoParams, stereo_features, triangulate
+from lab.vision.stereo import (
+    StereoParams,
+    _epipolar_matches,
+    _epipolar_matches_dense,
+    sift,
+    stereo_features,
+    triangulate,
+)
 
 CAM = StereoCamera.from_fov(320, 240, 60.0, 0.12)
 RING = [(math.cos(a), math.sin(a)) for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)]
@@ -93,6 +100,57 @@ def test_right_image_in_a_second_thread_gives_the_same_features():
         np.testing.assert_array_equal(x, y)
 
 
+def test_epipolar_matching_over_the_allowed_pairs_is_the_dense_matrix_s():
+    """The sparse epipolar matcher (allowed pairs only) returns the dense distance matrix's matches,
+    index for index: on rendered pairs, with the camera noise of the realistic profile, and on
+    synthetic keypoints made of ties (rows shared by many keypoints, descriptors of 0..3)."""
+    from lab.sim.sensing import corrupt_stereo, sensing_profile
+
+    errors = sensing_profile("realistic").camera
+
+    params, det = StereoParams(), sift()
+    rng = np.random.default_rng(0)
+    n_matches = 0
+    with SimWorld("box_database") as w:
+        w.add_carrier(load_box_models()[0], Pose2D(0, 0, 0), box_yaw=0.2)
+        for cx, cy in RING[::2]:
+            left, right = w.render_stereo(viewpoint_G_WC((cx, cy, 0.7), (0, 0, 0.49)), CAM)
+            for noisy in (False, True):
+                if noisy:
+                    draw = errors.draw(rng, CAM, (0.3, 0.2, -1.0))
+                    left, right = corrupt_stereo(left, right, errors, draw, rng)
+                kl, dl = det.detectAndCompute(cv2.cvtColor(left, cv2.COLOR_RGB2GRAY), None)
+                kr, dr = det.detectAndCompute(cv2.cvtColor(right, cv2.COLOR_RGB2GRAY), None)
+                a = _epipolar_matches(kl, dl, kr, dr, params)
+                b = _epipolar_matches_dense(kl, dl, kr, dr, params)
+                np.testing.assert_array_equal(a[0], b[0])
+                np.testing.assert_array_equal(a[1], b[1])
+                n_matches += len(a[0])
+    assert n_matches > 500
+    n_synthetic = 0
+    for _ in range(20):
+        n_l, n_r = rng.integers(1, 60, 2)
+        kl = [cv2.KeyPoint(float(rng.uniform(0, 320)), float(rng.integers(0, 6)), 3.0) for _ in range(n_l)]
+        kr = [
+            cv2.KeyPoint(
+                float(rng.uniform(0, 320)), float(rng.integers(0, 6)) + rng.choice([0, 0.5, 1.5, 2]), 3.0
+            )
+            for _ in range(n_r)
+        ]
+        dl = rng.integers(0, 4, (n_l, 128)).astype(np.float32)
+        dr = rng.integers(0, 4, (n_r, 128)).astype(np.float32)
+        for p in (params, StereoParams(ratio=1.0)):
+            a, b = _epipolar_matches(kl, dl, kr, dr, p), _epipolar_matches_dense(kl, dl, kr, dr, p)
+            np.testing.assert_array_equal(a[0], b[0])
+            np.testing.assert_array_equal(a[1], b[1])
+            n_synthetic += len(a[0])
+    assert n_synthetic > 20
+    # descriptors that are not small integers take the dense path
+    a = _epipolar_matches(kl, dl + 0.25, kr, dr, params)
+    b = _epipolar_matches_dense(kl, dl + 0.25, kr, dr, params)
+    np.testing.assert_array_equal(a[0], b[0])
+
+
 def test_triangulation_agrees_with_opencv():
     rng = np.random.default_rng(0)
     uv_l = rng.uniform([20, 20], [300, 220], (50, 2))
@@ -149,6 +207,50 @@ def test_matcher_flann_agrees_with_exact_search(dbs):
         np.testing.assert_array_equal(x, y)
     with pytest.raises(ConfigError, match="neighbours must be two"):
         Matcher(db).match(f, neighbours=(idx[:, :3], idx[:, :3].astype(float)))
+
+
+def test_exact_search_is_the_argpartition_search_bit_for_bit(dbs):
+    """The k nearest by repeated argmin (ties re-done by argpartition) equal the argpartition search,
+    indices and distances, and the alias table the direct alias test, on real frames against every
+    database (ties common: databases store some descriptors twice and squared distances of SIFT's
+    integer descriptors are integers), and on a synthetic matrix made of ties; their values are the
+    dense sort's."""
+    with SimWorld("box_database") as w:
+        w.add_carrier(load_box_models()[2], Pose2D(0, 0, 0), box_yaw=0.5)
+        frames = [
+            stereo_features(*w.render_stereo(viewpoint_G_WC((c, s, 0.7), (0, 0, 0.49)), CAM), CAM)
+            for c, s in RING[::3]
+        ]
+    n_ties = 0
+    for f in frames:
+        q = f.descriptors.astype(np.float32)
+        for db in dbs.values():
+            m = Matcher(db, method="brute", k=8)
+            d2 = np.einsum("ij,ij->i", q, q)[:, None] + m._D_sq[None, :] - 2.0 * q @ m._D.T
+            a, b = _k_smallest(d2, 8), _k_smallest_by_partition(d2, k=8)
+            np.testing.assert_array_equal(a[0], b[0])
+            np.testing.assert_array_equal(a[1], b[1])
+            np.testing.assert_array_equal(a[1], np.sort(d2, axis=1)[:, :8])  # a dense peer
+            s = np.sort(d2, axis=1)[:, :9]
+            n_ties += int(np.count_nonzero((s[:, 1:] == s[:, :-1]).any(axis=1)))
+            # the alias table (one matrix product) is the direct descriptor distance, pair for pair
+            direct = np.linalg.norm(m._D[a[0]] - m._D[a[0][:, :1]], axis=2) < m.alias_distance
+            np.testing.assert_array_equal(m._aliases(a[0]), direct)
+            chunked = Matcher(db, method="brute", k=8)
+            chunked._D = chunked._D + np.float32(0.25)  # not integers: the table by the direct expression
+            direct = np.linalg.norm(chunked._D[a[0]] - chunked._D[a[0][:, :1]], axis=2) < m.alias_distance
+            np.testing.assert_array_equal(chunked._aliases(a[0]), direct)
+    assert n_ties > 10  # the tie path was exercised
+    rng = np.random.default_rng(0)
+    d2 = rng.integers(0, 6, (200, 50)).astype(np.float32)  # nearly every row has ties
+    for k in (1, 3, 8, 49):
+        a, b = _k_smallest(d2, k), _k_smallest_by_partition(d2, k=k)
+        np.testing.assert_array_equal(a[0], b[0])
+        np.testing.assert_array_equal(a[1], b[1])
+    d2 = rng.permutation(200 * 50).reshape(200, 50).astype(float)  # no ties: the argmin path alone
+    a, b = _k_smallest(d2, 8), _k_smallest_by_partition(d2, k=8)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[0], np.argsort(d2, axis=1)[:, :8])
 
 
 def test_training_is_deterministic_and_remembers_visibility(dbs):

@@ -13,7 +13,8 @@ def _sensing(value: str) -> str:
     if value in ("realistic", "ideal") or value.endswith(".toml"):
         return value
     raise argparse.ArgumentTypeError(
-        f"unknown sensing profile {value!r}; allowed: realistic, ideal, or a .toml file with a [sensing] table"
+        f"unknown sensing profile {value!r}; allowed: realistic, ideal, "
+        "or a .toml file with a [sensing] table"
     )
 
 

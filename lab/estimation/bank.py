@@ -1,16 +1,36 @@
-"""A bank of pose EKFs: one per database model, all fed from the same frames.
+r"""A bank of pose EKFs: one per database model, all fed from the same frames.
 
 The identification paper runs "an Extended Kalman Filter ... for each of the plausible models in the
 database" (Sec. IV). Every filter sees the same robot and pan-tilt motion, so :meth:`EKFBank.predict`
-applies one motion to all of them; each model has its own correspondences ``J_i``, so updates are
-per model.
+checks that motion once and applies it to all of them; each model has its own correspondences ``J_i``,
+so updates are per model, and :meth:`EKFBank.update_all` batches their linear algebra:
+
+* the whitening of every filter's matches at once: the 3x3 Cholesky factors ``L_j L_j^T = Sigma_j``
+  written out (no LAPACK call per match) and ``L_j^-1 [y_j, C_j]`` by forward substitution, the
+  filters' rows stacked;
+* the 6x6 (10x10 with the calibration error) information-form update of :mod:`lab.estimation.ekf`
+  stacked over the filters: one Cholesky factor of ``Sigma_bar`` and one of ``B`` per filter, solves
+  instead of inverses.
+
+The results are :meth:`PoseEKF.update`'s, filter by filter, to round-off (``tests/test_ekf_filter.py``
+checks them against it and against filterpy).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
-from lab.estimation.ekf import EKFConfig, PoseEKF, UpdateResult
+from lab.estimation.ekf import (
+    _LOG_2PI,
+    EKFConfig,
+    PoseEKF,
+    UpdateResult,
+    _checked_motion,
+    _information_update,
+    _whitened,
+)
 from lab.estimation.estimate import PoseEstimate
 
 __all__ = ["EKFBank"]
@@ -51,15 +71,38 @@ class EKFBank:
         Same arguments as :meth:`PoseEKF.predict`; returns each model's ``(mu_bar, Sigma_bar)`` (None for
         a model whose filter is not initialised yet).
         """
-        return tuple(
-            f.predict(G_RC_prev, G_RC, G_odom, dt, G_OO=G_OO, Sigma_odom=Sigma_odom) for f in self.filters
-        )
+        motion = _checked_motion(G_RC_prev, G_RC, G_odom, dt, G_OO)  # once for the bank
+        return tuple(f._predict_motion(motion, Sigma_odom) for f in self.filters)
 
     def update(self, i: int, d_C, b_O, Sigma_d) -> UpdateResult:
         """Update model ``i``'s filter with its matched pairs (same arguments as :meth:`PoseEKF.update`)."""
         if not 0 <= i < len(self.filters):
             raise ValueError(f"model index {i} is outside [0, {len(self.filters) - 1}]")
         return self.filters[i].update(d_C, b_O, Sigma_d)
+
+    def update_all(self, matches: Sequence[tuple]) -> tuple[UpdateResult, ...]:
+        """Update every model's filter with its matched pairs, the linear algebra batched (module
+        docstring): ``matches[i]`` is ``(d_C, b_O, Sigma_d)`` for model ``i`` (as :meth:`update`'s).
+
+        Returns each filter's :class:`UpdateResult`, as ``update(i, *matches[i])`` for every ``i``
+        would.
+        """
+        if len(matches) != len(self.filters):
+            raise ValueError(f"need one match set per model: {len(matches)} for {len(self.filters)} filters")
+        pending = [f._begin_update(*m) for f, m in zip(self.filters, matches, strict=True)]
+        ready = [i for i, p in enumerate(pending) if not isinstance(p, UpdateResult)]
+        outs = _batched_updates([pending[i] for i in ready]) if ready else []
+        results = list(pending)
+        for i, out in zip(ready, outs, strict=True):
+            f, p = self.filters[i], pending[i]
+            if out is None:  # the batch could not factorise: this filter alone, as update() does
+                try:
+                    out = _information_update(p.prior, *_whitened(p.r, p.C, p.S))
+                except np.linalg.LinAlgError:
+                    results[i] = f._update_failed(p)
+                    continue
+            results[i] = f._end_update(p, *out)
+        return tuple(results)
 
     @property
     def estimates(self) -> tuple[PoseEstimate | None, ...]:
@@ -70,3 +113,61 @@ class EKFBank:
     def log_likelihoods(self) -> tuple[float | None, ...]:
         """Every model's Eq. (9) log data likelihood from its last update (None where none was applied)."""
         return tuple(f.log_likelihood for f in self.filters)
+
+
+def _batched_updates(pending) -> list:
+    """``_information_update(prior, *_whitened(r, C, S))`` of each pending update, batched (module
+    docstring); None for every one when a factorisation fails or the priors differ in size (each is then
+    done alone)."""
+    k = pending[0].prior.shape[0]
+    if any(p.prior.shape[0] != k for p in pending):
+        return [None] * len(pending)
+    S = np.concatenate([p.S for p in pending])  # (N, 3, 3)
+    rC = np.concatenate([np.concatenate([p.r[..., None], p.C], axis=2) for p in pending])  # (N, 3, 1 + k)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        l11 = np.sqrt(S[:, 0, 0])  # Sigma_j = L_j L_j^T, written out
+        l21 = S[:, 1, 0] / l11
+        l31 = S[:, 2, 0] / l11
+        l22 = np.sqrt(S[:, 1, 1] - l21 * l21)
+        l32 = (S[:, 2, 1] - l31 * l21) / l22
+        l33 = np.sqrt(S[:, 2, 2] - l31 * l31 - l32 * l32)
+    diag = np.stack([l11, l22, l33], axis=1)
+    if not (np.all(np.isfinite(diag)) and np.all(diag > 0)):
+        return [None] * len(pending)
+    w = np.empty_like(rC)  # L_j^-1 [y_j, C_j], forward substitution
+    w[:, 0] = rC[:, 0] / l11[:, None]
+    w[:, 1] = (rC[:, 1] - l21[:, None] * w[:, 0]) / l22[:, None]
+    w[:, 2] = (rC[:, 2] - l31[:, None] * w[:, 0] - l32[:, None] * w[:, 1]) / l33[:, None]
+    log_diag = np.log(diag).sum(axis=1)
+    bounds = np.cumsum([0] + [len(p.S) for p in pending])
+    Lam, g, yy, logdet_m = [], [], [], []
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        y_w = w[a:b, :, 0].reshape(-1)
+        C_w = w[a:b, :, 1:].reshape(-1, k)
+        Lam.append(C_w.T @ C_w)  # Lambda = C^T Sigma_m^-1 C
+        g.append(C_w.T @ y_w)  # g = C^T Sigma_m^-1 y
+        yy.append(y_w @ y_w)
+        logdet_m.append(2.0 * float(np.sum(log_diag[a:b])))
+    Sigma_bar = np.stack([p.prior for p in pending])
+    Lam, g = np.stack(Lam), np.stack(g)
+    try:
+        L = np.linalg.cholesky(Sigma_bar)  # Sigma_bar = L L^T, one per filter
+        Lt = np.swapaxes(L, 1, 2)
+        eye = np.eye(k)
+        B = eye + Lt @ Lam @ L  # B = I + L^T Lambda L, eigenvalues >= 1
+        L_B = np.linalg.cholesky(B)
+    except np.linalg.LinAlgError:
+        return [None] * len(pending)
+    Z = np.linalg.solve(L_B, Lt)  # Z = L_B^-1 L^T
+    M = np.swapaxes(Z, 1, 2) @ Z  # M = L B^-1 L^T = (Sigma_bar^-1 + Lambda)^-1
+    dx = np.einsum("fij,fj->fi", M, g)  # K y
+    I_KC = eye - M @ Lam  # I - K C
+    P = I_KC @ Sigma_bar @ np.swapaxes(I_KC, 1, 2) + M @ Lam @ np.swapaxes(M, 1, 2)  # Joseph form
+    P = 0.5 * (P + np.swapaxes(P, 1, 2))
+    out = []
+    for f, p in enumerate(pending):
+        nis = float(yy[f] - g[f] @ dx[f])  # y^T S^-1 y (Woodbury)
+        logdet_S = logdet_m[f] + 2.0 * float(np.sum(np.log(np.diag(L_B[f]))))  # log|Sigma_m| + log|B|
+        loglik = -0.5 * (nis + logdet_S + 3 * len(p.S) * _LOG_2PI)  # log N(y; 0, S), Eq. (9)
+        out.append((dx[f], P[f], nis, loglik))
+    return out

@@ -448,6 +448,56 @@ def _is_rotation(G) -> bool:
     return bool(det + R[0, 2] * (R[1, 0] * R[2, 1] - R[1, 1] * R[2, 0]) > 0)
 
 
+@dataclass(frozen=True)
+class _PendingUpdate:
+    """An update between its checks and its linear algebra (:meth:`PoseEKF._begin_update`): the used
+    rows' residuals ``r`` (m, 3), Jacobians ``C`` (m, 3, k), covariances ``S`` (m, 3, 3) and database
+    points ``b`` (m, 3), and the prior (k, k), with the calibration error when it is modelled."""
+
+    n: int
+    n_valid: int
+    note: str
+    keep: np.ndarray
+    inliers: np.ndarray
+    prior: np.ndarray
+    r: np.ndarray
+    C: np.ndarray
+    S: np.ndarray
+    b: np.ndarray  # the used rows' database points (the database error's share, Sigma_m)
+
+
+@dataclass(frozen=True)
+class _Motion:
+    """One step's checked motion inputs (:func:`_checked_motion`), shared by every filter of a bank."""
+
+    mats: dict
+    bad: list
+    dt: float
+    A: np.ndarray | None  # G_{C(k) C(k-1)}, Eq. (1) without the object (None when ``bad``)
+
+
+def _checked_motion(G_RC_prev, G_RC, G_odom, dt, G_OO=None) -> _Motion:
+    """:meth:`PoseEKF.predict`'s inputs, checked (ValueError for wrong shapes, a non-rigid transform or
+    a bad ``dt``); transforms that are non-finite or absurd (> 1 km) are listed in ``bad``."""
+    mats = {"G_RC_prev": G_RC_prev, "G_RC": G_RC, "G_odom": G_odom}
+    if G_OO is not None:
+        mats["G_OO"] = G_OO
+    mats = {k: np.asarray(v, dtype=float) for k, v in mats.items()}
+    for name, G in mats.items():
+        if G.shape != (4, 4):
+            raise ValueError(f"{name} must be a 4x4 homogeneous transform, got shape {G.shape}")
+    dt = float(dt)
+    if not (math.isfinite(dt) and dt >= 0.0):
+        raise ValueError(f"dt must be finite and >= 0 s, got {dt}")
+    bad = [k for k, G in mats.items() if not (np.all(np.isfinite(G)) and np.abs(G[:3, 3]).max() <= 1e3)]
+    if not bad:
+        for name, G in mats.items():
+            if not _is_rotation(G):
+                raise ValueError(f"{name} is not a rigid transform (its 3x3 block is not a rotation)")
+    A = None if bad else _camera_motion(mats["G_RC_prev"], mats["G_RC"], mats["G_odom"])
+    return _Motion(mats, bad, dt, A)
+
+
 class PoseEKF:
     """EKF on the object's 6-DOF pose in the camera frame for one database model.
 
@@ -613,12 +663,17 @@ class PoseEKF:
             np.linalg.cholesky(P)
         except np.linalg.LinAlgError:
             return "covariance is not positive definite"
-        top = np.linalg.eigvalsh(np.stack([P[:3, :3], P[3:, 3:]]))[:, -1]  # largest variances
-        pos_std, rot_std = math.sqrt(max(0.0, float(top[0]))), math.sqrt(max(0.0, float(top[1])))
-        if pos_std > dc.max_position_std_m:
-            return f"covariance blow-up: position std {pos_std:.3g} m > {dc.max_position_std_m} m"
-        if rot_std > dc.max_rotation_std_rad:
-            return f"covariance blow-up: angle std {rot_std:.3g} rad > {dc.max_rotation_std_rad} rad"
+        # the largest variance of each block is at most its trace (P is positive definite): only a
+        # block whose trace exceeds its bound needs its eigenvalues
+        if P[0, 0] + P[1, 1] + P[2, 2] > dc.max_position_std_m**2 or (
+            P[3, 3] + P[4, 4] + P[5, 5] > dc.max_rotation_std_rad**2
+        ):
+            top = np.linalg.eigvalsh(np.stack([P[:3, :3], P[3:, 3:]]))[:, -1]  # largest variances
+            pos_std, rot_std = math.sqrt(max(0.0, float(top[0]))), math.sqrt(max(0.0, float(top[1])))
+            if pos_std > dc.max_position_std_m:
+                return f"covariance blow-up: position std {pos_std:.3g} m > {dc.max_position_std_m} m"
+            if rot_std > dc.max_rotation_std_rad:
+                return f"covariance blow-up: angle std {rot_std:.3g} rad > {dc.max_rotation_std_rad} rad"
         if self._euler and abs(math.cos(mu[4])) < dc.min_cos_beta:
             return f"gimbal lock: beta = {mu[4]:.6f} rad, the Euler state is singular"
         return None
@@ -647,32 +702,23 @@ class PoseEKF:
         PoseEstimate or None
             ``(mu_bar, Sigma_bar)``, or None while the filter is not initialised.
         """
-        mats = {"G_RC_prev": G_RC_prev, "G_RC": G_RC, "G_odom": G_odom}
-        if G_OO is not None:
-            mats["G_OO"] = G_OO
-        mats = {k: np.asarray(v, dtype=float) for k, v in mats.items()}
-        for name, G in mats.items():
-            if G.shape != (4, 4):
-                raise ValueError(f"{name} must be a 4x4 homogeneous transform, got shape {G.shape}")
-        dt = float(dt)
-        if not (math.isfinite(dt) and dt >= 0.0):
-            raise ValueError(f"dt must be finite and >= 0 s, got {dt}")
-        bad = [k for k, G in mats.items() if not (np.all(np.isfinite(G)) and np.abs(G[:3, 3]).max() <= 1e3)]
-        if not bad:
-            for name, G in mats.items():
-                if not _is_rotation(G):
-                    raise ValueError(f"{name} is not a rigid transform (its 3x3 block is not a rotation)")
-        self.t += dt
+        return self._predict_motion(_checked_motion(G_RC_prev, G_RC, G_odom, dt, G_OO), Sigma_odom)
+
+    def _predict_motion(self, motion: _Motion, Sigma_odom=None) -> PoseEstimate | None:
+        """:meth:`predict` with its inputs checked (:func:`_checked_motion`; a bank checks them once)."""
+        self.t += motion.dt
         if self.mu is None:
             return None
-        if bad:  # the robot's motion is unknown: we no longer know where the object is
-            self.divergence = f"prediction impossible: non-finite or absurd (> 1 km) {', '.join(bad)}"
+        if motion.bad:  # the robot's motion is unknown: we no longer know where the object is
+            self.divergence = f"prediction impossible: non-finite or absurd (> 1 km) {', '.join(motion.bad)}"
             return self.estimate
         chart = self.config.chart
+        mats = motion.mats
         G_RC, G_odom = mats["G_RC"], mats["G_odom"]
-        A = _camera_motion(mats["G_RC_prev"], G_RC, G_odom)  # G_{C(k) C(k-1)}, Eq. (1) without the object
-        mu_bar, F = _predict(self.mu, A, mats.get("G_OO"), jacobian=True, chart=chart)  # mu_bar = F(mu, u)
-        Q = process_noise_covariance(mu_bar, G_RC, G_odom, dt, self.config.process, Sigma_odom, chart)
+        mu_bar, F = _predict(
+            self.mu, motion.A, mats.get("G_OO"), jacobian=True, chart=chart
+        )  # mu_bar = F(mu, u)
+        Q = process_noise_covariance(mu_bar, G_RC, G_odom, motion.dt, self.config.process, Sigma_odom, chart)
         P_bar = F @ self.P @ F.T + Q  # Sigma_bar = F Sigma F^T + Q
         P_bar = 0.5 * (P_bar + P_bar.T)
         problem = self._health(mu_bar, P_bar)
@@ -744,6 +790,19 @@ class PoseEKF:
             failed factorisation skip the update with the reason. While the filter is not initialised
             or has diverged, the matches initialise it by RANSAC instead (``auto_initialize``).
         """
+        pending = self._begin_update(d_C, b_O, Sigma_d)
+        if isinstance(pending, UpdateResult):
+            return pending
+        try:
+            y_w, C_w, logdet_m = _whitened(pending.r, pending.C, pending.S)  # innovation y = D - H(mu_bar)
+            out = _information_update(pending.prior, y_w, C_w, logdet_m)
+        except np.linalg.LinAlgError:
+            return self._update_failed(pending)
+        return self._end_update(pending, *out)
+
+    def _begin_update(self, d_C, b_O, Sigma_d) -> UpdateResult | _PendingUpdate:
+        """:meth:`update` up to its linear algebra: the checks, the gate, and the prior and Jacobian
+        with the calibration error; or the result, when the update is skipped or initialises."""
         d, b, S = _check_matches(d_C, b_O, Sigma_d)
         n = d.shape[0]
         valid = _valid_rows(d, b, S)
@@ -763,31 +822,33 @@ class PoseEKF:
         idx = np.flatnonzero(valid)
         d, b, S = d[idx], b[idx], S[idx]
 
-        mu_bar, P_bar = self.mu, self.P
         keep, r, C, inliers, why_not = self._feasible_matches(d, b, S, idx, n, n_valid, note)
         if why_not is not None:
             return self._skip(why_not, n, inliers)
-        try:
-            cal = self.config.calibration
-            prior, C_c = _with_calibration(P_bar, self.P_xc, r[keep], C[keep], d[keep], cal)
-            y_w, C_w, logdet_m = _whitened(r[keep], C_c, S[keep])  # innovation y = D - H(mu_bar)
-            dx, P, nis, loglik = _information_update(prior, y_w, C_w, logdet_m)
-            dx = dx[:6]  # consider update: the estimate of c stays 0 (module docstring)
-        except np.linalg.LinAlgError:
-            self.divergence = "covariance is not positive definite"
-            return self._skip("update failed: a covariance factorisation failed", n, inliers)
-        mu, P = self._corrected(mu_bar, dx, P)  # P still (6 + m, 6 + m): the chart acts on its rows
+        cal = self.config.calibration
+        prior, C_c = _with_calibration(self.P, self.P_xc, r[keep], C[keep], d[keep], cal)
+        return _PendingUpdate(n, n_valid, note, keep, inliers, prior, r[keep], C_c, S[keep], b[keep])
+
+    def _update_failed(self, pending: _PendingUpdate) -> UpdateResult:
+        self.divergence = "covariance is not positive definite"
+        return self._skip("update failed: a covariance factorisation failed", pending.n, pending.inliers)
+
+    def _end_update(self, pending: _PendingUpdate, dx, P, nis: float, loglik: float) -> UpdateResult:
+        """:meth:`update` after its linear algebra (``_information_update``'s outputs)."""
+        dx = dx[:6]  # consider update: the estimate of c stays 0 (module docstring)
+        n, inliers = pending.n, pending.inliers
+        mu, P = self._corrected(self.mu, dx, P)  # P still (6 + m, 6 + m): the chart acts on its rows
         P, P_xc = P[:6, :6], P[:6, 6:]  # and Sigma_c stays Sigma_c
         problem = self._health(mu, P)
         if problem is not None and not problem.startswith(("covariance blow-up", "gimbal")):
             self.divergence = problem
             return self._skip(f"update rejected: {problem}", n, inliers)
         self.mu, self.P, self.P_xc = mu, P, P_xc
-        self.Sigma_m = model_offset_covariance(b[keep], self.config.model.point_std_m)
-        n_used = int(np.count_nonzero(keep))
+        self.Sigma_m = model_offset_covariance(pending.b, self.config.model.point_std_m)
+        n_used = int(np.count_nonzero(pending.keep))
         dof = 3 * n_used
         self._watch_divergence(nis, dof, problem)
-        why = f"updated with {n_used} of {n_valid} matches{note}"
+        why = f"updated with {n_used} of {pending.n_valid} matches{pending.note}"
         res = UpdateResult(
             True, UpdateOutcome.UPDATED, why, n, n_used, inliers, nis, dof, loglik, self.estimate
         )

@@ -20,7 +20,13 @@ import numpy as np
 
 from lab.geometry import transform_points
 
-__all__ = ["box_surface_points", "stereo_covariance", "visible_points", "noisy_points"]
+__all__ = [
+    "box_surface_points",
+    "stereo_covariance",
+    "visible_points",
+    "noisy_points",
+    "rocking_robot_frames",
+]
 
 
 def box_surface_points(rng: np.random.Generator, n_per_face: int, size=0.28) -> tuple[np.ndarray, np.ndarray]:
@@ -86,3 +92,42 @@ def noisy_points(rng: np.random.Generator, p_C, Sigma) -> np.ndarray:
     L = np.linalg.cholesky(np.asarray(Sigma, dtype=float))
     z = rng.standard_normal((len(L), 3))
     return np.asarray(p_C, dtype=float) + np.einsum("nab,nb->na", L, z)
+
+
+def rocking_robot_frames(n_steps: int, n_features: int, seed: int = 0):
+    """Inputs of ``n_steps`` filter steps with a box 1.1 m ahead: the robot rocks back and forth and the
+    head pans a little, so the box stays in view (the EKF benchmarks' data).
+
+    Returns
+    -------
+    X_end : ndarray, shape (6,)
+        The true state after the last step.
+    frames : list of tuple
+        Per step ``(G_RC_prev, G_RC, G_odom, d_C, b_O, Sigma_d)``: the camera in the robot before and
+        after, the odometry increment, and ``n_features`` matched features (measured in C with
+        stereo-like noise, their box points in O, their covariances).
+    """
+    from lab.estimation.models import motion_model
+    from lab.geometry import Pose2D, pose6_to_G, relative_pose2d
+    from lab.robot import StereoCamera
+
+    rng = np.random.default_rng(seed)
+    cam = StereoCamera.from_fov(320, 240, 60.0, baseline=0.12)
+    b_all, _ = box_surface_points(rng, 40, 0.28)
+    X = np.array([0.05, 0.02, 1.1, 0.6, -0.4, 1.8])
+    frames = []
+    pan_prev, robot_prev = 0.0, Pose2D(0.0, 0.0, 0.0)
+    for k in range(n_steps):
+        pan = 0.05 * np.sin(0.1 * k)
+        robot = Pose2D(0.1 * np.sin(0.05 * k), 0.0, 0.05 * np.sin(0.03 * k))
+        G_odom = relative_pose2d(robot_prev, robot)
+        X_k = motion_model(X, cam.G_RC(pan_prev, -0.2), cam.G_RC(pan, -0.2), G_odom)
+        idx = rng.choice(len(b_all), n_features, replace=False)
+        G = pose6_to_G(X_k)
+        p = b_all[idx] @ G[:3, :3].T + G[:3, 3]
+        S = stereo_covariance(p, cam.fx, cam.baseline, 0.3, 0.5)
+        frames.append(
+            (cam.G_RC(pan_prev, -0.2), cam.G_RC(pan, -0.2), G_odom, noisy_points(rng, p, S), b_all[idx], S)
+        )
+        X, pan_prev, robot_prev = X_k, pan, robot
+    return X, frames

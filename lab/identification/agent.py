@@ -6,7 +6,7 @@ One control step (period ``dt``, the same on the simulator and on the real robot
     frame    = robot.capture_stereo()                         # images, G_RC and odometry at capture
     bank.predict(...)                                         # Eq. (1)-(2) for every model
     D_k      = stereo_features(frame)                         # 3D SIFT features
-    bank.update(i, matches of D_k against B_i)  for each i    # EKF per model
+    bank.update_all(matches of D_k against each B_i)          # EKF per model, batched
     belief   = calcCurrentEntropy(...)                        # Eq. (7)-(9), (5)
     head     : tracking (Eq. (16)-(17)) or scanning           # HeadController
     base     : follow the arc to the goal; HALT while scanning after a lost track

@@ -139,7 +139,7 @@ def calc_current_entropy(
     scored_at = None
     if config.share_poses and poses and config.common_pose:
         poses = _candidate_poses(states, symmetries)
-        table = [[s.score(features, x) for x in poses] for s in scorers]  # (L, C): model i at pose c
+        table = [s.score_many(features, poses) for s in scorers]  # (L, C): model i at pose c
         if pool:  # shared evidence counted identically for every model, at each pose
             masks = shared_masks(scorers)
             cols = [pool_shared_evidence([row[c] for row in table], masks, config) for c in range(len(poses))]
@@ -153,9 +153,7 @@ def calc_current_entropy(
         scores = [row[c] for row in table]
         scored_at = poses[c]
     elif config.share_poses:
-        scores = [
-            max((s.score(features, x) for x in poses), key=_by_likelihood, default=None) for s in scorers
-        ]
+        scores = [max(s.score_many(features, poses), key=_by_likelihood, default=None) for s in scorers]
         scores = [
             sc if sc is not None else s.score(features, None) for s, sc in zip(scorers, scores, strict=True)
         ]

@@ -257,13 +257,16 @@ def symmetry_log_weights(
         if est is None:
             continue
         G_WO = G_WC @ est.G_CO
-        for k, S in enumerate(symmetries):
-            for features, G_WC_f in frames:
-                G_WC_f = np.asarray(G_WC_f, dtype=float)
-                G_CO = se3_inv(G_WC_f) @ G_WO @ np.asarray(S, dtype=float)
-                Sigma = _rotate_cov(G_WC_f[:3, :3].T @ G_WC[:3, :3], est.Sigma_rv)  # into that camera
-                alias = pose_estimate_rv(G_to_pose6(G_CO), Sigma, est.t)
-                out[i, k] += config.evidence_weight * scorer.score(features, alias).log_likelihood
+        for features, G_WC_f in frames:  # every turn of a frame in one vectorised scoring
+            G_WC_f = np.asarray(G_WC_f, dtype=float)
+            Sigma = _rotate_cov(G_WC_f[:3, :3].T @ G_WC[:3, :3], est.Sigma_rv)  # into that camera
+            G_CW_f = se3_inv(G_WC_f)
+            aliases = [
+                pose_estimate_rv(G_to_pose6(G_CW_f @ G_WO @ np.asarray(S, dtype=float)), Sigma, est.t)
+                for S in symmetries
+            ]
+            for k, sc in enumerate(scorer.score_many(features, aliases)):
+                out[i, k] += config.evidence_weight * sc.log_likelihood
         out[i] -= out[i].max()
     return out
 

@@ -55,6 +55,7 @@ image frustum between the nearest depth (largest disparity) and ``max_depth_m`` 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from enum import Enum
 
@@ -67,11 +68,10 @@ from lab.estimation import (
     UpdateOutcome,
     UpdateResult,
     data_log_likelihood,
-    measurement_jacobian_rv,
-    measurement_model,
     rv_to_euler_jacobian,
 )
 from lab.estimation.fit import chi2_quantile
+from lab.geometry import euler_zyx_to_R
 from lab.robot import StereoCamera
 from lab.vision import FeatureDatabase, Features3D, Matcher, StereoParams
 
@@ -334,6 +334,40 @@ def state_for_scoring(predicted: PoseEstimate | None, result: UpdateResult | Non
     return predicted
 
 
+def _predicted_covariance(q: np.ndarray, Sigma_rv: np.ndarray) -> np.ndarray:
+    """``C_l Sigma_bar C_l^T`` (m, 3, 3), ``Sigma_bar`` (6, 6) or one per row (m, 6, 6), for
+    ``C_l = [I, -[q_l]_x]`` (the rotation-vector chart's Jacobian of ``H`` at ``q_l = R b_l``), written
+    out in the 3x3 blocks ``A, B; B^T, D`` of ``Sigma_bar``: ``A + Q B^T + B Q^T + Q D Q^T`` with
+    ``Q = -[q_l]_x``."""
+    A, B, D = Sigma_rv[..., :3, :3], Sigma_rv[..., :3, 3:], Sigma_rv[..., 3:, 3:]
+    Q = np.zeros((len(q), 3, 3))
+    x, y, z = q[:, 0], q[:, 1], q[:, 2]
+    Q[:, 0, 1], Q[:, 0, 2] = z, -y  # -[q]_x
+    Q[:, 1, 0], Q[:, 1, 2] = -z, x
+    Q[:, 2, 0], Q[:, 2, 1] = y, -x
+    QBt = Q @ np.swapaxes(B, -1, -2)  # Q B^T
+    return A + QBt + np.swapaxes(QBt, 1, 2) + Q @ D @ np.swapaxes(Q, 1, 2)
+
+
+def _mahalanobis_3(S: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``r^T S^-1 r`` and ``log|S|`` of m symmetric positive definite 3x3 matrices (m, 3, 3) and
+    residuals (m, 3), by the Cholesky factor written out (no LAPACK call per matrix). A matrix that is
+    not positive definite gives NaN (its candidate then fails the gate)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        l11 = np.sqrt(S[:, 0, 0])
+        l21 = S[:, 1, 0] / l11
+        l31 = S[:, 2, 0] / l11
+        l22 = np.sqrt(S[:, 1, 1] - l21 * l21)
+        l32 = (S[:, 2, 1] - l31 * l21) / l22
+        l33 = np.sqrt(S[:, 2, 2] - l31 * l31 - l32 * l32)
+        y1 = r[:, 0] / l11  # L y = r, forward substitution
+        y2 = (r[:, 1] - l21 * y1) / l22
+        y3 = (r[:, 2] - l31 * y1 - l32 * y2) / l33
+        m2 = y1 * y1 + y2 * y2 + y3 * y3
+        logdet = 2.0 * (np.log(l11) + np.log(l22) + np.log(l33))
+    return m2, logdet
+
+
 class ModelScorer:
     """Scores measured feature sets against one database model (module docstring).
 
@@ -352,6 +386,7 @@ class ModelScorer:
         self._matcher = Matcher(db, method="brute", k=self.config.k_neighbours)
         self._gate_m2 = chi2_quantile(self.config.gate_prob, 3)
         self._nn_cache: tuple | None = None  # (features, idx, dist) of the last feature set
+        self._cand_cache: tuple | None = None  # (features, its descriptor candidates)
         self._shared: tuple | None = None  # (ids of the group's databases, shared_features mask)
         self._view_dirs = None
         if self.config.visibility_deg is not None and db.seen_from.size:
@@ -394,44 +429,96 @@ class ModelScorer:
     def name(self) -> str:
         return self.db.name
 
-    def explain(self, features: Features3D, estimate: PoseEstimate | None) -> Explanation:
-        """Which measured features the model explains at pose ``estimate`` (object in the camera C)."""
-        n = len(features)
-        if estimate is None or n == 0 or len(self.db) == 0:
-            return Explanation.none(n)
-        cfg = self.config
+    def _candidates(self, features: Features3D):
+        """The frame's descriptor candidates, which do not depend on the pose: ``(rows, l, d, Sigma_d,
+        b)``, the measured feature, the database feature within ``max_descriptor_distance`` of it, the
+        measured point, its covariance and the database point (kept for the frame's other poses)."""
+        c = self._cand_cache
+        if c is not None and c[0] is features:
+            return c[1]
         idx, dist = self._neighbours(features)  # (n, k) nearest descriptors
-        rows, cols = np.nonzero(dist < cfg.max_descriptor_distance)
+        rows, cols = np.nonzero(dist < self.config.max_descriptor_distance)
         l = idx[rows, cols]
-        vis = self.visible(estimate)
-        if vis is not None:  # only features the camera can see from there
-            rows, l = rows[vis[l]], l[vis[l]]
+        out = (rows, l, features.points_C[rows], features.covariances[rows], self.db.points_O[l])
+        self._cand_cache = (features, out)
+        return out
+
+    def explain(self, features: Features3D, estimate: PoseEstimate | None) -> Explanation:
+        """Which measured features the model explains at pose ``estimate`` (object in the camera C);
+        :meth:`explain_many` with one pose."""
+        return self.explain_many(features, [estimate])[0]
+
+    def explain_many(
+        self, features: Features3D, estimates: Sequence[PoseEstimate | None]
+    ) -> list[Explanation]:
+        r"""Which measured features the model explains at each of the poses (object in the camera C).
+
+        For each pose and descriptor candidate ``(d, b_l)`` (found once per frame): the residual
+        ``r = d - H(mu_bar, b_l)`` (Eq. (3)), the Euclidean gate ``|r| <= dist_max_m`` first (it
+        needs no covariance, and rejects most look-alike candidates), then on those left the
+        Mahalanobis gate under ``S = C_l Sigma_bar C_l^T + Sigma_d`` with ``C_l = [I, -[R b_l]_x]``
+        (the rotation-vector chart), by a closed-form 3x3 Cholesky factor ``S = L L^T``:
+
+        .. math:: m^2 = |L^{-1} r|^2, \qquad \log|S| = 2 \textstyle\sum_i \log L_{ii}
+
+        All poses are evaluated in one vectorised pass (a frame is scored at every filter's pose and
+        its look-alike turns). ``tests/test_ident_probabilities.py`` checks the result against a dense
+        per-candidate reference.
+        """
+        n = len(features)
+        out = [Explanation.none(n) for _ in estimates]
+        live = [k for k, e in enumerate(estimates) if e is not None]
+        if n == 0 or len(self.db) == 0 or not live:
+            return out
+        cfg = self.config
+        rows, l, d, Sd, b = self._candidates(features)
         if len(rows) == 0:
-            return Explanation.none(n)
-        b = self.db.points_O[l]
-        r = features.points_C[rows] - measurement_model(estimate.mu, b)  # d - H(mu_bar, b_l), Eq. (3)
-        C = measurement_jacobian_rv(estimate.mu, b).reshape(-1, 3, 6)
-        S = (
-            C @ estimate.Sigma_rv @ np.swapaxes(C, 1, 2) + features.covariances[rows]
-        )  # C Sigma_bar C^T + Sigma_d
-        m2 = np.einsum("na,na->n", r, np.linalg.solve(S, r[..., None])[..., 0])
-        ok = (m2 <= self._gate_m2) & (np.linalg.norm(r, axis=1) <= cfg.dist_max_m)
-        rows, l, m2, S = rows[ok], l[ok], m2[ok], S[ok]
-        # one database feature per measured feature: the candidate nearest in Mahalanobis distance
-        best_m2 = np.full(n, np.inf)
-        np.minimum.at(best_m2, rows, m2)
-        win = np.flatnonzero(m2 == best_m2[rows])
-        win = win[np.unique(rows[win], return_index=True)[1]]  # exact ties: the first candidate
-        idx_db = np.full(n, -1)
-        idx_db[rows[win]] = l[win]
-        log_density = np.full(n, -np.inf)
-        log_density[rows[win]] = -0.5 * (m2[win] + np.linalg.slogdet(S[win])[1] + 3 * _LOG_2PI)
+            return out
+        mus = np.array([np.asarray(estimates[k].mu, dtype=float) for k in live])  # (P, 6)
+        R = np.stack([euler_zyx_to_R(mu[3], mu[4], mu[5]) for mu in mus])  # (P, 3, 3)
+        q = b[None] @ np.swapaxes(R, 1, 2)  # R b_l, (P, m, 3)
+        r = d[None] - (q + mus[:, None, :3])  # d - H(mu_bar, b_l), Eq. (3)
+        near = np.linalg.norm(r, axis=2) <= cfg.dist_max_m  # the Euclidean gate, (P, m)
+        for c, k in enumerate(live):
+            vis = self.visible(estimates[k])
+            if vis is not None:  # only features the camera can see from there
+                near[c] &= vis[l]
+        pc, j = np.nonzero(near)  # (pose, candidate) pairs left, by pose then candidate
+        Sigma_bar = np.stack([np.asarray(estimates[k].Sigma_rv, dtype=float) for k in live])
+        S = _predicted_covariance(q[pc, j], Sigma_bar[pc]) + Sd[j]  # C Sigma_bar C^T + Sigma_d
+        m2, logdet = _mahalanobis_3(S, r[pc, j])
+        ok = m2 <= self._gate_m2
+        pc, j, m2, logdet = pc[ok], j[ok], m2[ok], logdet[ok]
+        # one database feature per measured feature and pose: the candidate nearest in Mahalanobis
+        # distance (exact ties: the first candidate)
+        key = pc * n + rows[j]
+        best_m2 = np.full(len(live) * n, np.inf)
+        np.minimum.at(best_m2, key, m2)
+        win = np.flatnonzero(m2 == best_m2[key])
+        win = win[np.unique(key[win], return_index=True)[1]]
+        idx_db = np.full(len(live) * n, -1)
+        idx_db[key[win]] = l[j[win]]
+        log_density = np.full(len(live) * n, -np.inf)
+        log_density[key[win]] = -0.5 * (m2[win] + logdet[win] + 3 * _LOG_2PI)
         explained = idx_db >= 0
-        return Explanation(explained, idx_db, np.where(explained, best_m2, np.inf), log_density)
+        best_m2 = np.where(explained, best_m2, np.inf)
+        for c, k in enumerate(live):
+            sl = slice(c * n, (c + 1) * n)
+            out[k] = Explanation(explained[sl], idx_db[sl], best_m2[sl], log_density[sl])
+        return out
 
     def score(self, features: Features3D, estimate: PoseEstimate | None) -> ModelScore:
         """``log p(D_k | D_{1:k-1}, M_i)`` on the whole feature set (module docstring)."""
-        e = self.explain(features, estimate)
+        return self._scored(features, estimate, self.explain(features, estimate))
+
+    def score_many(self, features: Features3D, estimates: Sequence[PoseEstimate | None]) -> list[ModelScore]:
+        """:meth:`score` at each of the poses (one vectorised :meth:`explain_many`)."""
+        return [
+            self._scored(features, x, e)
+            for x, e in zip(estimates, self.explain_many(features, estimates), strict=True)
+        ]
+
+    def _scored(self, features: Features3D, estimate: PoseEstimate | None, e: Explanation) -> ModelScore:
         n = len(features)
         ll_expl = 0.0
         if e.n_explained and self.config.likelihood is LikelihoodForm.PER_FEATURE:

@@ -81,14 +81,13 @@ def observe_frame(
             f"need one prediction, matcher and scorer per model: {len(predicted)}, {len(matchers)}, "
             f"{len(scorers)} for {L} filters"
         )
-    updates = tuple(
-        bank.update(
-            i,
-            *matchers[i]
+    updates = bank.update_all(  # every model's matches, the filters' linear algebra batched
+        [
+            matchers[i]
             .match(features, _shared(matchers[i], scorers[i], features))
-            .pairs(features, scorers[i].db),
-        )
-        for i in range(L)
+            .pairs(features, scorers[i].db)
+            for i in range(L)
+        ]
     )
     states = [state_for_scoring(p, u) for p, u in zip(predicted, updates, strict=True)]
     belief = calc_current_entropy(P, features, scorers, states, config, symmetries)

@@ -177,7 +177,80 @@ def triangulation_covariance(uv_left: np.ndarray, disparity: np.ndarray, camera,
 
 
 def _epipolar_matches(kp_l, des_l, kp_r, des_r, params: StereoParams):
-    """Indices (i_left, i_right) of mutual, ratio-tested matches along epipolar rows."""
+    """Indices (i_left, i_right) of mutual, ratio-tested matches along epipolar rows.
+
+    Only the allowed pairs (rows within ``max_dy``, disparity within its range: about 0.5 % of all
+    pairs) are formed, from the right keypoints sorted by row, and their descriptor distances
+    computed; the nearest and second nearest right candidate of each left keypoint, and the nearest
+    left candidate of each right keypoint, are taken over them. SIFT's descriptors are integers (at most
+    255), so every squared distance ``|a|^2 + |b|^2 - 2 a.b`` is an integer below 2^24, exact in float32
+    whichever way it is summed: the result is the dense matrix's (:func:`_epipolar_matches_dense`),
+    index for index; other descriptors take the dense path.
+    """
+    if len(kp_l) == 0 or len(kp_r) == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    if not _small_integers(des_l) or not _small_integers(des_r):
+        return _epipolar_matches_dense(kp_l, des_l, kp_r, des_r, params)
+    ul = np.array([k.pt for k in kp_l])
+    ur = np.array([k.pt for k in kp_r])
+    n_l = len(ul)
+    # candidate pairs: right keypoints on (about) the same row, then the exact test of the dense path
+    by_row = np.argsort(ur[:, 1], kind="stable")
+    v_sorted = ur[by_row, 1]
+    lo = np.searchsorted(v_sorted, ul[:, 1] - params.max_dy - 1e-6, side="left")
+    hi = np.searchsorted(v_sorted, ul[:, 1] + params.max_dy + 1e-6, side="right")
+    counts = hi - lo
+    rows = np.repeat(np.arange(n_l), counts)
+    first = np.repeat(lo - (np.cumsum(counts) - counts), counts)
+    cols = by_row[np.arange(len(rows)) + first]
+    disp = ul[rows, 0] - ur[cols, 0]
+    allowed = (
+        (np.abs(ul[rows, 1] - ur[cols, 1]) <= params.max_dy)
+        & (disp >= params.min_disparity)
+        & (disp <= params.max_disparity)
+    )
+    rows, cols = rows[allowed], cols[allowed]
+    if len(rows) == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    # squared descriptor distances of the allowed pairs: |a|^2 + |b|^2 - 2 a.b
+    sq_l = np.einsum("ij,ij->i", des_l, des_l)
+    sq_r = np.einsum("ij,ij->i", des_r, des_r)
+    D = sq_l[rows] + sq_r[cols] - 2.0 * np.einsum("ij,ij->i", des_l[rows], des_r[cols])
+    D = np.maximum(D, 0.0)
+    # per left keypoint: the nearest and the second nearest right candidate (pairs by row, then distance)
+    order = np.lexsort((D, rows))
+    r_o, c_o, D_o = rows[order], cols[order], D[order]
+    head = np.flatnonzero(np.r_[True, r_o[1:] != r_o[:-1]])  # each row's nearest
+    best = np.full(n_l, np.inf, D.dtype)
+    second = np.full(n_l, np.inf, D.dtype)
+    j = np.zeros(n_l, int)
+    best[r_o[head]], j[r_o[head]] = D_o[head], c_o[head]
+    nxt = head + 1
+    has_second = nxt < len(r_o)
+    has_second[has_second] = r_o[nxt[has_second]] == r_o[head[has_second]]
+    second[r_o[head[has_second]]] = D_o[nxt[has_second]]
+    ok = np.isfinite(best) & (best < (params.ratio**2) * second)  # ratio on distances, squared
+    # mutual: the right keypoint's best allowed left candidate (the first of equals) is this one
+    by_col = np.lexsort((rows, D, cols))
+    c_b, r_b = cols[by_col], rows[by_col]
+    col_head = np.flatnonzero(np.r_[True, c_b[1:] != c_b[:-1]])
+    best_left_for_right = np.zeros(len(ur), int)
+    best_left_for_right[c_b[col_head]] = r_b[col_head]
+    left = np.arange(n_l)
+    ok &= best_left_for_right[j] == left
+    return left[ok], j[ok]
+
+
+def _small_integers(des) -> bool:
+    """All descriptor entries are integers within [0, 255] (OpenCV's SIFT), so that their squared
+    distances are exact in float32."""
+    des = np.asarray(des)
+    return bool(des.size == 0 or (des.min() >= 0 and des.max() <= 255 and np.array_equal(des, np.rint(des))))
+
+
+def _epipolar_matches_dense(kp_l, des_l, kp_r, des_r, params: StereoParams):
+    """Indices (i_left, i_right) of mutual, ratio-tested matches along epipolar rows, by the dense
+    (n_left, n_right) distance matrix (:func:`_epipolar_matches`'s reference)."""
     if len(kp_l) == 0 or len(kp_r) == 0:
         return np.zeros(0, int), np.zeros(0, int)
     ul = np.array([k.pt for k in kp_l])
