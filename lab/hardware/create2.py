@@ -443,7 +443,13 @@ class Create2:
     def _mark_lost(self, err: BaseException) -> None:
         with self._cond:
             if self.lost is None:
-                self.lost = lost("Create 2", self.port, err)
+                self.lost = lost(
+                    "Create 2",
+                    self.port,
+                    err,
+                    "it can no longer be told to stop and keeps its last wheel speeds "
+                    "(the Open Interface has no link watchdog): press its power button",
+                )
                 self._enabled = False
             self._cond.notify_all()
         self._emit("connection_lost", str(self.lost))

@@ -93,8 +93,9 @@ def open_port(
         raise PortUnavailable(f"{what}: cannot open {url}: {e} ({_ports_hint()})") from e
 
 
-def lost(what: str, url: str, err: BaseException) -> ConnectionLost:
-    """The error raised when a device goes away mid-session."""
+def lost(what: str, url: str, err: BaseException, consequence: str) -> ConnectionLost:
+    """The error raised when a device goes away mid-session; ``consequence`` says what that device
+    does now that nothing can reach it (e.g. a base keeps its last wheel speeds)."""
     return ConnectionLost(
-        f"{what} on {url} went away ({err}); motion stopped. Plug it back in and call reconnect()"
+        f"{what} on {url} went away ({err}); {consequence}. Plug it back in and call reconnect()"
     )
