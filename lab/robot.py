@@ -49,6 +49,7 @@ __all__ = [
     "PanTiltLimits",
     "PanTiltState",
     "Robot",
+    "RobotWrapper",
     "StereoCamera",
     "StereoFrame",
     "check_finite",
@@ -383,3 +384,81 @@ class Robot(ABC):
             if self.now() >= t_end:
                 raise DeviceTimeout(f"pan-tilt did not reach its target within {timeout:.1f} s")
             self.step(dt)
+
+
+class RobotWrapper(Robot):
+    """A :class:`Robot` that passes every call on to ``base``: subclasses override only what they
+    change (a budget on ``step``, a localized ``odometry``, ...). Anything else the base offers (a
+    hardware robot's ``watchdog_stops``, ``read_state``) is reached through it too.
+    """
+
+    def __init__(self, base: Robot):
+        self.base = base
+
+    @property
+    def camera(self) -> StereoCamera:
+        return self.base.camera
+
+    @property
+    def pan_tilt_limits(self) -> PanTiltLimits:
+        return self.base.pan_tilt_limits
+
+    @property
+    def base_limits(self) -> BaseLimits:
+        return self.base.base_limits
+
+    @property
+    def cmd_timeout_s(self) -> float:  # type: ignore[override]
+        return self.base.cmd_timeout_s
+
+    def now(self) -> float:
+        return self.base.now()
+
+    def enable(self) -> None:
+        self.base.enable()
+
+    def disable(self) -> None:
+        self.base.disable()
+
+    @property
+    def enabled(self) -> bool:
+        return self.base.enabled
+
+    def capture_stereo(self, after: float | None = None) -> StereoFrame:
+        return self.base.capture_stereo(after)
+
+    @property
+    def bumps(self) -> int:
+        return self.base.bumps
+
+    def odometry(self) -> Pose2D:
+        return self.base.odometry()
+
+    def pan_tilt(self) -> PanTiltState:
+        return self.base.pan_tilt()
+
+    def command_pan_tilt(self, pan: float, tilt: float, speed: float | None = None) -> None:
+        self.base.command_pan_tilt(pan, tilt, speed)
+
+    def drive(self, v: float, omega: float) -> None:
+        self.base.drive(v, omega)
+
+    def stop(self) -> None:
+        self.base.stop()
+
+    def step(self, dt: float) -> None:
+        self.base.step(dt)
+
+    def estop(self) -> None:
+        self.base.estop()
+
+    def clear_estop(self) -> None:
+        self.base.clear_estop()
+
+    def close(self) -> None:
+        self.base.close()
+
+    def __getattr__(self, name):  # only for what the class does not define
+        if name == "base":  # not set yet (e.g. while unpickling): no recursion
+            raise AttributeError(name)
+        return getattr(self.base, name)

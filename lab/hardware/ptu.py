@@ -568,9 +568,7 @@ class PTUD46:
 
     def _mark_lost(self, err: BaseException) -> None:
         if self.lost is None:
-            self.lost = lost(
-                "PTU-D46", self.port, err, "the head stops at its last target"
-            )
+            self.lost = lost("PTU-D46", self.port, err, "the head stops at its last target")
             if self.on_event is not None:
                 try:
                     self.on_event("connection_lost", str(self.lost))

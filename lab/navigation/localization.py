@@ -45,7 +45,7 @@ from lab.errors import ConfigError
 from lab.estimation.fit import RansacConfig, chi2_quantile, ransac_pose
 from lab.geometry import Pose2D, pose6_to_G, se3_inv, transform_points, wrap_angle
 from lab.navigation.landmarks import Landmark, LandmarkMap
-from lab.robot import Robot, StereoFrame
+from lab.robot import Robot, RobotWrapper, StereoFrame
 from lab.vision.matching import Matcher
 from lab.vision.stereo import Features3D, StereoParams, sift, stereo_features
 
@@ -489,7 +489,7 @@ class LandmarkObserver:
 # --- behind the Robot interface ---------------------------------------------------------------------
 
 
-class LocalizedRobot(Robot):
+class LocalizedRobot(RobotWrapper):
     """A :class:`~lab.robot.Robot` whose ``odometry()`` and frames' ``odom`` are the localizer's estimate.
 
     Every call is passed on to ``base``. With ``mode=LANDMARKS`` each captured frame in which a landmark
@@ -518,7 +518,7 @@ class LocalizedRobot(Robot):
         rng: np.random.Generator | None = None,
         log=None,
     ):
-        self.base = base
+        super().__init__(base)
         self.mode = LocalizationMode.parse(mode)
         self.config = config or LocalizerConfig()
         self._odom = base.odometry()
@@ -621,66 +621,7 @@ class LocalizedRobot(Robot):
         self.base.wait_pan_tilt(timeout=15.0)
         return done
 
-    # the Robot interface, passed on
-    @property
-    def camera(self):
-        return self.base.camera
-
-    @property
-    def pan_tilt_limits(self):
-        return self.base.pan_tilt_limits
-
-    @property
-    def base_limits(self):
-        return self.base.base_limits
-
-    @property
-    def cmd_timeout_s(self):  # type: ignore[override]
-        return self.base.cmd_timeout_s
-
-    def now(self) -> float:
-        return self.base.now()
-
-    def enable(self) -> None:
-        self.base.enable()
-
-    def disable(self) -> None:
-        self.base.disable()
-
-    @property
-    def enabled(self) -> bool:
-        return self.base.enabled
-
-    def pan_tilt(self):
-        return self.base.pan_tilt()
-
-    def command_pan_tilt(self, pan, tilt, speed=None) -> None:
-        self.base.command_pan_tilt(pan, tilt, speed)
-
-    def drive(self, v, omega) -> None:
-        self.base.drive(v, omega)
-
-    def stop(self) -> None:
-        self.base.stop()
-
+    # the rest of the Robot interface is RobotWrapper's: passed on to the base
     def step(self, dt: float) -> None:
         self.base.step(dt)
         self._sync()
-
-    @property
-    def bumps(self) -> int:
-        return self.base.bumps
-
-    def estop(self) -> None:
-        self.base.estop()
-
-    def clear_estop(self) -> None:
-        self.base.clear_estop()
-
-    def close(self) -> None:
-        self.base.close()
-
-    def __getattr__(self, name):  # anything else the base offers (e.g. a hardware robot's extras)
-        if name == "base":
-            raise AttributeError(name)
-        return getattr(self.base, name)

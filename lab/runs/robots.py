@@ -29,7 +29,7 @@ from pathlib import Path
 from lab.errors import ConfigError
 from lab.geometry import Pose2D, wrap_angle
 from lab.hardware.config import HardwareConfig, load_config
-from lab.robot import Robot, StereoFrame
+from lab.robot import Robot, RobotWrapper, StereoFrame
 
 __all__ = ["PlacedRobot", "RobotKind", "RobotSession", "make_robot", "robot_kind"]
 
@@ -155,7 +155,7 @@ def make_robot(
         yield RobotSession(RobotKind.HARDWARE, robot, config=cfg)
 
 
-class PlacedRobot(Robot):
+class PlacedRobot(RobotWrapper):
     """A robot whose odometry (and each frame's) is in the room's frame W: the base started at ``start``.
 
     A real robot's wheel odometry starts at its own origin, (0, 0, 0) where it was switched on; the
@@ -171,9 +171,8 @@ class PlacedRobot(Robot):
     """
 
     def __init__(self, base: Robot, start: Pose2D):
-        self.base = base
+        super().__init__(base)
         self.start = start
-        self.cmd_timeout_s = base.cmd_timeout_s
 
     def _in_room(self, p: Pose2D) -> Pose2D:
         s = self.start
@@ -186,62 +185,3 @@ class PlacedRobot(Robot):
     def capture_stereo(self, after: float | None = None) -> StereoFrame:
         frame = self.base.capture_stereo(after)
         return dataclasses.replace(frame, odom=self._in_room(frame.odom))
-
-    # the rest of the Robot interface, passed on
-    @property
-    def camera(self):
-        return self.base.camera
-
-    @property
-    def pan_tilt_limits(self):
-        return self.base.pan_tilt_limits
-
-    @property
-    def base_limits(self):
-        return self.base.base_limits
-
-    def now(self) -> float:
-        return self.base.now()
-
-    def enable(self) -> None:
-        self.base.enable()
-
-    def disable(self) -> None:
-        self.base.disable()
-
-    @property
-    def enabled(self) -> bool:
-        return self.base.enabled
-
-    @property
-    def bumps(self) -> int:
-        return self.base.bumps
-
-    def pan_tilt(self):
-        return self.base.pan_tilt()
-
-    def command_pan_tilt(self, pan, tilt, speed=None) -> None:
-        self.base.command_pan_tilt(pan, tilt, speed)
-
-    def drive(self, v, omega) -> None:
-        self.base.drive(v, omega)
-
-    def stop(self) -> None:
-        self.base.stop()
-
-    def step(self, dt: float) -> None:
-        self.base.step(dt)
-
-    def estop(self) -> None:
-        self.base.estop()
-
-    def clear_estop(self) -> None:
-        self.base.clear_estop()
-
-    def close(self) -> None:
-        self.base.close()
-
-    def __getattr__(self, name):  # a hardware robot's extras (watchdog_stops, read_state, ...)
-        if name == "base":
-            raise AttributeError(name)
-        return getattr(self.base, name)

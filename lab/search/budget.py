@@ -13,8 +13,7 @@ import math
 import time
 
 from lab.errors import ConfigError, LabError
-from lab.geometry import Pose2D
-from lab.robot import Robot
+from lab.robot import Robot, RobotWrapper
 
 __all__ = ["BudgetedRobot", "SearchBudgetExceeded"]
 
@@ -23,7 +22,7 @@ class SearchBudgetExceeded(LabError):
     """The search's time budget ran out (raised from :meth:`BudgetedRobot.step`)."""
 
 
-class BudgetedRobot(Robot):
+class BudgetedRobot(RobotWrapper):
     """A :class:`~lab.robot.Robot` that refuses to step past a deadline, and measures the path.
 
     Parameters
@@ -41,7 +40,7 @@ class BudgetedRobot(Robot):
     def __init__(self, base: Robot, max_time_s: float, max_wall_s: float | None = None, record_every_s=0.2):
         if not (math.isfinite(max_time_s) and max_time_s > 0):
             raise ConfigError(f"the time budget must be a finite number > 0 s, got {max_time_s!r}")
-        self.base = base
+        super().__init__(base)
         self.t_start = base.now()
         self.deadline = self.t_start + float(max_time_s)
         self.wall_deadline = None if max_wall_s is None else time.perf_counter() + float(max_wall_s)
@@ -68,64 +67,3 @@ class BudgetedRobot(Robot):
     @property
     def remaining_s(self) -> float:
         return self.deadline - self.base.now()
-
-    # the Robot interface, passed on
-    @property
-    def camera(self):
-        return self.base.camera
-
-    @property
-    def pan_tilt_limits(self):
-        return self.base.pan_tilt_limits
-
-    @property
-    def base_limits(self):
-        return self.base.base_limits
-
-    @property
-    def cmd_timeout_s(self):  # type: ignore[override]
-        return self.base.cmd_timeout_s
-
-    def now(self) -> float:
-        return self.base.now()
-
-    def enable(self) -> None:
-        self.base.enable()
-
-    def disable(self) -> None:
-        self.base.disable()
-
-    @property
-    def enabled(self) -> bool:
-        return self.base.enabled
-
-    def capture_stereo(self, after=None):
-        return self.base.capture_stereo(after)
-
-    @property
-    def bumps(self) -> int:
-        return self.base.bumps
-
-    def odometry(self) -> Pose2D:
-        return self.base.odometry()
-
-    def pan_tilt(self):
-        return self.base.pan_tilt()
-
-    def command_pan_tilt(self, pan, tilt, speed=None) -> None:
-        self.base.command_pan_tilt(pan, tilt, speed)
-
-    def drive(self, v, omega) -> None:
-        self.base.drive(v, omega)
-
-    def stop(self) -> None:
-        self.base.stop()
-
-    def estop(self) -> None:
-        self.base.estop()
-
-    def clear_estop(self) -> None:
-        self.base.clear_estop()
-
-    def close(self) -> None:
-        self.base.close()
