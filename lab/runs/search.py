@@ -56,6 +56,7 @@ from lab.runs.placement import (
     supports,
 )
 from lab.runs.robots import PlacedRobot, RobotKind, make_robot, robot_kind
+from lab.runs.tracks import RobotTrack, TrackedRobot
 from lab.scene import BodySpec, Scene, load_scene
 from lab.search.agent import (
     INTERRUPTED,
@@ -155,14 +156,16 @@ def path_obstacles(
 @dataclass(frozen=True)
 class SearchTrace:
     """Everything a trial recorded beyond the JSON (for the figures): the agent's record, the map's grid,
-    the odometry trajectory ``(t, x, y, theta)``, the world's scene and the database the agent searched
-    with."""
+    the trajectory of the pose the agent used ``(t, x, y, theta)`` (the localized pose, or the odometry),
+    the world's scene, the database the agent searched with, and the robot's path as the wheel odometry,
+    the estimate and (where known) the truth saw it (``track``)."""
 
     agent: AgentResult = field(repr=False)
     spec: GridSpec = field(repr=False)
     trajectory: np.ndarray = field(repr=False)
     scene: Scene = field(repr=False)
     db: FeatureDatabase | None = field(default=None, repr=False)
+    track: RobotTrack | None = field(default=None, repr=False)
 
 
 @dataclass(frozen=True)
@@ -431,7 +434,7 @@ def run_search(
         t0 = 0.0 if kind is RobotKind.SIM else robot.now()
         hook = _with_progress(attach, t0) if progress else attach
         parts = (db, navigate, spec, cfg, seed, recorder, hook, (max_time, max_wall_time))
-        out, truth_end, budget, odom = _search(robot, truth_of, *parts)
+        out, truth_end, budget, odom, track = _search(robot, truth_of, *parts)
         profile = run.sensing
         estimate = robot.pose_estimate()
         watchdog = None if kind is RobotKind.SIM else int(run.robot.watchdog_stops)
@@ -459,7 +462,7 @@ def run_search(
         surface=surface,
         obstacles=tuple(obstacle_poses),
         events=out.events,
-        trace=SearchTrace(out, spec, np.array(budget.trajectory), scene, db),
+        trace=SearchTrace(out, spec, np.array(budget.trajectory), scene, db, track),
         recording=None if recorder is None or (p := recorder.close()) is None else str(p),
         sensing=profile,
         robot=run.name,
@@ -543,11 +546,12 @@ def measured_pose(scene: Scene, object: str, truth) -> np.ndarray:
 
 def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, attach, budgets):
     """The agent's run on the enabled robot within the time budgets (sim, wall), with the truth behind
-    it read once it has ended: returns the agent's result, the truth, the budgeted robot and its
-    odometry at the end."""
+    it read once it has ended: returns the agent's result, the truth, the budgeted robot, its odometry
+    at the end and the robot's track (odometry, estimate and truth: for the figures)."""
     robot.enable()
-    budget = BudgetedRobot(robot, *budgets)
-    nav = _relocalizing(navigate(budget, spec), robot)
+    tracked = TrackedRobot(robot, truth_of.robot_pose)
+    budget = BudgetedRobot(tracked, *budgets)
+    nav = _relocalizing(navigate(budget, spec), tracked)
     agent = SearchAgent(budget, db, nav, ProbabilityMap(spec), cfg, rng=np.random.default_rng([seed, 1]))
     if recorder is not None:
         from lab.viz.live import LiveView
@@ -557,7 +561,8 @@ def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, 
         attach(agent)
     out = agent.run()  # the robot stopped on its way out (also after Ctrl-C: then reason "interrupted")
     if out.reason != INTERRUPTED:
-        out = _relocalized_find(out, robot)
+        out = _relocalized_find(out, tracked)
+    tracked.record(force=True)  # where the run ended
     truth = _TrialTruth(
         G_WO=truth_of.G_WO(),
         G_WC=truth_of.G_WC(),  # the head has not moved since the last frame of a found track
@@ -565,10 +570,10 @@ def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, 
         collisions=truth_of.collisions(),
         robot_time_s=robot.now(),
     )
-    return out, truth, budget, robot.base.odometry()
+    return out, truth, budget, robot.base.odometry(), tracked.track()
 
 
-def _relocalizing(navigate, robot: LocalizedRobot):
+def _relocalizing(navigate, robot: LocalizedRobot | TrackedRobot):
     """Active re-localization before every drive: when the pose is uncertain, look for a landmark first."""
 
     def go(*args, **kwargs):
@@ -580,7 +585,7 @@ def _relocalizing(navigate, robot: LocalizedRobot):
     return go
 
 
-def _relocalized_find(out: AgentResult, robot: LocalizedRobot) -> AgentResult:
+def _relocalized_find(out: AgentResult, robot: LocalizedRobot | TrackedRobot) -> AgentResult:
     """Active re-localization before reporting a found object: the object's pose relative to the robot
     stays; its world pose follows the corrected robot pose ``G_WO' = G_WR' G_WR^-1 G_WO``."""
     if not out.found or out.G_WO is None or robot.mode is not LocalizationMode.LANDMARKS:

@@ -4,8 +4,9 @@
   the back-projection (window means), the peaks projected onto ``M_p``, and the growing beta of one
   peak (the paper's Fig. 2).
 * :func:`fig5_trial`: the probability map after the first global search with the first planned path and
-  its goal, the costmap (when given) with the odometry trajectory, and the 6D pose drawn on the image of
-  the successful local search (the paper's Fig. 5).
+  its goal, the costmap (when given) with the robot's path -- the wheel odometry's, the localized one
+  (``landmarks`` localization) and the true one (where the truth is known) --, and the 6D pose drawn on
+  the image of the successful local search (the paper's Fig. 5).
 * :func:`fig6_snapshots`: the panorama of the first scan and the map after each failed local search
   (the paper's Fig. 6).
 * :func:`draw_pose`: a picture of an estimated pose: the object's box and axes projected on an image.
@@ -163,7 +164,10 @@ def fig5_trial(result, costmap_state: np.ndarray | None = None, costmap_spec=Non
     result : SearchResult
     costmap_state : ndarray, optional
         Costmap labels (``lab.navigation.CellState`` values) to show under the trajectory, e.g. the
-        Navigator's final ``Costmap.state``; without it only the trajectory is drawn.
+        Navigator's final ``Costmap.state``; without it only the trajectory is drawn. The trajectory
+        panel draws the robot's track (``result.trace.track``): the wheel odometry, the localized
+        estimate when the trial localized against landmarks, and the true path and object where the
+        truth is known (:data:`PATH_STYLES`), with a legend; its title gives the final errors.
     costmap_spec : GridSpec, optional
         The costmap's grid.
     """
@@ -189,16 +193,16 @@ def fig5_trial(result, costmap_state: np.ndarray | None = None, costmap_spec=Non
         ax[0, 1].imshow(shade.T, origin="lower", extent=(cx0, cx1, cy0, cy1), cmap="gray", vmin=0, vmax=1)
     else:
         ax[0, 1].set_facecolor("0.2")
-    traj = tr.trajectory
-    if len(traj):
-        ax[0, 1].plot(traj[:, 1], traj[:, 2], "-", color="magenta", lw=1.5, label="odometry")
-    true_xyz = result.true_pose["position_m"]
-    ax[0, 1].plot(true_xyz[0], true_xyz[1], "*", color="orange", ms=12, label="object (truth)")
+    _draw_paths(ax[0, 1], tr)
+    truth = _true_xy(result)
+    if truth is not None:
+        ax[0, 1].plot(*truth, "*", color="orange", ms=12, label="object (truth)")
     ax[0, 1].set_xlim(x0, x1)
     ax[0, 1].set_ylim(y0, y1)
     ax[0, 1].set_aspect("equal")
-    ax[0, 1].set_title("costmap and trajectory" if costmap_state is not None else "trajectory")
-    ax[0, 1].legend(loc="lower right", fontsize=7)
+    title = "costmap and trajectory" if costmap_state is not None else "trajectory"
+    ax[0, 1].set_title(title + _end_errors(result), fontsize=9)
+    ax[0, 1].legend(loc="best", fontsize=7, framealpha=0.7)
     # the pose on the image
     loc = agent.local
     if loc is not None and loc.found and loc.frame is not None:
@@ -211,6 +215,48 @@ def fig5_trial(result, costmap_state: np.ndarray | None = None, costmap_spec=Non
         ax[0, 2].set_title(f"not found: {result.reason}")
     ax[0, 2].axis("off")
     return fig
+
+
+#: How :func:`fig5_trial` draws the robot's paths: (colour, line style, width, label).
+PATH_STYLES = {
+    "truth": ("white", "-", 2.4, "true path"),
+    "odometry": ("magenta", "-", 1.3, "odometry"),
+    "estimate": ("cyan", "--", 1.3, "localized (landmarks)"),
+}
+
+
+def _draw_paths(ax, trace) -> None:
+    """The robot's path on ``ax``: the wheel odometry, the localized estimate (with ``landmarks``
+    localization) and the true path where it is known, from the trial's track; a trace without one
+    (recorded before tracks were) draws its single trajectory as the odometry."""
+    track = getattr(trace, "track", None)
+    paths = []
+    if track is None or len(track) == 0:
+        if len(trace.trajectory):
+            paths.append(("odometry", trace.trajectory[:, 1:3]))
+    else:
+        if track.truth is not None:
+            paths.append(("truth", track.truth[:, :2]))
+        paths.append(("odometry", track.odometry[:, :2]))
+        if track.localized:
+            paths.append(("estimate", track.estimate[:, :2]))
+    for kind, xy in paths:
+        colour, ls, lw, label = PATH_STYLES[kind]
+        ax.plot(xy[:, 0], xy[:, 1], ls=ls, color=colour, lw=lw, label=label)
+    if paths:  # where the run ended, on each path
+        for kind, xy in paths:
+            ax.plot(xy[-1, 0], xy[-1, 1], "o", color=PATH_STYLES[kind][0], ms=4)
+
+
+def _end_errors(result) -> str:
+    """The run's final robot position errors against the truth, for a title ("" without a truth)."""
+    odo, loc = getattr(result, "odometry_error_m", None), getattr(result, "localization_error_m", None)
+    if odo is None:
+        return ""
+    text = f"\nat the end: odometry {100 * odo:.1f} cm"
+    if getattr(result, "localization", "odometry") == "landmarks" and loc is not None:
+        text += f", localized {100 * loc:.1f} cm"
+    return text + " off the truth"
 
 
 def _map_norm(maps):
@@ -321,7 +367,8 @@ def snapshot_figure(result, k: int):
         a.plot(*truth, "*", color="gold", mec="black", ms=11, label="true object")
     if len(traj):
         upto = traj[traj[:, 0] <= s.t + 1e-9]
-        a.plot(upto[:, 1], upto[:, 2], "-", color="magenta", lw=1.0, label="robot's path (odometry)")
+        which = "localized" if getattr(result, "localization", "odometry") == "landmarks" else "odometry"
+        a.plot(upto[:, 1], upto[:, 2], "-", color="magenta", lw=1.0, label=f"robot's path ({which})")
     if s.cell is not None:
         cx, cy = spec.cell_to_world(*s.cell)
         a.plot(cx, cy, "x", color="red", ms=9, mew=2, label="cell searched")
