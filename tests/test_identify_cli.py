@@ -4,6 +4,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from lab.contract import problems
 
 
@@ -139,3 +141,44 @@ def test_an_unknown_sensing_profile_is_one_clear_line(tmp_path):
     with pytest.raises(ConfigError, match="must be a finite number >= 0, got -1"):
         bad = {"camera": {"blur_sigma_px": -1}}
         run_identify(2, planner="circle", max_actions=0, figures=False, sensing=bad)
+
+
+@pytest.mark.slow
+def test_identify_hands_its_figures_the_robots_track(tmp_path, monkeypatch):
+    """The episode records the robot's track for Fig. 6 (odometry, localized estimate, truth): it ends
+    where the JSON's final errors were scored, and it starts at the episode's true start. (That the
+    estimate is the localizer's, not the odometry's, the search's track test shows with landmarks in
+    view.)"""
+    import numpy as np
+
+    import lab.viz.identification as viz
+    from lab.runs.identify import run_identify
+
+    seen = {}
+    draw = viz.save_episode_figures
+
+    def spy(out, agent, true_poses, true_model, track=None):
+        seen["track"] = track
+        return draw(out, agent, true_poses, true_model, track=track)
+
+    monkeypatch.setattr(viz, "save_episode_figures", spy)
+    res = run_identify(
+        2,
+        seed=3,
+        mover="static",
+        planner="circle",
+        max_actions=1,
+        max_time_s=12.0,
+        out=tmp_path,
+        localization="landmarks",
+    )
+    tr = seen["track"]
+    assert tr is not None and tr.localization == res["localization"] and tr.truth is not None
+    assert res["localization"] == "landmarks" and tr.localized  # (12 s on the box: no poster in view)
+    assert len(tr) >= 20 and tr.t[-1] - tr.t[0] == pytest.approx(res["sim_time_s"], abs=0.3)
+    end_odo = float(np.hypot(*(tr.odometry[-1, :2] - tr.truth[-1, :2])))
+    end_loc = float(np.hypot(*(tr.estimate[-1, :2] - tr.truth[-1, :2])))
+    assert end_odo == pytest.approx(res["odometry_error_m"], abs=1e-4)
+    assert end_loc == pytest.approx(res["localization_error_m"], abs=1e-4)
+    assert tr.truth[0, 0] == pytest.approx(-1.2, abs=1e-6) and abs(tr.truth[0, 1]) <= 0.1  # the start
+    assert (tmp_path / "fig5_pose_and_probabilities.png").is_file()

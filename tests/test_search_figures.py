@@ -18,16 +18,26 @@ from lab.viz.search import (
 )
 
 
-def _trial():
+def _trial(localization="odometry"):
     scene = load_scene("lab_room")
     return run_search(
-        "toy_block", 0, place=scene.body("toy_block").pose, max_time=120.0, navigate=truth_navigator
+        "toy_block",
+        0,
+        place=scene.body("toy_block").pose,
+        max_time=120.0,
+        navigate=truth_navigator,
+        localization=localization,
     )
 
 
 @pytest.fixture(scope="module")
 def trial():
     return _trial()
+
+
+@pytest.fixture(scope="module")
+def localized_trial():
+    return _trial("landmarks")
 
 
 def test_fig2_shows_the_scan_peaks_and_the_map(trial):
@@ -77,6 +87,70 @@ def test_fig6_maps_share_one_scale_and_every_mark_is_named(trial):
     assert "true object" in labels
     no_truth = dataclasses.replace(trial, true_pose=None)
     assert "true object" not in [t.get_text() for t in fig6_snapshots(no_truth).legends[0].get_texts()]
+
+
+def _path_lines(fig):
+    """The trajectory panel's labelled lines, by label."""
+    return {ln.get_label(): ln for ln in fig.axes[1].lines if not ln.get_label().startswith("_")}
+
+
+def test_the_track_is_what_the_run_scored(localized_trial):
+    """The recorded track ends where the scoring read the robot: its odometry and estimate are the
+    JSON's final errors off its truth, the truth is the simulator's, and the estimate is the pose the
+    agent used (the budgeted robot's trajectory), corrected by landmarks away from the odometry."""
+    r = localized_trial
+    tr = r.trace.track
+    assert tr.localization == "landmarks" and tr.localized and r.landmark_updates >= 1
+    assert tr.truth is not None and len(tr) >= 10 and np.all(np.diff(tr.t) >= 0)
+    assert np.hypot(*(tr.odometry[-1, :2] - tr.truth[-1, :2])) == pytest.approx(r.odometry_error_m, abs=1e-9)
+    assert np.hypot(*(tr.estimate[-1, :2] - tr.truth[-1, :2])) == pytest.approx(
+        r.localization_error_m, abs=1e-9
+    )
+    x0, y0, heading_deg = load_scene("lab_room").robot_start  # the truth starts where the scene put it
+    assert tr.truth[0] == pytest.approx([x0, y0, np.radians(heading_deg)], abs=1e-3)
+    used = r.trace.trajectory  # (t, x, y, theta) of the pose the agent saw, every 0.2 s
+    at = np.searchsorted(tr.t, used[:, 0])
+    ok = (at < len(tr)) & (np.abs(tr.t[np.minimum(at, len(tr) - 1)] - used[:, 0]) < 1e-9)
+    assert ok.sum() >= len(used) // 2
+    assert tr.estimate[at[ok], :2] == pytest.approx(used[ok, 1:3], abs=1e-12)
+    assert np.abs(tr.estimate[:, :2] - tr.odometry[:, :2]).max() > 1e-4  # the landmarks moved it
+
+
+def test_fig5_draws_the_localized_path_beside_the_odometry_and_the_truth(localized_trial, trial):
+    """With landmarks: the true, odometry and localized paths, each the recorded track, all in the
+    legend; with odometry alone no localized path; without a truth neither the true path nor the
+    true object (and the figure still draws)."""
+    import dataclasses
+
+    tr = localized_trial.trace.track
+    fig = fig5_trial(localized_trial)
+    lines = _path_lines(fig)
+    for label, xy in (
+        ("true path", tr.truth),
+        ("odometry", tr.odometry),
+        ("localized (landmarks)", tr.estimate),
+    ):
+        assert np.array_equal(lines[label].get_xydata(), xy[:, :2]), label
+    legend = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
+    assert legend == ["true path", "odometry", "localized (landmarks)", "object (truth)"]
+    title = fig.axes[1].get_title()
+    assert f"odometry {100 * localized_trial.odometry_error_m:.1f} cm" in title
+    assert f"localized {100 * localized_trial.localization_error_m:.1f} cm" in title
+
+    legend = [t.get_text() for t in fig5_trial(trial).axes[1].get_legend().get_texts()]
+    assert legend == ["true path", "odometry", "object (truth)"]
+
+    no_truth_track = dataclasses.replace(tr, truth=None)
+    no_truth = dataclasses.replace(
+        localized_trial,
+        true_pose=None,
+        odometry_error_m=None,
+        localization_error_m=None,
+        trace=dataclasses.replace(localized_trial.trace, track=no_truth_track),
+    )
+    fig = fig5_trial(no_truth)
+    assert list(_path_lines(fig)) == ["odometry", "localized (landmarks)"]
+    assert "off the truth" not in fig.axes[1].get_title()
 
 
 def test_draw_pose_draws_the_box_where_it_projects():

@@ -32,3 +32,43 @@ def test_fig5_fig6_fig7_draw_their_data():
         [{"t": t, "posteriors": P, "true_model": 1}, {"t": t, "posteriors": P[:, ::-1], "true_model": 2}]
     )
     assert len(f.axes) == 2
+
+
+def _track(localization="landmarks", truth=True):
+    from lab.runs.tracks import RobotTrack
+
+    t = np.linspace(0.0, 4.0, 9)
+    true = np.c_[-1.2 + 0.1 * t, 0.05 * t**2, 0.1 * t]
+    odom = true + np.c_[0.02 * t, -0.01 * t, 0.0 * t]  # drifting wheels
+    est = true + 0.003
+    return RobotTrack(
+        t, odom, est if localization == "landmarks" else odom, true if truth else None, localization
+    )
+
+
+def _ring():
+    a = np.radians(np.arange(0, 360, 30))
+    return np.c_[1.2 * np.cos(a), 1.2 * np.sin(a), a + np.pi], np.linspace(0, 1, 12)
+
+
+def test_fig6_draws_the_robots_track_three_ways():
+    """The true, odometry and localized paths are the track's, each named in the legend; with odometry
+    alone there is no localized path, without a truth no true path; without a track the frames' path."""
+    cand, gains = _ring()
+    tr = _track()
+    f = fig6(cand, gains, 3, tr.estimate[-1], (0, 0), path_xy=tr.estimate[:, :2], track=tr)
+    lines = {ln.get_label(): ln for ln in f.axes[0].lines}
+    for label, xy in (
+        ("true path", tr.truth),
+        ("odometry", tr.odometry),
+        ("localized (landmarks)", tr.estimate),
+    ):
+        np.testing.assert_array_equal(lines[label].get_xydata(), xy[:, :2])
+    assert "path" not in lines  # the track replaces the frames' path
+    legend = {t.get_text() for t in f.axes[0].get_legend().get_texts()}
+    assert {"true path", "odometry", "localized (landmarks)", "next-best view"} <= legend
+    f = fig6(cand, gains, 3, tr.estimate[-1], (0, 0), track=_track("odometry", truth=False))
+    legend = {t.get_text() for t in f.axes[0].get_legend().get_texts()}
+    assert "odometry" in legend and not legend & {"true path", "localized (landmarks)"}
+    f = fig6(cand, gains, 3, tr.estimate[-1], (0, 0), path_xy=tr.estimate[:, :2])
+    assert "path" in {t.get_text() for t in f.axes[0].get_legend().get_texts()}

@@ -34,6 +34,7 @@ from lab.io import write_json_atomic
 from lab.navigation.localization import LocalizationMode, LocalizedRobot
 from lab.robot import Robot
 from lab.runs.robots import RobotKind, RobotSession, make_robot
+from lab.runs.tracks import TrackedRobot
 from lab.training import box_model_names, get_database, get_tables
 
 __all__ = ["build_agent", "floor_plan", "pose_error", "run_identify"]
@@ -157,7 +158,8 @@ def run_identify(
         if session.kind is RobotKind.SIM and world.scene.room is not None:
             plan = floor_plan(world.scene.room.size, session.robot.base_limits.radius)
         robot, note = _localized(session, robot_config, localization, seed)
-        agent = build_agent(robot, planner, seed, config, floor_plan=plan)
+        tracked = TrackedRobot(robot, _truth_pose(session))  # the robot's path, for Fig. 6
+        agent = build_agent(tracked, planner, seed, config, floor_plan=plan)
         recorder = _watch(agent, record, progress)
         if attach is not None:
             attach(agent, session.carrier)
@@ -174,6 +176,7 @@ def run_identify(
             "wall": time.perf_counter() - loop_wall0,
             "cpu": time.process_time() - loop_cpu0,
         }
+        tracked.record(force=True)  # where the episode ended
         error = _final_pose_error(agent, session, truth, true_model)
         elapsed = session.robot.now() - t0
         extra = _robot_fields(session)
@@ -185,7 +188,8 @@ def run_identify(
     if session.kind is RobotKind.SIM:
         result.update(_speed_fields(elapsed, wall, cpu, loop))
     _finish_recording(recorder, result, progress)
-    _write(result, json_path, out if figures else None, agent, session, [G_WO for _, G_WO in truth])
+    true_poses = [G_WO for _, G_WO in truth]
+    _write(result, json_path, out if figures else None, agent, session, true_poses, tracked.track())
     return result
 
 
@@ -230,6 +234,12 @@ def _localized(session: RobotSession, robot_config, localization, seed: int):
     return robot, note
 
 
+def _truth_pose(session: RobotSession):
+    """The true base pose for the robot's track (figures only): the simulator's; None elsewhere (a
+    rehearsal's truth is in the room's frame, its odometry from its own origin; a real robot has none)."""
+    return session.world.truth.robot_pose if session.kind is RobotKind.SIM else None
+
+
 def _localization_fields(robot: LocalizedRobot, session: RobotSession, note) -> dict:
     """``localization``, ``odometry_error_m`` and ``localization_error_m`` (against the simulator's
     truth; null without one), the landmark updates, and a note when no landmark was used."""
@@ -253,14 +263,15 @@ def _localization_fields(robot: LocalizedRobot, session: RobotSession, note) -> 
     }
 
 
-def _write(result: dict, json_path, out, agent, session: RobotSession, true_poses: list) -> None:
-    """The JSON to ``json_path``; in the simulator, Figs. 5-7 and ``identify.json`` into ``out``."""
+def _write(result: dict, json_path, out, agent, session: RobotSession, true_poses: list, track=None) -> None:
+    """The JSON to ``json_path``; in the simulator, Figs. 5-7 (Fig. 6 with the robot's ``track``) and
+    ``identify.json`` into ``out``."""
     if json_path is not None:
         write_json_atomic(Path(json_path), result)
     if out is not None and agent.steps and session.kind is RobotKind.SIM:
         from lab.viz.identification import save_episode_figures
 
-        save_episode_figures(Path(out), agent, true_poses, result["true_model"])
+        save_episode_figures(Path(out), agent, true_poses, result["true_model"], track=track)
         write_json_atomic(Path(out) / "identify.json", result)
 
 

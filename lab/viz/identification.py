@@ -3,7 +3,8 @@
 * :func:`fig5`: pose estimates against ground truth, and the model probabilities against time with the
   scanning / tracking bands and the planning instants (the paper's Fig. 5).
 * :func:`fig6`: the ring of candidate poses coloured by information gain, the chosen one, the robot and
-  the object (the paper's Fig. 6, its visual interface).
+  the object, and the robot's path -- the wheel odometry's, the localized one and the true one -- (the
+  paper's Fig. 6, its visual interface).
 * :func:`fig7`: probabilities against time for several runs with different true models (Fig. 7).
 """
 
@@ -13,6 +14,8 @@ import math
 
 import matplotlib.pyplot as plt
 import numpy as np
+
+from lab.viz.localization import draw_track
 
 __all__ = ["fig5", "fig6", "fig7", "plot_probabilities"]
 
@@ -89,7 +92,15 @@ def fig5(t, est_xyz_yaw, true_xyz_yaw, posteriors, modes, decisions=(), names=No
 
 
 def fig6(
-    candidates_xy_theta, gains, chosen, robot_xy_theta, object_xy, path_xy=None, object_cov_xy=None, ax=None
+    candidates_xy_theta,
+    gains,
+    chosen,
+    robot_xy_theta,
+    object_xy,
+    path_xy=None,
+    object_cov_xy=None,
+    ax=None,
+    track=None,
 ):
     """The paper's Fig. 6: the equatorial ring of candidate poses coloured by information gain.
 
@@ -105,9 +116,13 @@ def fig6(
     object_xy : (2,)
         The probability-weighted object estimate (the ring's centre).
     path_xy : (m, 2), optional
-        The robot's path so far.
+        The robot's path so far (drawn when there is no ``track``).
     object_cov_xy : (2, 2), optional
         Covariance of the object's position, drawn as a 2-sigma ellipse.
+    track : RobotTrack, optional
+        The robot's path three ways (:class:`lab.runs.tracks.RobotTrack`): the wheel odometry, the
+        localized estimate (with ``landmarks`` localization) and the true path where it is known
+        (:func:`lab.viz.localization.draw_track`).
     """
     cand = np.asarray(candidates_xy_theta, float)
     g = np.asarray(gains, float)
@@ -130,7 +145,9 @@ def fig6(
     x, y, th = robot_xy_theta
     ax.add_patch(plt.Circle((x, y), 0.2, color="tab:green", alpha=0.7, zorder=2))
     ax.arrow(x, y, 0.3 * math.cos(th), 0.3 * math.sin(th), width=0.02, color="k", zorder=3)
-    if path_xy is not None and len(path_xy):
+    if track is not None and len(track):
+        draw_track(ax, track)
+    elif path_xy is not None and len(path_xy):
         p = np.asarray(path_xy)
         ax.plot(p[:, 0], p[:, 1], color="tab:green", lw=1, label="path")
     ax.set_aspect("equal")
@@ -157,7 +174,7 @@ def fig7(runs, names=None):
     return fig
 
 
-def save_episode_figures(out, agent, true_poses, true_model: int) -> None:
+def save_episode_figures(out, agent, true_poses, true_model: int, track=None) -> None:
     """Write an identification episode's Figs. 5-7 into ``out`` (``lab identify --out``).
 
     Parameters
@@ -168,6 +185,9 @@ def save_episode_figures(out, agent, true_poses, true_model: int) -> None:
     true_poses : sequence of ndarray, shape (4, 4)
         The box's true pose in W at each step's frame (scoring only).
     true_model : int
+    track : RobotTrack, optional
+        The robot's path (odometry, estimate, truth) for Fig. 6; without it Fig. 6 draws the frames'
+        poses (the pose the agent used).
     """
     from pathlib import Path
 
@@ -196,9 +216,9 @@ def save_episode_figures(out, agent, true_poses, true_model: int) -> None:
         d = agent.decisions[-1]
         odom = np.array([s.odom for s in steps])
         gains = d.gains if np.isfinite(d.gains).any() else np.zeros(len(d.candidates))
-        fig6(d.candidates, gains, d.chosen, odom[-1], d.centre_W[:2], path_xy=odom[:, :2]).savefig(
-            out / "fig6_information_gain_ring.png", dpi=90
-        )
+        fig6(
+            d.candidates, gains, d.chosen, odom[-1], d.centre_W[:2], path_xy=odom[:, :2], track=track
+        ).savefig(out / "fig6_information_gain_ring.png", dpi=90)
     fig7(
         [{"t": t, "posteriors": P, "modes": modes, "decisions": decisions, "true_model": true_model}], names
     ).savefig(out / "fig7_probabilities.png", dpi=90)

@@ -1,4 +1,5 @@
-"""Figures of a localization drive: the true, odometry and localized trajectories, and 3-sigma ellipses."""
+"""Figures of a localization drive: the true, odometry and localized trajectories, and 3-sigma ellipses;
+and :func:`draw_track`, the same three paths of a search trial or an identification episode."""
 
 from __future__ import annotations
 
@@ -6,7 +7,35 @@ import numpy as np
 
 from lab.navigation.landmarks import LandmarkMap
 
-__all__ = ["drive_figure", "trajectories_axes"]
+__all__ = ["PATH_STYLES", "draw_track", "drive_figure", "trajectories_axes"]
+
+#: How :func:`draw_track` draws the robot's paths: (colour, line style, width, label).
+PATH_STYLES = {
+    "truth": ("limegreen", "-", 2.4, "true path"),
+    "odometry": ("magenta", "-", 1.3, "odometry"),
+    "estimate": ("cyan", "--", 1.3, "localized (landmarks)"),
+}
+
+
+def draw_track(ax, track, end_marks: bool = True) -> list[str]:
+    """Draw a run's track (:class:`lab.runs.tracks.RobotTrack`) on ``ax``: the true path where the
+    truth is known, the wheel odometry, and the localized estimate when the run localized against
+    landmarks (with odometry alone the estimate is the odometry: not drawn twice), each labelled for a
+    legend (:data:`PATH_STYLES`); ``end_marks`` puts a dot where each path ends. Returns the kinds
+    drawn, in order (``truth``, ``odometry``, ``estimate``)."""
+    paths = []
+    if track.truth is not None:
+        paths.append(("truth", track.truth))
+    paths.append(("odometry", track.odometry))
+    if track.localized:
+        paths.append(("estimate", track.estimate))
+    for kind, xy in paths:
+        colour, ls, lw, label = PATH_STYLES[kind]
+        ax.plot(xy[:, 0], xy[:, 1], ls=ls, color=colour, lw=lw, label=label)
+    if end_marks and len(track):
+        for kind, xy in paths:
+            ax.plot(xy[-1, 0], xy[-1, 1], "o", color=PATH_STYLES[kind][0], ms=4)
+    return [kind for kind, _ in paths]
 
 
 def _ellipse(x, Sigma, k: float = 3.0, n: int = 60) -> np.ndarray:

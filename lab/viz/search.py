@@ -28,6 +28,7 @@ from lab.geometry import transform_points
 from lab.robot import StereoCamera
 from lab.search.global_search import GlobalSearchResult
 from lab.search.probability_map import detection_likelihood, growing_beta_field
+from lab.viz.localization import PATH_STYLES, draw_track
 
 __all__ = [
     "draw_pose",
@@ -167,7 +168,8 @@ def fig5_trial(result, costmap_state: np.ndarray | None = None, costmap_spec=Non
         Navigator's final ``Costmap.state``; without it only the trajectory is drawn. The trajectory
         panel draws the robot's track (``result.trace.track``): the wheel odometry, the localized
         estimate when the trial localized against landmarks, and the true path and object where the
-        truth is known (:data:`PATH_STYLES`), with a legend; its title gives the final errors.
+        truth is known (:func:`lab.viz.localization.draw_track`), with a legend; its title gives the
+        final errors.
     costmap_spec : GridSpec, optional
         The costmap's grid.
     """
@@ -202,7 +204,8 @@ def fig5_trial(result, costmap_state: np.ndarray | None = None, costmap_spec=Non
     ax[0, 1].set_aspect("equal")
     title = "costmap and trajectory" if costmap_state is not None else "trajectory"
     ax[0, 1].set_title(title + _end_errors(result), fontsize=9)
-    ax[0, 1].legend(loc="best", fontsize=7, framealpha=0.7)
+    # below the panel: inside it the legend hides the paths near the room's edges
+    ax[0, 1].legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, fontsize=7, frameon=False)
     # the pose on the image
     loc = agent.local
     if loc is not None and loc.found and loc.frame is not None:
@@ -217,35 +220,15 @@ def fig5_trial(result, costmap_state: np.ndarray | None = None, costmap_spec=Non
     return fig
 
 
-#: How :func:`fig5_trial` draws the robot's paths: (colour, line style, width, label).
-PATH_STYLES = {
-    "truth": ("white", "-", 2.4, "true path"),
-    "odometry": ("magenta", "-", 1.3, "odometry"),
-    "estimate": ("cyan", "--", 1.3, "localized (landmarks)"),
-}
-
-
 def _draw_paths(ax, trace) -> None:
-    """The robot's path on ``ax``: the wheel odometry, the localized estimate (with ``landmarks``
-    localization) and the true path where it is known, from the trial's track; a trace without one
-    (recorded before tracks were) draws its single trajectory as the odometry."""
+    """The robot's path on ``ax``: the trial's track (:func:`lab.viz.localization.draw_track`); a trace
+    without one (recorded before tracks were) draws its single trajectory as the odometry."""
     track = getattr(trace, "track", None)
-    paths = []
-    if track is None or len(track) == 0:
-        if len(trace.trajectory):
-            paths.append(("odometry", trace.trajectory[:, 1:3]))
-    else:
-        if track.truth is not None:
-            paths.append(("truth", track.truth[:, :2]))
-        paths.append(("odometry", track.odometry[:, :2]))
-        if track.localized:
-            paths.append(("estimate", track.estimate[:, :2]))
-    for kind, xy in paths:
-        colour, ls, lw, label = PATH_STYLES[kind]
-        ax.plot(xy[:, 0], xy[:, 1], ls=ls, color=colour, lw=lw, label=label)
-    if paths:  # where the run ended, on each path
-        for kind, xy in paths:
-            ax.plot(xy[-1, 0], xy[-1, 1], "o", color=PATH_STYLES[kind][0], ms=4)
+    if track is not None and len(track):
+        draw_track(ax, track)
+    elif len(trace.trajectory):
+        colour, ls, lw, label = PATH_STYLES["odometry"]
+        ax.plot(trace.trajectory[:, 1], trace.trajectory[:, 2], ls=ls, color=colour, lw=lw, label=label)
 
 
 def _end_errors(result) -> str:
