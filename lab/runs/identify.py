@@ -113,7 +113,7 @@ def run_identify(
     robot_config=None,
     progress=None,
     sensing="realistic",
-    localization="odometry",
+    localization="landmarks",
 ) -> dict:
     """Run one episode and return the ``lab identify`` JSON (also written to ``json_path``).
 

@@ -252,7 +252,7 @@ class SearchResult:
     camera_frame_error: dict | None = None
     odometry_error_m: float | None = 0.0
     localization_error_m: float | None = 0.0
-    localization: str = "odometry"
+    localization: str = "landmarks"
     landmark_updates: int = 0
     localization_note: str | None = None
     events: tuple[SearchEvent, ...] = field(default=(), repr=False)
@@ -336,7 +336,7 @@ def run_search(
     record=None,
     attach: Callable | None = None,
     sensing="realistic",
-    localization="odometry",
+    localization="landmarks",
     robot_config=None,
     truth=None,
     emulator_setup: Callable | None = None,
@@ -373,8 +373,8 @@ def run_search(
         The simulator's sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic).
     localization : {"landmarks", "odometry"}
         Where the robot's pose comes from (:class:`lab.navigation.localization.LocalizedRobot`): the
-        odometry corrected by the room's posters, or odometry alone (default, until the localizer's effect
-        on the search is measured). The real robot has no landmark map in the scene's frame: odometry.
+        odometry corrected by the room's posters (default), or wheel odometry alone, as in the papers.
+        The real robot has no landmark map in the scene's frame: odometry.
     robot_config : path or HardwareConfig, optional
         Run on this robot (:func:`lab.runs.robots.make_robot`): a rehearsal (``hardware/rehearsal.toml``)
         or the real robot (``hardware/robot.toml``); None: the simulator.
