@@ -120,3 +120,40 @@ def test_a_map_whose_posters_are_never_seen_falls_back_and_says_so(tmp_path, cap
     p, q = starts
     assert (p.x, p.y, math.degrees(p.theta)) == pytest.approx((0.4, -2.5, 80.0), abs=1e-9)
     assert (q.x, q.y, math.degrees(q.theta)) == pytest.approx((0.0, -3.0, 90.0), abs=1e-9)
+
+
+def test_rehearsed_search_corrects_a_start_measured_30cm_10deg_off(monkeypatch):
+    """The rehearsal (emulators, the lab room rendered from their true state) told it stands 30 cm and
+    10 deg from where it does: the first poster it sees corrects the start (the gate alone, with the
+    start's 5 cm / 3 deg, would have rejected it), and the localized pose ends far closer to the rendered
+    world's truth than the odometry placed at the told start."""
+    from lab.navigation.navigator import NavigatorConfig
+    from lab.search.agent import AgentConfig
+    from lab.search.global_search import GlobalSearchConfig
+
+    config = AgentConfig(global_search=GlobalSearchConfig(pans_deg=(0.0,), tilts_deg=(-30.0,)))
+    nav_config = NavigatorConfig(scan_pans=(0.0,))
+    robots = []
+    told = (0.25, -2.85, 100.0)  # the scene's start is (0, -3, 90 deg): 29 cm and 10 deg off
+    res = run_search(
+        "cereal_box",
+        0,
+        place=(0.0, -1.6, 0.0, -90.0),  # 1.4 m ahead
+        max_time=30.0,
+        navigate=lambda robot, spec: navigator_factory(robot, spec, config=nav_config),
+        config=config,
+        robot_config=REHEARSAL_TOML,
+        localization="landmarks",
+        start=told,
+        attach=lambda agent: robots.append(agent.robot.base),  # BudgetedRobot -> LocalizedRobot
+    )
+    d = json.loads(json.dumps(res.to_json()))
+    hist = robots[0].localizer.history
+    print({k: d[k] for k in ("found", "odometry_error_m", "localization_error_m", "landmark_updates")})
+    print([(r.landmark, r.kind, round(r.nis, 1)) for r in hist])
+    assert d["localization"] == "landmarks" and d["landmark_updates"] >= 1 and d["localization_note"] is None
+    first = next(r for r in hist if r.accepted)
+    assert first.kind in ("reset", "fused")
+    assert d["odometry_error_m"] > 0.15  # the told start's error, turned by the drive (measured: 0.19)
+    assert d["localization_error_m"] < 0.6 * d["odometry_error_m"]  # measured: 0.07
+    assert d["localization_error_m"] < 0.10
