@@ -20,6 +20,7 @@ the localizer starts certain, as before.
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -182,6 +183,12 @@ def localize(
     rng = np.random.default_rng([seed, 20])
     if kind is RobotKind.SIM or start is None:
         return LocalizedRobot(robot, room.mode, room.landmarks, rng=rng, log=log)
+    p = start.pose
+    s_m, s_rad = math.sqrt(start.Sigma0[0, 0]), math.sqrt(start.Sigma0[2, 2])
+    (log or (lambda m: print(f"lab: {m}", file=sys.stderr)))(
+        f"localization: the robot starts at ({p.x:.3f}, {p.y:.3f}) m, {math.degrees(p.theta):.1f} deg in the "
+        f"room ({start.source}; sigma {s_m:.3f} m, {math.degrees(s_rad):.1f} deg)"
+    )
     return LocalizedRobot(
         PlacedRobot(robot, start.pose),
         room.mode,
