@@ -157,3 +157,29 @@ def test_rehearsed_search_corrects_a_start_measured_30cm_10deg_off(monkeypatch):
     assert d["odometry_error_m"] > 0.15  # the told start's error, turned by the drive (measured: 0.19)
     assert d["localization_error_m"] < 0.6 * d["odometry_error_m"]  # measured: 0.07
     assert d["localization_error_m"] < 0.10
+
+
+def test_identify_on_a_robot_uses_the_map_and_needs_a_start(tmp_path, capsys):
+    """`lab identify --robot ... --localization landmarks` (identify's _localized) on the emulators with
+    the synthetic camera: the config's map is used once a start is known (--start), nothing is seen in
+    random dots and it says so; without a start on the real robot's path it falls back and says why."""
+    from lab.hardware.emulators import start_emulators
+    from lab.runs.identify import run_identify
+
+    with start_emulators(tmp_path / "links") as emu:
+        cfg = load_config(EMULATED_TOML).with_ports(base=emu.base_port, ptu=emu.ptu_port)
+        cfg = dataclasses.replace(cfg, base=dataclasses.replace(cfg.base, stale_timeout_s=0.5))
+        cfg = dataclasses.replace(cfg, room=RoomConfig(landmarks=str(LANDMARKS_TOML)))
+        kw = {"max_actions": 0, "max_time_s": 3.0, "figures": False, "localization": "landmarks"}
+        capsys.readouterr()
+        placed = run_identify(1, 0, "static", "random", robot_config=cfg, start=(0.5, 1.0, 45.0), **kw)
+        err = capsys.readouterr().err
+        unplaced = run_identify(1, 0, "static", "random", robot_config=cfg, **kw)
+    assert (
+        "the robot starts at (0.500, 1.000) m, 45.0 deg in the room (--start; sigma 0.100 m, 5.0 deg)" in err
+    )
+    assert placed["localization"] == "landmarks" and placed["landmark_updates"] == 0
+    assert placed["localization_note"] == "no landmark was seen: the pose is odometry alone"
+    assert unplaced["localization"] == "odometry"
+    assert unplaced["localization_note"].startswith("no start pose in the room for this robot (--start")
+    assert placed["odometry_error_m"] is None and placed["localization_error_m"] is None  # no truth

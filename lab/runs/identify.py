@@ -178,6 +178,11 @@ def run_identify(
         sim_t0, loop_wall0, loop_cpu0 = session.robot.now(), time.perf_counter(), time.process_time()
         interrupted = False
         try:
+            if robot.mode is LocalizationMode.LANDMARKS and session.kind is not RobotKind.SIM:
+                # a robot's start was measured by hand: look for a poster first (the first sighting may
+                # correct it), then put the head back; the agent tracks the box, not the walls
+                robot.enable()
+                robot.relocalize()
             identified = agent.run()  # stops the robot on its way out
         except KeyboardInterrupt:  # Ctrl-C: the motors are stopped; the record so far is the result
             interrupted, identified = True, agent.identified
