@@ -139,7 +139,7 @@ def test_rehearsed_search_corrects_a_start_measured_30cm_10deg_off(monkeypatch):
         "cereal_box",
         0,
         place=(0.0, -1.6, 0.0, -90.0),  # 1.4 m ahead
-        max_time=30.0,
+        max_time=20.0,  # wall time: the first poster is seen before the first drive, ~10 s in
         navigate=lambda robot, spec: navigator_factory(robot, spec, config=nav_config),
         config=config,
         robot_config=REHEARSAL_TOML,
@@ -152,11 +152,15 @@ def test_rehearsed_search_corrects_a_start_measured_30cm_10deg_off(monkeypatch):
     print({k: d[k] for k in ("found", "odometry_error_m", "localization_error_m", "landmark_updates")})
     print([(r.landmark, r.kind, round(r.nis, 1)) for r in hist])
     assert d["localization"] == "landmarks" and d["landmark_updates"] >= 1 and d["localization_note"] is None
+    # the first sighting comes before the first drive (the search re-localizes before it drives): the
+    # base still stands at the scene's start, which the reset pose must be near; the gate alone would
+    # have rejected it (NIS > chi-square(3)'s 0.999 quantile, 16.3)
     first = next(r for r in hist if r.accepted)
-    assert first.kind in ("reset", "fused")
+    assert first.kind == "reset" and first.nis > 16.3
+    assert math.hypot(first.x[0] - 0.0, first.x[1] + 3.0) < 0.06  # measured: 3 cm
+    assert abs(math.degrees(first.x[2]) - 90.0) < 3.0  # measured: 0.3 deg
     assert d["odometry_error_m"] > 0.15  # the told start's error, turned by the drive (measured: 0.19)
-    assert d["localization_error_m"] < 0.6 * d["odometry_error_m"]  # measured: 0.07
-    assert d["localization_error_m"] < 0.10
+    assert d["localization_error_m"] < 0.7 * d["odometry_error_m"]  # measured: 0.03-0.09 (4 runs)
 
 
 def test_identify_on_a_robot_uses_the_map_and_needs_a_start(tmp_path, capsys):
