@@ -611,6 +611,10 @@ class LandmarkObserver:
 class LocalizedRobot(RobotWrapper):
     """A :class:`~lab.robot.Robot` whose ``odometry()`` and frames' ``odom`` are the localizer's estimate.
 
+    Its frames keep the base's wheel odometry in ``wheel_odom``: the object filters predict with the
+    wheels' increment between two frames (:func:`lab.robot.frame_motion`), since a landmark update moves
+    the estimate, not the robot.
+
     Every call is passed on to ``base``. With ``mode=LANDMARKS`` each captured frame in which a landmark
     should be visible updates the filter; ``relocalize()`` points the head at landmarks until the pose
     is certain again (active re-localization). With ``mode=ODOMETRY`` the base's odometry is passed
@@ -706,7 +710,7 @@ class LocalizedRobot(RobotWrapper):
                     f"localization: the start pose was {100 * math.hypot(dx, dy):.0f} cm and {abs(dth):.1f} "
                     f"deg off what {obs.landmark.name} says (NIS {rec.nis:.1f}): reset from it"
                 )
-        return replace(frame, odom=self._pose())
+        return replace(frame, odom=self._pose(), wheel_odom=frame.wheels)  # the wheels: frame_motion
 
     def certain(self) -> bool:
         """Whether the pose is within the re-localization thresholds (position and heading)."""

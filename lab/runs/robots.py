@@ -189,4 +189,5 @@ class PlacedRobot(RobotWrapper):
 
     def capture_stereo(self, after: float | None = None) -> StereoFrame:
         frame = self.base.capture_stereo(after)
-        return dataclasses.replace(frame, odom=self._in_room(frame.odom))
+        wheels = None if frame.wheel_odom is None else self._in_room(frame.wheel_odom)
+        return dataclasses.replace(frame, odom=self._in_room(frame.odom), wheel_odom=wheels)
