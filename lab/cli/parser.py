@@ -43,6 +43,18 @@ def _localization_argument(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _start_argument(p: argparse.ArgumentParser) -> None:
+    """``--start``: where a robot stands in the room when it starts (``lab/runs/room.py``)."""
+    p.add_argument(
+        "--start",
+        type=lambda s: _floats(s, 3, "--start"),
+        metavar="X,Y,YAW_DEG",
+        help="with --robot: where the robot stands in the room's frame when it starts, as measured (its "
+        "odometry starts there; default: the config's [room] start, else the scene's start); the localizer "
+        "starts there with the config's [room] start_sigma, and the first poster it sees can correct it",
+    )
+
+
 def _executor_arguments(p: argparse.ArgumentParser) -> None:
     """Where independent jobs run: ``--workers N`` local processes, or ``--scheduler`` (Dask)."""
     p.add_argument("--workers", type=int, help="worker processes on this machine (default 1)")
@@ -220,6 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("--json", type=Path, help="write the result JSON here")
     idf.add_argument("--out", type=Path, help="write the figures (Fig. 5, 6, 7) and identify.json here")
     _localization_argument(idf)
+    _start_argument(idf)
     idf.add_argument(
         "--keep-direction",
         type=float,
@@ -280,6 +293,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _sensing_argument(se)
     _localization_argument(se)
+    _start_argument(se)
 
     hw = sub.add_parser(
         "hardware",
