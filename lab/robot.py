@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lab.errors import ConfigError, LimitError
-from lab.geometry import Pose2D, pan_tilt_G_RC
+from lab.geometry import Pose2D, pan_tilt_G_RC, relative_pose2d
 
 __all__ = [
     "BaseLimits",
@@ -53,6 +53,7 @@ __all__ = [
     "StereoCamera",
     "StereoFrame",
     "check_finite",
+    "frame_motion",
 ]
 
 
@@ -262,7 +263,13 @@ class StereoFrame:
     pan_tilt : PanTiltState
         The head's state at capture: ``camera.G_RC(pan_tilt.pan, pan_tilt.tilt)`` is ``G_RC``.
     odom : Pose2D
-        The base's odometry pose at capture (world frame as the odometry believes it).
+        The robot's pose at capture, in the world frame: the base's wheel odometry, or the localizer's
+        estimate behind :class:`lab.navigation.localization.LocalizedRobot`. Whatever is placed in the
+        world from this frame uses it (``G_WC = odom.G() @ G_RC``).
+    wheel_odom : Pose2D or None
+        The base's own wheel odometry at capture when ``odom`` is a localized estimate (None: ``odom``
+        is the wheel odometry). The motion between two frames comes from it (:func:`frame_motion`):
+        a landmark update between two frames moves the estimate, not the robot.
     """
 
     t: float
@@ -271,10 +278,25 @@ class StereoFrame:
     camera: StereoCamera
     pan_tilt: PanTiltState
     odom: Pose2D
+    wheel_odom: Pose2D | None = None
 
     @property
     def G_RC(self) -> np.ndarray:
         return self.camera.G_RC(self.pan_tilt.pan, self.pan_tilt.tilt)
+
+    @property
+    def wheels(self) -> Pose2D:
+        """The wheel odometry at capture (``wheel_odom``, else ``odom``)."""
+        return self.odom if self.wheel_odom is None else self.wheel_odom
+
+
+def frame_motion(prev: StereoFrame, cur: StereoFrame) -> np.ndarray:
+    """``G_{R(k-1) R(k)}`` (4x4): how the base moved between two frames, by its wheel odometry.
+
+    The object filters predict with it. It is the increment of the wheels, not of ``odom``: with
+    localization on, ``odom`` also jumps when a landmark corrects the estimate.
+    """
+    return relative_pose2d(prev.wheels, cur.wheels)
 
 
 class Robot(ABC):

@@ -8,13 +8,16 @@ import math
 import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
+from nav_fakes import KinematicRobot
 from scipy.stats import chi2
 
 from lab.errors import ConfigError
-from lab.geometry import Pose2D, Rz, pan_tilt_G_RC, se3, wrap_angle
+from lab.geometry import Pose2D, Rz, pan_tilt_G_RC, relative_pose2d, se3, wrap_angle
 from lab.navigation.landmarks import Landmark
 from lab.navigation.localization import (
+    LandmarkObservation,
     LocalizationMode,
+    LocalizedRobot,
     Localizer,
     LocalizerConfig,
     measurement_jacobian,
@@ -24,6 +27,7 @@ from lab.navigation.localization import (
     observation_of,
     odometry_increment,
 )
+from lab.robot import StereoFrame, frame_motion
 from lab.training.landmarks import landmark_map_from_scene, load_landmark_map
 
 RNG = np.random.default_rng(20)
@@ -278,3 +282,72 @@ def test_closed_loop_drive_localizes_against_the_truth():
     assert loc.localization_error_m < loc.odometry_error_m
     odo = run_localization_drive(3, "odometry", length_m=3.0)
     assert odo.localization_error_m == odo.odometry_error_m and odo.n_updates == 0
+
+
+# --- the object filters' motion under a localized pose -------------------------------------------------
+
+
+class _FramedRobot(KinematicRobot):
+    """The kinematic robot with a (blank) stereo camera: frames carry its wheel odometry."""
+
+    def capture_stereo(self, after=None):
+        cam = self.camera
+        img = np.zeros((cam.height, cam.width, 3), np.uint8)
+        return StereoFrame(self.now(), img, img, cam, self.pan_tilt(), self.odometry())
+
+
+class _OneLandmarkObserver:
+    """Sees one poster in every frame, as if the robot stood ``offset`` away from its wheel odometry."""
+
+    def __init__(self, robot, offset):
+        self.robot, self.offset = robot, np.asarray(offset, float)
+        self.lm = Landmark("p", (0.0, 3.94, 1.5), 0.0, (1.4, 0.02, 1.0), (0.0, -1.0))
+
+    def candidates(self, x, frame):
+        return [self.lm]
+
+    def observe(self, frame, candidates):
+        z = measurement_model(frame.odom.as_array() + self.offset, self.lm.planar)
+        return [LandmarkObservation(self.lm, np.eye(4), z, np.diag([1e-6, 1e-6, 1e-6]), 30)]
+
+
+def test_a_landmark_update_between_frames_is_not_robot_motion():
+    """Behind the localizer a frame's ``odom`` is the estimate, which a landmark update moves while the
+    wheels stand still; ``frame_motion`` (what the object EKFs predict with) is the wheels' increment:
+    the identity when they did not move, their increment when they did; and the EKF predicted with it
+    equals the EKF predicted with the true (zero) motion."""
+    from lab.estimation.ekf import PoseEKF
+
+    base = _FramedRobot(Pose2D(0.3, -1.0, 1.4))
+    robot = LocalizedRobot(base, "odometry")
+    robot.mode = LocalizationMode.LANDMARKS  # the observer below stands in for a trained map
+    robot.observer = _OneLandmarkObserver(robot, [0.06, -0.04, 0.02])
+    f1 = robot.capture_stereo()
+    f2 = robot.capture_stereo()  # the wheels did not move; the estimate did
+    assert f1.wheel_odom == f2.wheel_odom == base.odometry()
+    assert math.hypot(f2.odom.x - f1.odom.x, f2.odom.y - f1.odom.y) > 0.002
+    np.testing.assert_allclose(frame_motion(f1, f2), np.eye(4), atol=1e-15)
+    assert not np.allclose(relative_pose2d(f1.odom, f2.odom), np.eye(4), atol=1e-3)  # what it was
+
+    def predicted(G_odom):
+        ekf = PoseEKF(rng=np.random.default_rng(0))
+        ekf.initialize(np.array([0.05, -0.02, 1.0, 0.3, -0.2, 0.1]), np.diag([1e-4] * 3 + [1e-3] * 3))
+        ekf.predict(f1.G_RC, f2.G_RC, G_odom, 0.1)
+        return ekf.estimate
+
+    a, b = predicted(frame_motion(f1, f2)), predicted(np.eye(4))
+    np.testing.assert_allclose(a.mu, b.mu, atol=1e-15)
+    np.testing.assert_allclose(a.Sigma, b.Sigma, atol=1e-15)
+
+    base.enable()
+    for _ in range(20):  # the wheels move: 0.2 m/s for 1 s
+        base.drive(0.2, 0.1)
+        base.step(0.05)
+    f3 = robot.capture_stereo()
+    np.testing.assert_allclose(
+        frame_motion(f2, f3), relative_pose2d(f2.wheel_odom, base.odometry()), atol=1e-12
+    )
+    assert frame_motion(f2, f3)[0, 3] > 0.1
+    # in odometry mode frames are the base's own: the wheels are the odometry
+    plain = LocalizedRobot(_FramedRobot(Pose2D(0.0, 0.0, 0.0)), "odometry").capture_stereo()
+    assert plain.wheel_odom is None and plain.wheels == plain.odom

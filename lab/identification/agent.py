@@ -70,7 +70,7 @@ from lab.estimation import (
     OrientationChart,
     UpdateOutcome,
 )
-from lab.geometry import G_to_pose6, Pose2D, relative_pose2d, wrap_angle
+from lab.geometry import G_to_pose6, Pose2D, wrap_angle
 from lab.identification.actions import ActionConfig, RingBlocked
 from lab.identification.bayes import uniform
 from lab.identification.head import HeadController, HeadMode
@@ -87,7 +87,7 @@ from lab.identification.planner import continue_direction, plan_next_best_view, 
 from lab.identification.scoring import ModelScorer, ScoringConfig
 from lab.identification.step import observe_frame
 from lab.navigation.follower import PathFollower
-from lab.robot import Robot
+from lab.robot import Robot, frame_motion
 from lab.vision import FeatureDatabase, Matcher, stereo_features
 
 __all__ = ["PlannerChoice", "AgentConfig", "StepRecord", "DecisionRecord", "IdentificationAgent"]
@@ -226,7 +226,7 @@ class IdentificationAgent:
             self.bank.predict(
                 self._prev.G_RC,
                 frame.G_RC,
-                relative_pose2d(self._prev.odom, frame.odom),
+                frame_motion(self._prev, frame),
                 frame.t - self._prev.t,
             )
         self._prev = frame

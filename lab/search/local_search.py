@@ -47,8 +47,8 @@ from lab.estimation import (
     PoseEstimate,
     ProcessNoise,
 )
-from lab.geometry import relative_pose2d, transform_points, wrap_angle
-from lab.robot import Robot, StereoCamera, StereoFrame
+from lab.geometry import transform_points, wrap_angle
+from lab.robot import Robot, StereoCamera, StereoFrame, frame_motion
 from lab.vision.database import FeatureDatabase
 from lab.vision.matching import Matcher
 from lab.vision.stereo import sift, stereo_features
@@ -411,7 +411,7 @@ def _refine(robot, db, matcher, detector, ekf: PoseEKF, frame: StereoFrame, cfg:
         )
         robot.wait_pan_tilt()
         cur = robot.capture_stereo()
-        ekf.predict(prev.G_RC, cur.G_RC, relative_pose2d(prev.odom, cur.odom), max(0.0, cur.t - prev.t))
+        ekf.predict(prev.G_RC, cur.G_RC, frame_motion(prev, cur), max(0.0, cur.t - prev.t))
         roi = object_roi(ekf.estimate.G_CO, db.extent, cur.camera, cfg.roi_margin_px)
         f = stereo_features(cur.left, cur.right, cur.camera, roi=roi, t=cur.t, detector=detector)
         res = ekf.update(*matcher.match(f).pairs(f, db))  # gated by the geometric feasibility check
