@@ -495,12 +495,13 @@ for name, xe, Se in (("before", x_bar, Sigma_bar), ("after ", x_new, Sigma_new))
 assert position_error_cm(x_new) < position_error_cm(x_bar)
 assert nees(x_new, Sigma_new) <= chi2.ppf(0.99, 3)         # the truth is inside the new covariance
 
-fig, ax = plt.subplots(figsize=(5, 4))
+fig, ax = plt.subplots(figsize=(8, 2.6))
 for xe, Se, col, lab in ((x_bar, Sigma_bar, "tab:red", "before"), (x_new, Sigma_new, "tab:blue", "after")):
     el = ellipse(xe, Se)
     ax.plot(el[:, 0], el[:, 1], color=col, label=f"3 sigma {lab}"); ax.plot(*xe[:2], "o", color=col)
 ax.plot(truth.x, truth.y, "k+", ms=14, mew=2, label="truth")
-ax.set_aspect("equal"); ax.set_xlabel("x [m]"); ax.set_ylabel("y [m]"); ax.legend(fontsize=8)
+ax.set_aspect("equal"); ax.set_xlabel("x [m]"); ax.set_ylabel("y [m]")
+ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.02, 0.5))
 ax.set_title("one look at the north poster", fontsize=9);
 """,
     ),
@@ -607,15 +608,26 @@ for r in (odo, est):                    # the truth at the last corner lies insi
         """\
 fig, ax = plt.subplots(1, 3, figsize=(15, 5), gridspec_kw={"width_ratios": [1.1, 1, 1]})
 trajectories_axes(ax[0], odo, est, landmarks)
+ax[0].legend(fontsize=7, loc="lower right")
+for b in scene.bodies:                                   # the furniture on the floor, in grey
+    if b.shape in ("table", "shelf", "box") and b.pose[2] == 0.0:
+        (cx, cy, _), (sx_, sy_) = b.centre, b.size[:2]
+        corners = np.array([[-sx_, -sy_], [sx_, -sy_], [sx_, sy_], [-sx_, sy_], [-sx_, -sy_]]) / 2
+        c, s = math.cos(b.yaw), math.sin(b.yaw)
+        ax[0].fill(cx + c * corners[:, 0] - s * corners[:, 1], cy + s * corners[:, 0] + c * corners[:, 1], color="0.85", zorder=0)
+        ax[0].annotate(b.name, (cx, cy), fontsize=6, ha="center", color="0.4")
 for x_c, Sigma_c in odo.ellipses:                        # dead reckoning's ellipses at the corners
     el = ellipse(x_c, Sigma_c)
     ax[0].plot(el[:, 0], el[:, 1], color="tab:red", lw=0.6)
 ax[0].set_title("truth, odometry alone and localized; 3-sigma ellipses at the corners", fontsize=9)
+def driven_m(tr):                                       # the true distance driven at each row [m]
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(tr[:, 1:3], axis=0).T))])
+
 for r, cols, col in ((odo, slice(4, 6), "tab:red"), (est, slice(7, 9), "tab:blue")):
     tr = r.trajectory
-    ax[1].plot(tr[:, 0], 100 * np.hypot(*(tr[:, cols] - tr[:, 1:3]).T), color=col,
+    ax[1].plot(driven_m(tr), 100 * np.hypot(*(tr[:, cols] - tr[:, 1:3]).T), color=col,
                label="odometry alone" if r is odo else "localized")
-ax[1].set_xlabel("t [s]"); ax[1].set_ylabel("position error [cm]"); ax[1].legend(fontsize=8)
+ax[1].set_xlabel("distance driven [m]"); ax[1].set_ylabel("position error [cm]"); ax[1].legend(fontsize=8)
 ax[1].set_title("error against the truth", fontsize=9)
 ax[2].semilogy(est.nees, "o", ms=4)
 for q in (lo, hi):
@@ -623,6 +635,16 @@ for q in (lo, hi):
 ax[2].set_xlabel("accepted landmark update"); ax[2].set_ylabel("NEES")
 ax[2].set_title("NEES and the chi-square(3) 95 % band", fontsize=9)
 plt.tight_layout()
+
+# where did each robot's true path end, and when did it stop moving? (the truth: for the story only)
+for r in (odo, est):
+    tr = r.trajectory
+    moving = np.flatnonzero(np.hypot(*np.diff(tr[:, 1:3], axis=0).T) > 1e-4)
+    t_stop = tr[moving[-1] + 1, 0] if len(moving) else 0.0
+    near = min(scene.bodies, key=lambda b: math.hypot(b.centre[0] - tr[-1, 1], b.centre[1] - tr[-1, 2]))
+    print(f"{r.mode:9s}: the robot's true pose last moved at t = {t_stop:.0f} s of {tr[-1, 0]:.0f} s; it ended at "
+          f"({tr[-1, 1]:.2f}, {tr[-1, 2]:.2f}) m, {math.hypot(near.centre[0] - tr[-1, 1], near.centre[1] - tr[-1, 2]):.2f} m "
+          f"from the centre of the {near.name}")
 """,
     ),
     (
@@ -630,6 +652,11 @@ plt.tight_layout()
         r"""The odometry's error grows with every metre and every corner, and its ellipses grow with it (the
 truth stays inside them: the noise model is honest about dead reckoning). The localized estimate's
 error drops at every landmark update, and its ellipses stay a few centimetres wide.
+
+Look at where the odometry-alone drive ended: with seed 7 its robot, more than half a metre off
+and sure it was on the rectangle, drove into `table_b` near the west wall. The bumper stopped it, and
+it stood there until the drive's step budget ran out (the long tail of its run time above). That is
+the other cost of dead reckoning: a costmap and a path planned in the wrong place.
 
 `lab search` and `lab identify` run their agents behind the same wrapper (`--localization landmarks`,
 the default, or `--localization odometry`) and report both final errors, `odometry_error_m` and
