@@ -30,8 +30,8 @@ def test_eval_search_jobs_are_lab_search_runs_and_resume_runs_only_the_missing(t
     assert main(["eval", "search", *SWEEP, "--out", str(out)]) == 0
     rows = list(csv.DictReader((out / "results.csv").open()))
     assert [r["key"] for r in rows] == [
-        "paper_free_ideal_book_floor_s3",
-        "paper_free_ideal_toy_block_floor_s3",
+        "paper_free_ideal_landmarks_book_floor_s3",
+        "paper_free_ideal_landmarks_toy_block_floor_s3",
     ]
     scene = load_scene("lab_room")
     for r in rows:
@@ -50,15 +50,16 @@ def test_eval_search_jobs_are_lab_search_runs_and_resume_runs_only_the_missing(t
         assert float(r["path_length_m"]) == job["path_length_m"] and r["error"] == ""
         assert 0.0 < job["shortest_path_m"] < 8.0  # the start to local-search range, round the furniture
     report = (out / "report.md").read_text()
-    assert "| paper | False | ideal | 0/2 | [0.0, 65.8] % |" in report and "tuning split" in report
+    assert "| paper | False | ideal | landmarks | 0/2 | [0.0, 65.8] % |" in report
+    assert "tuning split" in report
 
     # --resume: only the job whose JSON is gone runs again, and gives the same result
-    first = json.loads((out / "jobs" / "paper_free_ideal_book_floor_s3.json").read_text())
-    (out / "jobs" / "paper_free_ideal_book_floor_s3.json").unlink()
+    first = json.loads((out / "jobs" / "paper_free_ideal_landmarks_book_floor_s3.json").read_text())
+    (out / "jobs" / "paper_free_ideal_landmarks_book_floor_s3.json").unlink()
     capsys.readouterr()
     assert main(["eval", "search", *SWEEP, "--out", str(out), "--resume"]) == 0
     assert "2 jobs, 1 done before, 1 to run on local pool" in capsys.readouterr().out
-    again = json.loads((out / "jobs" / "paper_free_ideal_book_floor_s3.json").read_text())
+    again = json.loads((out / "jobs" / "paper_free_ideal_landmarks_book_floor_s3.json").read_text())
     assert _strip(again) == _strip(first)
 
 
@@ -77,6 +78,10 @@ def test_bad_search_sweeps_are_refused_in_one_line_before_anything_starts(tmp_pa
         ([*SWEEP, "--surfaces", "roof", "--out", str(out)], "unknown surface 'roof'; surfaces: floor"),
         ([*SWEEP, "--strategies", "dfs", "--out", str(out)], "unknown strategy 'dfs'; strategies: paper"),
         ([*SWEEP, "--obstacles", "some", "--out", str(out)], "obstacles must be one of no, yes, both"),
+        (
+            [*SWEEP, "--localization", "gps", "--out", str(out)],
+            "unknown localization 'gps'; allowed: landmarks, odometry",
+        ),
         ([*SWEEP, "--scheduler", "tcp://127.0.0.1:9", "--out", str(out)], "cannot reach the Dask scheduler"),
         ([*SWEEP, "--job-timeout", "0", "--out", str(out)], "--job-timeout must be > 0 s"),
     ]

@@ -110,6 +110,7 @@ def _cmd_identify(args) -> int:
         progress=print if args.robot is not None else None,
         sensing=_sensing(args),
         localization=args.localization,
+        start=args.start,
     )
     keys = ["true_model", "identified_model", "success", "actions", "sim_time_s", "wall_time_s"]
     keys += [
@@ -164,6 +165,7 @@ def _cmd_search(args) -> int:
         localization=args.localization,
         robot_config=args.robot,
         truth=args.truth,
+        start=args.start,
     )
     data = res.to_json()
     if args.json is not None:

@@ -37,10 +37,21 @@ def _localization_argument(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--localization",
         choices=("landmarks", "odometry"),
-        default="odometry",
-        help="where the robot's pose comes from: odometry alone (default, for now: the localizer's "
-        "effect on the search and the identification is not measured yet), or odometry corrected by the "
-        "walls' posters seen in stereo (landmarks)",
+        default="landmarks",
+        help="where the robot's pose comes from: odometry corrected by the walls' posters seen in stereo "
+        "(landmarks, the default), or wheel odometry alone (odometry, as in the papers)",
+    )
+
+
+def _start_argument(p: argparse.ArgumentParser) -> None:
+    """``--start``: where a robot stands in the room when it starts (``lab/runs/room.py``)."""
+    p.add_argument(
+        "--start",
+        type=lambda s: _floats(s, 3, "--start"),
+        metavar="X,Y,YAW_DEG",
+        help="with --robot: where the robot stands in the room's frame when it starts, as measured (its "
+        "odometry starts there; default: the config's [room] start, else the scene's start); the localizer "
+        "starts there with the config's [room] start_sigma, and the first poster it sees can correct it",
     )
 
 
@@ -221,6 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("--json", type=Path, help="write the result JSON here")
     idf.add_argument("--out", type=Path, help="write the figures (Fig. 5, 6, 7) and identify.json here")
     _localization_argument(idf)
+    _start_argument(idf)
     idf.add_argument(
         "--keep-direction",
         type=float,
@@ -281,6 +293,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _sensing_argument(se)
     _localization_argument(se)
+    _start_argument(se)
 
     hw = sub.add_parser(
         "hardware",
@@ -383,7 +396,7 @@ def build_parser() -> argparse.ArgumentParser:
         "eval",
         help="run an evaluation sweep (seeded episodes) on a process pool or a Dask cluster",
         description="Run a grid of seeded episodes (identify: models x seeds x planners x movers x sensing; "
-        "search: objects x placements x seeds x strategies x obstacles x sensing), locally "
+        "search: objects x placements x seeds x strategies x obstacles x sensing x localization), locally "
         "(--workers N processes) or on a Dask cluster (--scheduler tcp://HOST:8786, or 'local' for a local "
         "one); writes OUT/jobs/KEY.json per job as it finishes, OUT/results.csv and OUT/report.md.",
     )
@@ -407,6 +420,7 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("--strategies", help="comma-separated: paper, lawnmower, frontier (default all three)")
     es.add_argument("--obstacles", help="no, yes or both (default both): boxes on the straight path")
     es.add_argument("--sensing", help="comma-separated: realistic, ideal (default realistic)")
+    es.add_argument("--localization", help="comma-separated: landmarks, odometry (default landmarks)")
     es.add_argument("--max-time", type=float, help="sim-time budget per trial [s] (default 300)")
     es.add_argument("--max-wall-time", type=float, help="the trial's own wall-clock cap [s] (default none)")
     _sweep_run_arguments(es)

@@ -69,6 +69,7 @@ def search_sweep(args):
         strategies=_names(spec.get("strategies", "paper,lawnmower,frontier")),
         obstacles=str(spec.get("obstacles", "both")),
         sensing=_names(spec.get("sensing", "realistic")),
+        localization=_names(spec.get("localization", "landmarks")),
         max_time=float(spec.get("max_time", 300.0)),
         max_wall_time=None if wall is None else float(wall),
     )

@@ -1,5 +1,5 @@
 """``lab eval search``: a grid of search trials (objects x placements x seeds x strategies x obstacles
-x sensing profiles), run by :func:`lab.eval.sweep.run_sweep` like ``lab eval identify``.
+x sensing profiles x localization modes), run by :func:`lab.eval.sweep.run_sweep` like ``lab eval identify``.
 
 **Placements.** A trial's placement is the surface it names (``floor``, ``table``, ``shelf``) and a
 seeded random spot on it: ``random_placement`` with ``numpy.random.default_rng([seed, object_index,
@@ -33,6 +33,7 @@ SEARCH_FIELDS = (
     "strategies",
     "obstacles",
     "sensing",
+    "localization",
     "max_time",
     "max_wall_time",
 )
@@ -41,9 +42,21 @@ STRATEGIES = ("paper", "lawnmower", "frontier")
 OBSTACLES = {"no": (False,), "yes": (True,), "both": (False, True)}
 
 
-def search_key(strategy: str, obstacles: bool, sensing: str, object: str, surface: str, seed: int) -> str:
+LOCALIZATIONS = ("landmarks", "odometry")
+
+
+def search_key(
+    strategy: str,
+    obstacles: bool,
+    sensing: str,
+    object: str,
+    surface: str,
+    seed: int,
+    localization: str = "landmarks",
+) -> str:
     """A search job's name: ``OUT/jobs/KEY.json``."""
-    return f"{strategy}_{'obst' if obstacles else 'free'}_{sensing}_{object}_{surface}_s{seed}"
+    ob = "obst" if obstacles else "free"
+    return f"{strategy}_{ob}_{sensing}_{localization}_{object}_{surface}_s{seed}"
 
 
 @dataclass(frozen=True)
@@ -56,6 +69,7 @@ class SearchSweep:
     strategies: tuple[str, ...] = STRATEGIES
     obstacles: str = "both"
     sensing: tuple[str, ...] = ("realistic",)
+    localization: tuple[str, ...] = ("landmarks",)
     max_time: float = 300.0
     max_wall_time: float | None = None
 
@@ -85,6 +99,11 @@ class SearchSweep:
         for s in self.sensing:
             if s not in ("realistic", "ideal"):
                 raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal")
+        for m in self.localization:
+            if m not in LOCALIZATIONS:
+                raise ConfigError(f"unknown localization {m!r}; allowed: {', '.join(LOCALIZATIONS)}")
+        if not self.localization:
+            raise ConfigError(f"no localization: give --localization like {','.join(LOCALIZATIONS)}")
         if not self.max_time > 0:
             raise ConfigError(f"max_time must be > 0 s, got {self.max_time}")
         if self.max_wall_time is not None and not self.max_wall_time > 0:
@@ -101,20 +120,22 @@ class SearchSweep:
                 for name in self.objects:
                     for ob in OBSTACLES[self.obstacles]:
                         for sensing in self.sensing:
-                            for strategy in self.strategies:
-                                kw = dict(
-                                    object=name,
-                                    surface=surface,
-                                    seed=seed,
-                                    strategy=strategy,
-                                    obstacles=ob,
-                                    sensing=sensing,
-                                    max_time=self.max_time,
-                                    max_wall_time=self.max_wall_time,
-                                    placement_key=[seed, objects.index(name), SURFACES.index(surface)],
-                                )
-                                key = search_key(strategy, ob, sensing, name, surface, seed)
-                                out.append(Job(key, search_job, kw))
+                            for loc in self.localization:
+                                for strategy in self.strategies:
+                                    kw = dict(
+                                        object=name,
+                                        surface=surface,
+                                        seed=seed,
+                                        strategy=strategy,
+                                        obstacles=ob,
+                                        sensing=sensing,
+                                        localization=loc,
+                                        max_time=self.max_time,
+                                        max_wall_time=self.max_wall_time,
+                                        placement_key=[seed, objects.index(name), SURFACES.index(surface)],
+                                    )
+                                    key = search_key(strategy, ob, sensing, name, surface, seed, loc)
+                                    out.append(Job(key, search_job, kw))
         return out
 
 
@@ -160,6 +181,7 @@ def search_job(
     max_time: float,
     max_wall_time: float | None,
     placement_key: list[int],
+    localization: str = "landmarks",
 ) -> dict:
     """One search trial in this worker process (its own PyBullet client): the ``lab search --json``
     result without its map snapshots, with ``shortest_path_m``."""
@@ -182,6 +204,7 @@ def search_job(
         obstacles=obstacles,
         max_wall_time=max_wall_time,
         sensing=sensing,
+        localization=localization,
     )
     d = r.to_json()
     d["n_snapshots"] = len(d.pop("map_snapshots", []))
@@ -218,6 +241,7 @@ SEARCH = SweepKind(
         "strategy",
         "obstacles",
         "sensing",
+        "localization",
         "seed",
         "max_time",
         "success",
@@ -227,6 +251,9 @@ SEARCH = SweepKind(
         "position_error_m",
         "orientation_error_deg",
         "collisions",
+        "odometry_error_m",
+        "localization_error_m",
+        "landmark_updates",
         "global_searches",
         "local_searches",
         "sim_time_s",
@@ -234,8 +261,8 @@ SEARCH = SweepKind(
         "reason",
         "error",
     ),
-    params=("object", "surface", "strategy", "obstacles", "sensing", "seed", "max_time"),
-    conditions=("strategy", "obstacles", "sensing"),
+    params=("object", "surface", "strategy", "obstacles", "sensing", "localization", "seed", "max_time"),
+    conditions=("strategy", "obstacles", "sensing", "localization"),
     medians=(
         ("found", lambda rs: str(sum(bool(r["found"]) for r in rs))),
         ("SPL", lambda rs: f"{spl(rs):.3f}"),

@@ -26,6 +26,7 @@ __all__ = [
     "HardwareConfig",
     "PTUConfig",
     "RobotConfig",
+    "RoomConfig",
     "SimSceneConfig",
     "load_config",
 ]
@@ -117,6 +118,30 @@ class SimSceneConfig:
 
 
 @dataclass(frozen=True)
+class RoomConfig:
+    """``[room]``: the room the robot localizes in (``lab --localization landmarks``).
+
+    Attributes
+    ----------
+    landmarks : str
+        The room's landmark map (``hardware/landmarks.toml``: the posters on its walls and their measured
+        poses, :func:`lab.training.landmarks.load_landmark_map`), relative to the config file; empty: none
+        (a rehearsal then uses the posters of the scene it renders, a real robot odometry alone).
+    start : tuple of 3 floats, or ()
+        ``[x_m, y_m, heading_deg]``: where the base stands in the room's frame when it starts (its wheel
+        odometry reads (0, 0, 0) there); empty: the scene's start (``[robot] start`` of the search's room,
+        a rehearsal's ``[sim] robot_start``).
+    start_sigma : tuple of 2 floats
+        ``[sigma_m, sigma_deg]``: how well the start was measured (one standard deviation of each position
+        coordinate and of the heading), the localizer's initial covariance.
+    """
+
+    landmarks: str = ""
+    start: tuple = ()
+    start_sigma: tuple = (0.10, 5.0)
+
+
+@dataclass(frozen=True)
 class HardwareConfig:
     """The whole file. ``path`` is where it was read from (None when built in code)."""
 
@@ -125,6 +150,7 @@ class HardwareConfig:
     ptu: PTUConfig = field(default_factory=PTUConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
     sim: SimSceneConfig = field(default_factory=SimSceneConfig)
+    room: RoomConfig = field(default_factory=RoomConfig)
     path: Path | None = None
 
     def with_ports(self, *, base: str | None = None, ptu: str | None = None) -> HardwareConfig:
@@ -140,6 +166,7 @@ _SECTIONS = {
     "ptu": PTUConfig,
     "camera": CameraConfig,
     "sim": SimSceneConfig,
+    "room": RoomConfig,
 }
 _REQUIRED = {
     ("base", "port"): '"/dev/ttyUSB0"',
@@ -315,6 +342,20 @@ def _check_values(c: HardwareConfig, where: str) -> None:
 
         worlds = list_worlds()
         need(sim.world in worlds, f"[sim] world {sim.world!r} is not a world; worlds: {', '.join(worlds)}")
+    room = c.room
+
+    def numbers(v, n: int) -> bool:
+        ok = len(v) == n and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+        return ok and all(math.isfinite(x) for x in v)
+
+    need(
+        len(room.start) == 0 or numbers(room.start, 3),
+        f"[room] start must be [x_m, y_m, heading_deg] (3 finite numbers), got {list(room.start)}",
+    )
+    need(
+        numbers(room.start_sigma, 2) and min(room.start_sigma) > 0,
+        f"[room] start_sigma must be [sigma_m, sigma_deg] (2 numbers > 0), got {list(room.start_sigma)}",
+    )
 
 
 def _resolve_paths(c: HardwareConfig, root: Path) -> HardwareConfig:
@@ -324,4 +365,13 @@ def _resolve_paths(c: HardwareConfig, root: Path) -> HardwareConfig:
         v = getattr(cam, k)
         if v and not Path(v).is_absolute():
             changes[k] = str((root / v).resolve())
-    return dataclasses.replace(c, camera=dataclasses.replace(cam, **changes)) if changes else c
+    c = dataclasses.replace(c, camera=dataclasses.replace(cam, **changes)) if changes else c
+    if c.room.landmarks:
+        p = (root / c.room.landmarks).resolve()
+        if not p.is_file():
+            raise ConfigError(
+                f"{c.path}: [room] landmarks {c.room.landmarks!r} not found (no file {p}; the room's "
+                'landmark map, e.g. landmarks = "landmarks.toml" beside this file)'
+            )
+        c = dataclasses.replace(c, room=dataclasses.replace(c.room, landmarks=str(p)))
+    return c

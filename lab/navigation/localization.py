@@ -64,6 +64,7 @@ __all__ = [
     "motion_model",
     "observation_of",
     "odometry_increment",
+    "pose_from_observation",
 ]
 
 
@@ -149,6 +150,38 @@ def measurement_jacobian(x, l) -> np.ndarray:
     return np.array([[-c, -s, h[1]], [s, -c, -h[0]], [0.0, 0.0, -1.0]])
 
 
+def pose_from_observation(z, l) -> tuple[np.ndarray, np.ndarray]:
+    r"""The robot pose ``x`` that one landmark observation ``z`` implies, and ``J = dx/dz`` (3, 3).
+
+    A landmark is unique and its planar pose ``l`` in W is known, so one observation of it (its planar
+    pose in R) determines the full planar pose of the robot: :func:`measurement_model` solved for ``x``,
+    ``G_WR = G_WL G_RL^-1``:
+
+    .. math:: \theta = \mathrm{wrap}(\theta_l - z_3), \qquad
+              [x, y]^T = [x_l, y_l]^T - R(\theta) [z_1, z_2]^T
+
+    .. math:: J = \begin{bmatrix} -\cos\theta & \sin\theta & -z_1 \sin\theta - z_2 \cos\theta \\
+                                  -\sin\theta & -\cos\theta & z_1 \cos\theta - z_2 \sin\theta \\
+                                  0 & 0 & -1 \end{bmatrix}
+
+    (the third column: :math:`\partial\theta/\partial z_3 = -1` through :math:`-R'(\theta) [z_1, z_2]^T`).
+    The pose's covariance is ``J Q J^T`` for an observation covariance ``Q``.
+    """
+    z = np.asarray(z, float)
+    l = np.asarray(l, float)
+    th = wrap_angle(l[2] - z[2])
+    c, s = math.cos(th), math.sin(th)
+    x = np.array([l[0] - (c * z[0] - s * z[1]), l[1] - (s * z[0] + c * z[1]), th])
+    J = np.array(
+        [
+            [-c, s, -s * z[0] - c * z[1]],
+            [-s, -c, c * z[0] - s * z[1]],
+            [0.0, 0.0, -1.0],
+        ]
+    )
+    return x, J
+
+
 def observation_of(
     G_RC: np.ndarray, G_CL: np.ndarray, Sigma_rv_CL: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -213,6 +246,10 @@ class LocalizerConfig:
     relocalize_sigma_m, relocalize_sigma_rad : float [m], [rad]
         Active re-localization: the robot looks for a landmark when the position standard deviation
         (the larger axis of the covariance ellipse) or the heading's exceeds these.
+    first_sighting_max_offset_m, first_sighting_max_offset_rad : float [m], [rad]
+        A start pose measured by hand (:class:`Localizer` with ``first_sighting=True``): the first
+        landmark sighting that disagrees with it beyond the gate replaces it when the pose it implies is
+        within these of the start (farther: an outlier, rejected).
     """
 
     sigma_along_m_per_sqrt_m: float = 0.02
@@ -230,6 +267,8 @@ class LocalizerConfig:
     min_facing: float = 0.35
     relocalize_sigma_m: float = 0.05
     relocalize_sigma_rad: float = math.radians(0.5)
+    first_sighting_max_offset_m: float = 1.0
+    first_sighting_max_offset_rad: float = math.radians(30.0)
     ransac: RansacConfig = field(default_factory=lambda: RansacConfig(min_matches=6, dist_max_m=0.25))
 
     def __post_init__(self):
@@ -311,7 +350,10 @@ class UpdateRecord:
     """One landmark observation the filter considered: what it saw and whether the gate let it in.
 
     ``x_bar``/``Sigma_bar`` before, ``x``/``Sigma`` after (equal to before when rejected); ``nis`` the
-    innovation's squared Mahalanobis distance.
+    innovation's squared Mahalanobis distance. ``kind`` is ``"update"`` (the EKF update), or for the
+    first sighting of a start measured by hand (:meth:`Localizer.first_sighting`) ``"fused"`` (it agreed
+    with the start: both fused), ``"reset"`` (it did not: the start replaced by the sighting's pose) or
+    ``"outlier"`` (too far from the start: rejected).
     """
 
     t: float
@@ -325,6 +367,7 @@ class UpdateRecord:
     nis: float = 0.0
     accepted: bool = True
     n_inliers: int = 0
+    kind: str = "update"
 
 
 class Localizer:
@@ -337,10 +380,15 @@ class Localizer:
     Sigma0 : array_like, shape (3, 3), optional
         Its covariance (default: 1 cm, 0.5 deg).
     config : LocalizerConfig, optional
+    first_sighting : bool
+        The start was measured by hand (a real robot stood at a taped mark): the first landmark
+        observation goes through :meth:`first_sighting` instead of the EKF update, so that a start that
+        is off by more than ``Sigma0`` says is corrected, not locked out by the gate.
     """
 
-    def __init__(self, x0, Sigma0=None, config: LocalizerConfig | None = None):
+    def __init__(self, x0, Sigma0=None, config: LocalizerConfig | None = None, first_sighting: bool = False):
         self.config = config or LocalizerConfig()
+        self.first_sighting_pending = bool(first_sighting)
         self.x = np.array(x0, dtype=float).reshape(3)
         self.Sigma = (
             np.diag([0.01**2, 0.01**2, math.radians(0.5) ** 2]) if Sigma0 is None else np.array(Sigma0, float)
@@ -364,7 +412,12 @@ class Localizer:
         self.Sigma = 0.5 * (Sigma + Sigma.T)
 
     def update(self, z, Q, landmark: Landmark, t: float = 0.0, n_inliers: int = 0) -> UpdateRecord:
-        """Update from one landmark observation ``z`` (3,) with covariance ``Q`` (3, 3); gated."""
+        """Update from one landmark observation ``z`` (3,) with covariance ``Q`` (3, 3); gated.
+
+        While the first sighting of a hand-measured start is pending (``first_sighting=True`` and no
+        observation accepted yet) this is :meth:`first_sighting`."""
+        if self.first_sighting_pending:
+            return self.first_sighting(z, Q, landmark, t, n_inliers)
         z = np.asarray(z, float)
         Q = np.asarray(Q, float) + self.config.observation_floor(z)
         l = landmark.planar
@@ -401,6 +454,72 @@ class Localizer:
             nis,
             bool(accepted),
             int(n_inliers),
+        )
+        self.history.append(rec)
+        return rec
+
+    def first_sighting(self, z, Q, landmark: Landmark, t: float = 0.0, n_inliers: int = 0) -> UpdateRecord:
+        r"""The first landmark observation of a start measured by hand: fuse it with the start, or let it
+        replace the start.
+
+        One observation of a (unique) landmark determines the whole planar pose,
+        :math:`x_z = h^{-1}(z; l)` with covariance :math:`\Sigma_z = J Q J^T`
+        (:func:`pose_from_observation`), so the prior can be compared with it in the pose's own space,
+        where nothing is linearised about a start that may be wrong by 10 degrees:
+
+        .. math:: d = x_z - \bar x, \quad S = \bar\Sigma + \Sigma_z, \quad
+                  d^T S^{-1} d \le \chi^2_3(p_{gate})
+
+        * within the gate, both are fused (the Kalman update with :math:`H = I`:
+          :math:`K = \bar\Sigma S^{-1}`, :math:`x = \bar x + K d`, Joseph form): ``kind="fused"``;
+        * beyond it the start, not the landmark, is the likelier culprit (a robot stood 30 cm off its mark
+          by a start covariance that says 10 cm): the sighting's pose replaces it, :math:`x = x_z`,
+          :math:`\Sigma = \Sigma_z` (``kind="reset"``), provided it is within
+          ``first_sighting_max_offset_m`` and ``_rad`` of the start; farther, it is rejected as an outlier
+          (a wrong fit) and the next sighting is tried the same way.
+
+        Later observations go through the EKF :meth:`update`.
+        """
+        z = np.asarray(z, float)
+        Q = np.asarray(Q, float) + self.config.observation_floor(z)
+        x_bar, Sigma_bar = self.x.copy(), self.Sigma.copy()
+        x_z, J = pose_from_observation(z, landmark.planar)
+        Sigma_z = J @ Q @ J.T  # the sighting's pose covariance
+        d = x_z - x_bar
+        d[2] = wrap_angle(d[2])
+        S = Sigma_bar + Sigma_z
+        nis = float(d @ np.linalg.solve(S, d))
+        cfg = self.config
+        kind = "fused"
+        if nis <= chi2_quantile(cfg.gate_prob, 3):
+            K = np.linalg.solve(S, Sigma_bar).T  # K = Sigma_bar S^-1 (H = I)
+            x = x_bar + K @ d
+            IK = np.eye(3) - K
+            Sigma = IK @ Sigma_bar @ IK.T + K @ Sigma_z @ K.T  # Joseph form
+        elif math.hypot(d[0], d[1]) <= cfg.first_sighting_max_offset_m and abs(d[2]) <= (
+            cfg.first_sighting_max_offset_rad
+        ):
+            kind, x, Sigma = "reset", x_z, Sigma_z
+        else:
+            kind, x, Sigma = "outlier", None, None  # rejected
+        accepted = x is not None
+        if accepted:
+            x[2] = wrap_angle(x[2])
+            self.x, self.Sigma = x, 0.5 * (Sigma + Sigma.T)
+            self.first_sighting_pending = False
+        rec = UpdateRecord(
+            t,
+            landmark.name,
+            z,
+            Q,
+            x_bar,
+            Sigma_bar,
+            self.x.copy(),
+            self.Sigma.copy(),
+            nis,
+            accepted,
+            int(n_inliers),
+            kind,
         )
         self.history.append(rec)
         return rec
@@ -511,6 +630,12 @@ class LocalizedRobot(RobotWrapper):
     rng : numpy.random.Generator, optional
     log : callable(str), optional
         Where the localizer says what it does (default: stderr).
+    Sigma0 : array_like, shape (3, 3), optional
+        The covariance of the start, ``base.odometry()`` when this is made (default: the
+        :class:`Localizer`'s, 1 cm and 0.5 deg: the simulator's odometry starts at the true pose).
+    start_measured_by_hand : bool
+        The start is a pose an operator measured (a robot's): the first landmark sighting may correct it
+        (:meth:`Localizer.first_sighting`).
     """
 
     def __init__(
@@ -521,12 +646,17 @@ class LocalizedRobot(RobotWrapper):
         config: LocalizerConfig | None = None,
         rng: np.random.Generator | None = None,
         log=None,
+        *,
+        Sigma0=None,
+        start_measured_by_hand: bool = False,
     ):
         super().__init__(base)
         self.mode = LocalizationMode.parse(mode)
         self.config = config or LocalizerConfig()
         self._odom = base.odometry()
-        self.localizer = Localizer(self._odom.as_array(), config=self.config)
+        self.localizer = Localizer(
+            self._odom.as_array(), Sigma0, config=self.config, first_sighting=start_measured_by_hand
+        )
         self.observer = None
         if self.mode is LocalizationMode.LANDMARKS:
             if landmarks is None or len(landmarks) == 0:
@@ -573,6 +703,13 @@ class LocalizedRobot(RobotWrapper):
             rec = self.localizer.update(obs.z, obs.Q, obs.landmark, frame.t, obs.n_inliers)
             if not rec.accepted:
                 self.log(f"localization: rejected {obs.landmark.name} (NIS {rec.nis:.1f}, an outlier)")
+            elif rec.kind == "reset":
+                dx, dy = rec.x[:2] - rec.x_bar[:2]
+                dth = math.degrees(wrap_angle(rec.x[2] - rec.x_bar[2]))
+                self.log(
+                    f"localization: the start pose was {100 * math.hypot(dx, dy):.0f} cm and {abs(dth):.1f} "
+                    f"deg off what {obs.landmark.name} says (NIS {rec.nis:.1f}): reset from it"
+                )
         return replace(frame, odom=self._pose(), wheel_odom=frame.wheels)  # the wheels: frame_motion
 
     def certain(self) -> bool:

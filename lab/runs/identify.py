@@ -33,7 +33,8 @@ from lab.identification.scoring import ScoringConfig
 from lab.io import write_json_atomic
 from lab.navigation.localization import LocalizationMode, LocalizedRobot
 from lab.robot import Robot
-from lab.runs.robots import RobotKind, RobotSession, make_robot
+from lab.runs.robots import PlacedRobot, RobotKind, RobotSession, load_robot_config, make_robot, robot_kind
+from lab.runs.room import RoomLandmarks, localize, robot_start, room_landmarks
 from lab.training import box_model_names, get_database, get_tables
 
 __all__ = ["build_agent", "floor_plan", "pose_error", "run_identify"]
@@ -113,7 +114,8 @@ def run_identify(
     robot_config=None,
     progress=None,
     sensing="realistic",
-    localization="odometry",
+    localization="landmarks",
+    start=None,
 ) -> dict:
     """Run one episode and return the ``lab identify`` JSON (also written to ``json_path``).
 
@@ -141,22 +143,32 @@ def run_identify(
         The simulator's sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic,
         or ideal), recorded as the JSON's ``sensing``.
     localization : {"landmarks", "odometry"}
-        Where the robot's pose comes from (:class:`lab.navigation.localization.LocalizedRobot`).
+        Where the robot's pose comes from (:class:`lab.navigation.localization.LocalizedRobot`); the
+        landmark map on a robot is its config's ``[room] landmarks``, a rehearsal's by default the posters
+        of the scene it renders (:mod:`lab.runs.room`).
+    start : (x_m, y_m, heading_deg), optional
+        A robot only: where it stands in the room when it starts (default: its config's ``[room] start``,
+        a rehearsal's ``[sim] robot_start``; the real robot has no default: without one it localizes by
+        odometry alone, and says so).
     """
     from lab.sim import box_model
 
     box_model(true_model)  # a clear error before anything starts
+    hw = load_robot_config(robot_config)
+    kind = robot_kind(hw)
+    room = room_landmarks(kind, hw, _scene_of(kind, hw), localization)  # a bad map: one line, first
+    start_pose = _start_of(kind, hw, room, start)
     config = AgentConfig(max_actions=max_actions, max_time_s=max_time_s)
     if keep_direction is not None:
         config = dataclasses.replace(config, keep_direction=keep_direction)
     t_wall, t_cpu = time.perf_counter(), time.process_time()  # CPU: the episode's cost whatever the load
     with contextlib.ExitStack() as stack:
-        session = _start(stack, robot_config, true_model, mover, seed, sensing)
+        session = _start(stack, hw, true_model, mover, seed, sensing)
         world = session.world
         plan = None
         if session.kind is RobotKind.SIM and world.scene.room is not None:
             plan = floor_plan(world.scene.room.size, session.robot.base_limits.radius)
-        robot, note = _localized(session, robot_config, localization, seed)
+        robot, note = _localized(session, room, start_pose, seed)
         agent = build_agent(robot, planner, seed, config, floor_plan=plan)
         recorder = _watch(agent, record, progress)
         if attach is not None:
@@ -166,6 +178,11 @@ def run_identify(
         sim_t0, loop_wall0, loop_cpu0 = session.robot.now(), time.perf_counter(), time.process_time()
         interrupted = False
         try:
+            if robot.mode is LocalizationMode.LANDMARKS and session.kind is not RobotKind.SIM:
+                # a robot's start was measured by hand: look for a poster first (the first sighting may
+                # correct it), then put the head back; the agent tracks the box, not the walls
+                robot.enable()
+                robot.relocalize()
             identified = agent.run()  # stops the robot on its way out
         except KeyboardInterrupt:  # Ctrl-C: the motors are stopped; the record so far is the result
             interrupted, identified = True, agent.identified
@@ -204,30 +221,48 @@ def _reason(agent: IdentificationAgent, identified, interrupted: bool) -> str:
     return "time budget used up"
 
 
-def _localized(session: RobotSession, robot_config, localization, seed: int):
-    """The episode's robot behind the localizer (:class:`LocalizedRobot`), and a note when it has to
-    fall back to odometry alone. The simulator's landmarks are its scene's posters (its odometry starts
-    at the true start pose, in the world frame); a real robot or a rehearsal runs on odometry alone until
-    its start pose in the room of ``hardware/landmarks.toml`` is measured."""
-    from lab.training.landmarks import trained_landmark_map
+def _scene_of(kind: RobotKind, hw) -> str | None:
+    """The scene behind an episode: the simulator's arena, a rehearsal's ``[sim] world``, none on the real
+    robot (its room is its landmark map)."""
+    if kind is RobotKind.SIM:
+        return "arena"
+    return hw.sim.world if kind is RobotKind.REHEARSAL else None
 
-    mode = LocalizationMode.parse(localization)
-    note = None
-    landmarks = None
-    if mode is LocalizationMode.LANDMARKS:
-        if session.kind is RobotKind.SIM:  # its odometry starts at the true start, in the world frame
-            landmarks = trained_landmark_map(session.world.scene, progress=False)
-        if landmarks is None or len(landmarks) == 0:
-            # a real robot's odometry starts at its own origin, not at a measured pose in the room that
-            # the landmark map (hardware/landmarks.toml) is written in: not supported yet
-            note = (
-                "no landmark map in the odometry's frame for this robot: the pose is odometry alone"
-                if session.kind is not RobotKind.SIM
-                else "the scene has no landmarks: the pose is odometry alone"
+
+def _start_of(kind: RobotKind, hw, room: RoomLandmarks, start):
+    """Where a robot's odometry starts in the room (``start``, ``[room] start``, a rehearsal's ``[sim]
+    robot_start``), checked against the room's floor; None in the simulator and where it is unknown."""
+    if kind is RobotKind.SIM:
+        if start is not None:
+            raise ConfigError(
+                "--start is where a robot stands in the room (with --robot); in the simulator the episode "
+                "places the robot itself"
             )
-            mode = LocalizationMode.ODOMETRY
-    robot = LocalizedRobot(session.robot, mode, landmarks, rng=np.random.default_rng([seed, 20]))
-    return robot, note
+        return None
+    size = None
+    if room.landmarks is not None:
+        size = room.landmarks.room_size
+    elif kind is RobotKind.REHEARSAL:
+        from lab.scene import load_scene
+
+        sc = load_scene(hw.sim.world)
+        size = None if sc.room is None else sc.room.size
+    default = hw.sim.robot_start if kind is RobotKind.REHEARSAL else None
+    return robot_start(hw, default, start, size)
+
+
+def _localized(session: RobotSession, room: RoomLandmarks, start_pose, seed: int):
+    """The episode's robot, on a robot placed at its start in the room, behind the localizer
+    (:func:`lab.runs.room.localize`), and a note when it has to fall back to odometry alone (no landmark
+    map, or a real robot with no start pose in the room)."""
+    note = room.note
+    if room.mode is LocalizationMode.LANDMARKS and session.kind is not RobotKind.SIM and start_pose is None:
+        note = (
+            "no start pose in the room for this robot (--start X,Y,YAW_DEG or [room] start in its config): "
+            "the pose is odometry alone"
+        )
+        room = RoomLandmarks(LocalizationMode.ODOMETRY, note=note)
+    return localize(session.robot, session.kind, room, start_pose, seed), note
 
 
 def _localization_fields(robot: LocalizedRobot, session: RobotSession, note) -> dict:
@@ -239,9 +274,13 @@ def _localization_fields(robot: LocalizedRobot, session: RobotSession, note) -> 
     if note is not None:
         print(f"lab: localization: {note}", file=sys.stderr)
     odo_err = loc_err = None
+    t = None
     if session.kind is RobotKind.SIM:
         t = session.world.truth.robot_pose()
-        o = session.robot.odometry()
+    elif session.kind is RobotKind.REHEARSAL and isinstance(robot.base, PlacedRobot):
+        t = session.rehearsal.source.base_pose_W()  # the emulator's true pose in the rendered world
+    if t is not None:
+        o = robot.base.odometry()  # the wheel odometry (placed at the start in the room on a robot)
         odo_err = round(math.hypot(o.x - t.x, o.y - t.y), 4)
         loc_err = round(math.hypot(est.pose.x - t.x, est.pose.y - t.y), 4)
     return {

@@ -31,7 +31,7 @@ from lab.geometry import Pose2D, wrap_angle
 from lab.hardware.config import HardwareConfig, load_config
 from lab.robot import Robot, RobotWrapper, StereoFrame
 
-__all__ = ["PlacedRobot", "RobotKind", "RobotSession", "make_robot", "robot_kind"]
+__all__ = ["PlacedRobot", "RobotKind", "RobotSession", "load_robot_config", "make_robot", "robot_kind"]
 
 
 class RobotKind(Enum):
@@ -84,6 +84,11 @@ class RobotSession:
 
 def _load(config: str | Path | HardwareConfig) -> HardwareConfig:
     return config if isinstance(config, HardwareConfig) else load_config(config)
+
+
+def load_robot_config(config: str | Path | HardwareConfig | None) -> HardwareConfig | None:
+    """The robot config read and checked (:func:`lab.hardware.load_config`; None: the simulator)."""
+    return None if config is None else _load(config)
 
 
 def robot_kind(config: str | Path | HardwareConfig | None) -> RobotKind:

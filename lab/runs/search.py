@@ -38,7 +38,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from lab.errors import ConfigError, SafetyStop
-from lab.geometry import Pose2D, R_to_euler_zyx, Rz, se3, se3_inv
+from lab.geometry import R_to_euler_zyx, Rz, se3, se3_inv
 from lab.navigation.astar import astar_to_region
 from lab.navigation.drive_loop import NavOutcome
 from lab.navigation.grid import GridSpec
@@ -55,7 +55,8 @@ from lab.runs.placement import (
     searchable_objects,
     supports,
 )
-from lab.runs.robots import PlacedRobot, RobotKind, make_robot, robot_kind
+from lab.runs.robots import RobotKind, load_robot_config, make_robot, robot_kind
+from lab.runs.room import localize, robot_start, room_landmarks
 from lab.scene import BodySpec, Scene, load_scene
 from lab.search.agent import (
     INTERRUPTED,
@@ -68,7 +69,6 @@ from lab.search.agent import (
 )
 from lab.search.budget import BudgetedRobot
 from lab.search.probability_map import ProbabilityMap
-from lab.training.landmarks import trained_landmark_map
 from lab.training.search import search_database
 from lab.vision.database import FeatureDatabase
 
@@ -252,7 +252,7 @@ class SearchResult:
     camera_frame_error: dict | None = None
     odometry_error_m: float | None = 0.0
     localization_error_m: float | None = 0.0
-    localization: str = "odometry"
+    localization: str = "landmarks"
     landmark_updates: int = 0
     localization_note: str | None = None
     events: tuple[SearchEvent, ...] = field(default=(), repr=False)
@@ -336,10 +336,11 @@ def run_search(
     record=None,
     attach: Callable | None = None,
     sensing="realistic",
-    localization="odometry",
+    localization="landmarks",
     robot_config=None,
     truth=None,
     emulator_setup: Callable | None = None,
+    start=None,
 ) -> SearchResult:
     """Run one search trial (in the simulator, a rehearsal or on the robot) and score it.
 
@@ -373,8 +374,14 @@ def run_search(
         The simulator's sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic).
     localization : {"landmarks", "odometry"}
         Where the robot's pose comes from (:class:`lab.navigation.localization.LocalizedRobot`): the
-        odometry corrected by the room's posters, or odometry alone (default, until the localizer's effect
-        on the search is measured). The real robot has no landmark map in the scene's frame: odometry.
+        odometry corrected by the room's posters (default), or wheel odometry alone, as in the papers.
+        The map: the scene's posters; on a robot its config's ``[room] landmarks`` (a rehearsal without
+        one: the rendered scene's posters; the real robot without one falls back to odometry and says
+        so: :mod:`lab.runs.room`).
+    start : (x_m, y_m, heading_deg), optional
+        A robot only: where it stands in the room when it starts (default: its config's ``[room] start``,
+        else the scene's ``[robot] start``); the localizer starts there with the covariance of ``[room]
+        start_sigma``, and its first landmark sighting may correct it.
     robot_config : path or HardwareConfig, optional
         Run on this robot (:func:`lab.runs.robots.make_robot`): a rehearsal (``hardware/rehearsal.toml``)
         or the real robot (``hardware/robot.toml``); None: the simulator.
@@ -388,13 +395,12 @@ def run_search(
     strategy = Strategy.parse(strategy)
     scene = world if isinstance(world, Scene) else load_scene(world)
     recorder = _check_trial(scene, object, navigate, max_time, record)
-    kind = robot_kind(robot_config)  # a bad robot config is one clear line before anything starts
-    mode = LocalizationMode.parse(localization)
-    note = None
-    if mode is LocalizationMode.LANDMARKS and kind is RobotKind.HARDWARE:
-        note = "no landmark map in the odometry's frame for this robot: the pose is odometry alone"
-        mode = LocalizationMode.ODOMETRY
-    landmarks = trained_landmark_map(scene, progress=progress) if mode is LocalizationMode.LANDMARKS else None
+    hw = load_robot_config(robot_config)  # a bad robot config is one clear line before anything starts
+    kind = robot_kind(hw)
+    # the landmark map (a bad landmark file is one line too) and where the robot's odometry starts
+    room = room_landmarks(kind, hw, scene, localization, progress=progress)
+    mode, note = room.mode, room.note
+    start_pose = _start_of(kind, hw, scene, room, start)
     rng = np.random.default_rng(seed)
     if kind is RobotKind.HARDWARE:
         G_WO_measured = _check_real_robot_trial(scene, object, place, obstacles, truth)
@@ -414,7 +420,7 @@ def run_search(
         run, truth_of = _session(
             stack,
             kind,
-            robot_config,
+            hw,
             scene,
             object,
             seed,
@@ -423,11 +429,8 @@ def run_search(
             emulator_setup,
             G_WO_measured,
         )
-        base = run.robot
-        if kind is not RobotKind.SIM:  # its odometry starts at (0, 0, 0): the scene's start in the room
-            x, y, h = scene.robot_start
-            base = PlacedRobot(base, Pose2D(x, y, math.radians(h)))
-        robot = LocalizedRobot(base, mode, landmarks, rng=np.random.default_rng([seed, 20]))
+        # on a robot its odometry starts at (0, 0, 0): placed at the start in the room (lab/runs/room.py)
+        robot = localize(run.robot, kind, room, start_pose, seed)
         t0 = 0.0 if kind is RobotKind.SIM else robot.now()
         hook = _with_progress(attach, t0) if progress else attach
         parts = (db, navigate, spec, cfg, seed, recorder, hook, (max_time, max_wall_time))
@@ -499,6 +502,20 @@ def _session(stack, kind, robot_config, scene, object, seed, sensing, supersampl
         return run, _TruthOf(lambda: run.world.truth.G_W(object), G_WC, r.source.base_pose_W, bumps)
     none = lambda: None  # noqa: E731
     return run, _TruthOf(lambda: G_WO, none, none, bumps)
+
+
+def _start_of(kind: RobotKind, hw, scene: Scene, room, start):
+    """Where a robot's odometry starts in the room (``start``, the config's ``[room] start``, else the
+    scene's ``[robot] start``), checked against the room's floor; None in the simulator."""
+    if kind is RobotKind.SIM:
+        if start is not None:
+            raise ConfigError(
+                "--start is where a robot stands in the room (with --robot); in the simulator the robot "
+                "starts at the scene's [robot] start"
+            )
+        return None
+    size = room.landmarks.room_size if room.landmarks is not None else scene.room.size
+    return robot_start(hw, scene.robot_start, start, size)
 
 
 def _check_real_robot_trial(scene: Scene, object: str, place, obstacles: bool, truth):

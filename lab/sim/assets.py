@@ -322,7 +322,22 @@ def build_textures(out: Path | None = None) -> list[Path]:
         p = out / f"poster{k}.png"
         write_png_atomic(p, magazine_texture(4000 + k, size=FACE_PX, n_shapes=20))
         written.append(p)
+    for k in range(3, 3 + GREY_POSTERS):
+        p = out / f"poster{k}.png"
+        write_png_atomic(p, grey_texture(magazine_texture(4000 + k, size=FACE_PX, n_shapes=28)))
+        written.append(p)
     return written
+
+
+#: Posters 3, 4, ... are grey: landmarks for localization that hold no colour the global search could
+#: take for an object's (its back-projection scores grey near zero, like the walls).
+GREY_POSTERS = 3
+
+
+def grey_texture(img: np.ndarray) -> np.ndarray:
+    """``img`` (H, W, 3) RGB in grey levels only (luma), still three channels: texture without colour."""
+    g = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+    return np.repeat(g[:, :, None], 3, axis=2)
 
 
 def main() -> None:

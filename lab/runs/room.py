@@ -1,0 +1,200 @@
+"""The robot in the room: where a run's robot starts, the landmark map it localizes against, and the
+localizer around it (:class:`~lab.navigation.localization.LocalizedRobot`), on every kind of robot.
+
+* **the simulator**: the scene's posters; the start is the true one (its odometry starts there);
+* **a rehearsal**: the robot config's ``[room] landmarks`` file, else the posters of the scene it
+  renders; the start is ``--start``, else ``[room] start``, else the rendered scene's start;
+* **the real robot**: ``[room] landmarks`` (``hardware/landmarks.toml``: without one the run falls back
+  to odometry alone and says so in its JSON and log); the start is ``--start``, else ``[room] start``,
+  else the search room's ``[robot] start``.
+
+On a robot the wheel odometry reads (0, 0, 0) where the base was switched on;
+:class:`~lab.runs.robots.PlacedRobot` puts it at the start in W. The start is a pose someone measured
+(a tape measure from the room's origin), so the localizer starts with the covariance ``[room]
+start_sigma`` says and lets the first landmark it sees correct it
+(:meth:`~lab.navigation.localization.Localizer.first_sighting`): a start 30 cm off its mark is corrected
+at the first poster, not locked out by the gate. The simulator's odometry starts at the true pose: there
+the localizer starts certain, as before.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lab.errors import ConfigError
+from lab.geometry import Pose2D
+from lab.hardware.config import HardwareConfig, RoomConfig
+from lab.navigation.landmarks import LandmarkMap
+from lab.navigation.localization import LocalizationMode, LocalizedRobot
+from lab.robot import Robot
+from lab.runs.robots import PlacedRobot, RobotKind
+
+__all__ = ["RobotStart", "RoomLandmarks", "localize", "robot_start", "room_landmarks"]
+
+
+@dataclass(frozen=True)
+class RoomLandmarks:
+    """The landmark map a run localizes against, or why it has none.
+
+    Attributes
+    ----------
+    mode : LocalizationMode
+        The mode the run uses (``odometry`` when it had to fall back).
+    landmarks : LandmarkMap or None
+        Trained (every landmark with its database); None in ``odometry`` mode.
+    note : str or None
+        Why the run fell back to odometry alone (for its JSON and log).
+    """
+
+    mode: LocalizationMode
+    landmarks: LandmarkMap | None = field(default=None, repr=False)
+    note: str | None = None
+
+
+@dataclass(frozen=True)
+class RobotStart:
+    """Where a robot's odometry starts in the room W, and how well that is known.
+
+    Attributes
+    ----------
+    pose : Pose2D
+    Sigma0 : ndarray, shape (3, 3) [m^2, rad^2]
+        ``diag(sigma_m^2, sigma_m^2, sigma_rad^2)`` from ``[room] start_sigma``.
+    source : str
+        Where the pose was read (``--start``, the config's ``[room] start``, the scene's start).
+    """
+
+    pose: Pose2D
+    Sigma0: np.ndarray = field(repr=False)
+    source: str = ""
+
+
+def _room(config: HardwareConfig | None) -> RoomConfig:
+    return RoomConfig() if config is None else config.room
+
+
+def room_landmarks(
+    kind: RobotKind, config: HardwareConfig | None, scene, localization, progress: bool = False
+) -> RoomLandmarks:
+    """The trained landmark map of a run (see the module's table), or the fallback to odometry alone.
+
+    Parameters
+    ----------
+    kind : RobotKind
+    config : HardwareConfig or None
+        The robot config (None in the simulator).
+    scene : Scene, str or None
+        The scene the simulator or the rehearsal renders (None: the real robot's room is only its map).
+    localization : {"landmarks", "odometry"} or LocalizationMode
+    progress : bool
+        Say when a landmark database is built.
+
+    Raises
+    ------
+    ConfigError
+        A bad landmark file: one line naming the file and the field
+        (:func:`lab.training.landmarks.load_landmark_map`).
+    """
+    from lab.training.landmarks import load_landmark_map, trained_landmark_map
+
+    mode = LocalizationMode.parse(localization)
+    if mode is LocalizationMode.ODOMETRY:
+        return RoomLandmarks(mode)
+    path = _room(config).landmarks if kind is not RobotKind.SIM else ""
+    if path:
+        load_landmark_map(path)  # checked (file and field) before anything is trained
+        source = path
+    elif kind is RobotKind.HARDWARE or scene is None:
+        where = "" if config is None or config.path is None else f" in {config.path}"
+        return RoomLandmarks(
+            LocalizationMode.ODOMETRY,
+            note=f"no landmark map for this robot ([room] landmarks{where}): the pose is odometry alone",
+        )
+    else:
+        source = scene
+    landmarks = trained_landmark_map(source, progress=progress)
+    if len(landmarks) == 0:
+        return RoomLandmarks(
+            LocalizationMode.ODOMETRY, note=f"{landmarks.source} has no landmarks: the pose is odometry alone"
+        )
+    return RoomLandmarks(mode, landmarks)
+
+
+def robot_start(
+    config: HardwareConfig | None,
+    default,
+    start=None,
+    room_size: tuple[float, float] | None = None,
+) -> RobotStart | None:
+    """Where a robot stands in the room when its odometry reads (0, 0, 0): ``start`` (``--start``), else
+    the config's ``[room] start``, else ``default`` (the scene's start; None: unknown).
+
+    Parameters
+    ----------
+    config : HardwareConfig or None
+    default : (x_m, y_m, heading_deg) or None
+    start : (x_m, y_m, heading_deg), optional
+        The ``--start`` flag's value.
+    room_size : (float, float) [m], optional
+        The room's floor extent, centred on the origin: a start outside it is an error.
+
+    Raises
+    ------
+    ConfigError
+        A start that is not three finite numbers, or one outside the room.
+    """
+    room = _room(config)
+    if start is not None:
+        value, source = start, "--start"
+    elif len(room.start) == 3:
+        value, source = room.start, f"[room] start of {config.path or config.robot.name}"
+    elif default is not None:
+        value, source = default, "the scene's start"
+    else:
+        return None
+    vals = tuple(value)
+    ok = len(vals) == 3 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals)
+    if not ok or not all(math.isfinite(float(v)) for v in vals):
+        raise ConfigError(f"{source} must be X,Y,YAW_DEG (3 finite numbers [m, m, deg]), got {value!r}")
+    x, y, yaw_deg = (float(v) for v in vals)
+    if room_size is not None and not (abs(x) < room_size[0] / 2 and abs(y) < room_size[1] / 2):
+        raise ConfigError(
+            f"{source} ({x:g}, {y:g}) is outside the room: x within +-{room_size[0] / 2:g} m, y within "
+            f"+-{room_size[1] / 2:g} m (the room's frame, origin at the floor's centre)"
+        )
+    s_m, s_deg = (float(v) for v in room.start_sigma)
+    Sigma0 = np.diag([s_m**2, s_m**2, math.radians(s_deg) ** 2])
+    return RobotStart(Pose2D(x, y, math.radians(yaw_deg)), Sigma0, source)
+
+
+def localize(
+    robot: Robot, kind: RobotKind, room: RoomLandmarks, start: RobotStart | None, seed: int, log=None
+) -> LocalizedRobot:
+    """The run's robot placed at ``start`` in the room (a robot's; None: as it is) behind the localizer.
+
+    In the simulator (or without a start) the localizer starts at the robot's odometry with its default
+    covariance; on a robot at ``start`` with ``start.Sigma0``, the first landmark sighting allowed to
+    correct it (:meth:`~lab.navigation.localization.Localizer.first_sighting`).
+    """
+    rng = np.random.default_rng([seed, 20])
+    if kind is RobotKind.SIM or start is None:
+        return LocalizedRobot(robot, room.mode, room.landmarks, rng=rng, log=log)
+    p = start.pose
+    s_m, s_rad = math.sqrt(start.Sigma0[0, 0]), math.sqrt(start.Sigma0[2, 2])
+    (log or (lambda m: print(f"lab: {m}", file=sys.stderr)))(
+        f"localization: the robot starts at ({p.x:.3f}, {p.y:.3f}) m, {math.degrees(p.theta):.1f} deg in the "
+        f"room ({start.source}; sigma {s_m:.3f} m, {math.degrees(s_rad):.1f} deg)"
+    )
+    return LocalizedRobot(
+        PlacedRobot(robot, start.pose),
+        room.mode,
+        room.landmarks,
+        rng=rng,
+        log=log,
+        Sigma0=start.Sigma0,
+        start_measured_by_hand=True,
+    )
