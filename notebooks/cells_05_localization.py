@@ -267,7 +267,7 @@ from lab.training.landmarks import trained_landmark_map
 scene = load_scene("lab_room")
 landmarks = trained_landmark_map(scene)
 for lm in landmarks:
-    print(f"{lm.name:13s} centre {lm.centre_W} m, yaw {math.degrees(lm.yaw):5.1f} deg, "
+    print(f"{lm.name:16s} centre ({', '.join(f'{c:.2f}' for c in lm.centre_W)}) m, yaw {math.degrees(lm.yaw):5.1f} deg, "
           f"face normal {lm.normal_W}, {len(lm.database.points_O)} database features")
 
 room_x, room_y = scene.room.size
@@ -583,7 +583,13 @@ from lab.runs.localization import run_localization_drive
 from lab.viz.localization import trajectories_axes
 
 seed, length = 7, 8.0
-odo = run_localization_drive(seed, "odometry", length_m=length)
+odo = run_localization_drive(seed, "odometry", length_m=length)     # one drive per cell: each takes a while
+print(f"odometry alone: {odo.path_length_m:.1f} m driven, {odo.trajectory[-1, 0]:.0f} s")
+""",
+    ),
+    (
+        "code",
+        """\
 est = run_localization_drive(seed, "landmarks", length_m=length)
 for r in (odo, est):
     print(f"{r.mode:9s}: {r.path_length_m:.1f} m driven; final error of the wheel odometry {r.odometry_error_m * 100:5.1f} cm "
