@@ -12,6 +12,8 @@ from pathlib import Path
 
 import nbformat
 from cells_00_sensing import CELLS as NB00_SENSING  # notebooks/ is the script's folder: sys.path[0]
+from cells_05_localization import CELLS as NB05_CELLS
+from cells_05_localization import INTRO as NB05_INTRO
 
 HERE = Path(__file__).resolve().parent
 
@@ -1587,6 +1589,9 @@ if EMULATED:   # scored against the rendered world: the box where `place` put it
 ]
 
 
+NB05 = [*NB05_INTRO, ("code", SETUP), *NB05_CELLS]
+
+
 def write(name: str, cells) -> Path:
     nb = nbformat.v4.new_notebook()
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
@@ -1606,6 +1611,7 @@ NOTEBOOKS = {
     "02_entropy_planning.ipynb": NB02,
     "03_grid_search.ipynb": NB03,
     "04_real_robot.ipynb": NB04,
+    "05_localization.ipynb": NB05,
 }
 
 if __name__ == "__main__":

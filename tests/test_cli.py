@@ -102,12 +102,13 @@ def test_demo_runs_an_identification_episode_and_writes_its_figures_and_report(t
 def test_notebooks_command_lists_them_and_says_what_is_missing(capsys, monkeypatch):
     assert main(["notebooks", "--list"]) == 0
     names = capsys.readouterr().out.split()
-    assert names[:5] == [
+    assert names[:6] == [
         "00_simulator_and_stereo.ipynb",
         "01_pose_ekf.ipynb",
         "02_entropy_planning.ipynb",
         "03_grid_search.ipynb",
         "04_real_robot.ipynb",
+        "05_localization.ipynb",
     ]
     import importlib.util
 

@@ -9,9 +9,10 @@ from nbclient import NotebookClient
 
 NOTEBOOKS = sorted((Path(__file__).resolve().parent.parent / "notebooks").glob("*.ipynb"))
 # Wall time of a fast-mode run on a quiet machine, measured: 02 runs two closed loops of rendered
-# frames (~29 s); the others take 3-15 s. The slow ones still run in the full suite (CI);
-# `make test-fast` leaves them out.
-SLOW = {"02_entropy_planning"}
+# frames (~29 s); 05 two 10 m localization drives (~32 s of CPU, ~40 s wall on 2 shared cores, plus
+# ~30 s to train the landmark databases into an empty cache); the others take 3-15 s. The slow ones
+# still run in the full suite (CI); `make test-fast` leaves them out.
+SLOW = {"02_entropy_planning", "05_localization"}
 PARAMS = [pytest.param(p, id=p.stem, marks=[pytest.mark.slow] if p.stem in SLOW else []) for p in NOTEBOOKS]
 
 

@@ -324,8 +324,8 @@ def build_parser() -> argparse.ArgumentParser:
         "notebooks",
         help="open the step-by-step notebooks in JupyterLab",
         description="Start JupyterLab in the repository's notebooks/ folder (00 simulator and stereo, "
-        "01 pose EKF, 02 entropy planning, 03 grid search, 04 the real robot). Needs the notebooks "
-        "extra: pip install -e '.[notebooks]' (`make notebooks` does both).",
+        "01 pose EKF, 02 entropy planning, 03 grid search, 04 the real robot, 05 localization). Needs "
+        "the notebooks extra: pip install -e '.[notebooks]' (`make notebooks` does both).",
     )
     nb.add_argument("--list", action="store_true", help="list the notebooks and exit")
     nb.add_argument("--fast", action="store_true", help="fast mode (LAB_FAST=1: small budgets, as in CI)")
