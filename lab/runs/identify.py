@@ -115,7 +115,7 @@ def run_identify(
     robot_config=None,
     progress=None,
     sensing="realistic",
-    localization="landmarks",
+    localization="odometry",
     start=None,
 ) -> dict:
     """Run one episode and return the ``lab identify`` JSON (also written to ``json_path``).
