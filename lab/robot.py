@@ -350,6 +350,12 @@ class Robot(ABC):
     def odometry(self) -> Pose2D:
         """The base's wheel-odometry pose in the world frame (drifts; it is not ground truth)."""
 
+    def wheel_odometry(self) -> Pose2D:
+        """The base's own wheel odometry: :meth:`odometry` here; a wrapper whose ``odometry()`` is an
+        estimate (a localized robot) keeps the wheels' here, so that the distance the wheels drove is
+        not lengthened by the estimate's corrections."""
+        return self.odometry()
+
     @abstractmethod
     def pan_tilt(self) -> PanTiltState:
         """The pan-tilt unit's current angles and targets."""
@@ -455,6 +461,9 @@ class RobotWrapper(Robot):
 
     def odometry(self) -> Pose2D:
         return self.base.odometry()
+
+    def wheel_odometry(self) -> Pose2D:
+        return self.base.wheel_odometry()
 
     def pan_tilt(self) -> PanTiltState:
         return self.base.pan_tilt()

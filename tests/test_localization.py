@@ -351,3 +351,34 @@ def test_a_landmark_update_between_frames_is_not_robot_motion():
     # in odometry mode frames are the base's own: the wheels are the odometry
     plain = LocalizedRobot(_FramedRobot(Pose2D(0.0, 0.0, 0.0)), "odometry").capture_stereo()
     assert plain.wheel_odom is None and plain.wheels == plain.odom
+
+
+def test_a_landmark_correction_is_not_distance_driven():
+    """The search's path length (``BudgetedRobot.path_length_m``) sums the wheels' path: a landmark
+    updates that pull the estimate 7 cm ahead while the robot drives 0.36 m add nothing to it, though
+    the estimate's own path is longer by them."""
+    from lab.search.budget import BudgetedRobot
+
+    base = _FramedRobot(Pose2D(0.3, -1.0, 1.4))
+    robot = LocalizedRobot(base, "odometry")
+    robot.mode = LocalizationMode.LANDMARKS
+    robot.observer = _OneLandmarkObserver(robot, [0.01, 0.07, 0.0])  # ahead of the wheels
+    budget = BudgetedRobot(robot, max_time_s=60.0)
+    budget.enable()
+    wheels, estimate = [base.odometry()], [robot.odometry()]
+    for k in range(40):  # 0.2 m/s for 2 s, a frame (and so an update) every other step
+        budget.drive(0.2, 0.0)
+        budget.step(0.05)
+        if k % 2 == 0:
+            budget.capture_stereo()
+        wheels.append(base.odometry())
+        estimate.append(robot.odometry())
+
+    def length(poses):
+        return sum(math.hypot(b.x - a.x, b.y - a.y) for a, b in zip(poses[:-1], poses[1:], strict=True))
+
+    assert robot.localizer.n_updates == 20
+    assert 0.3 < length(wheels) <= 0.4  # (the base accelerates at its slew limit)
+    assert budget.path_length_m == pytest.approx(length(wheels), abs=1e-9)
+    assert length(estimate) > length(wheels) + 0.03  # what the path length used to sum
+    assert budget.wheel_odometry() == base.odometry() and robot.wheel_odometry() == base.odometry()

@@ -692,6 +692,10 @@ class LocalizedRobot(RobotWrapper):
         self._sync()
         return self._pose()
 
+    def wheel_odometry(self) -> Pose2D:
+        """The base's wheel odometry, which the estimate starts from (in the base's frame)."""
+        return self.base.odometry()
+
     def capture_stereo(self, after=None):
         frame = self.base.capture_stereo(after)
         self._sync(frame.odom)

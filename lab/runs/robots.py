@@ -187,6 +187,9 @@ class PlacedRobot(RobotWrapper):
     def odometry(self) -> Pose2D:
         return self._in_room(self.base.odometry())
 
+    def wheel_odometry(self) -> Pose2D:
+        return self._in_room(self.base.wheel_odometry())
+
     def capture_stereo(self, after: float | None = None) -> StereoFrame:
         frame = self.base.capture_stereo(after)
         wheels = None if frame.wheel_odom is None else self._in_room(frame.wheel_odom)

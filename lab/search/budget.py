@@ -3,8 +3,9 @@
 :class:`BudgetedRobot` wraps the robot the :class:`~lab.search.agent.SearchAgent` drives: once its
 clock passes the deadline, the next ``step`` raises :class:`SearchBudgetExceeded` -- inside the
 navigator, a pan-tilt wait or a drive -- and the agent ends the run there ("time budget"). A
-wall-clock limit can be added the same way. It also measures the odometry path length and keeps the
-trajectory for the figures.
+wall-clock limit can be added the same way. It also measures the path length from the wheel odometry
+(a landmark correction of a localized pose is not distance driven) and keeps the pose the agent sees
+as the trajectory for the figures.
 """
 
 from __future__ import annotations
@@ -44,9 +45,9 @@ class BudgetedRobot(RobotWrapper):
         self.t_start = base.now()
         self.deadline = self.t_start + float(max_time_s)
         self.wall_deadline = None if max_wall_s is None else time.perf_counter() + float(max_wall_s)
-        self.path_length_m = 0.0
+        self.path_length_m = 0.0  # the wheels' path: base.wheel_odometry()
         p = base.odometry()
-        self._last = p
+        self._wheels = base.wheel_odometry()
         self.trajectory: list[tuple[float, float, float, float]] = [(self.t_start, p.x, p.y, p.theta)]
         self._record_every = record_every_s
 
@@ -57,9 +58,10 @@ class BudgetedRobot(RobotWrapper):
         if self.wall_deadline is not None and time.perf_counter() >= self.wall_deadline:
             raise SearchBudgetExceeded("wall-clock budget used up")
         self.base.step(dt)
+        w = self.base.wheel_odometry()
+        self.path_length_m += math.hypot(w.x - self._wheels.x, w.y - self._wheels.y)
+        self._wheels = w
         p = self.base.odometry()
-        self.path_length_m += math.hypot(p.x - self._last.x, p.y - self._last.y)
-        self._last = p
         t = self.base.now()
         if t - self.trajectory[-1][0] >= self._record_every:
             self.trajectory.append((t, p.x, p.y, p.theta))
