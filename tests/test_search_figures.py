@@ -100,7 +100,7 @@ def test_the_track_is_what_the_run_scored(localized_trial):
     agent used (the budgeted robot's trajectory), corrected by landmarks away from the odometry."""
     r = localized_trial
     tr = r.trace.track
-    assert tr.localization == "landmarks" and tr.localized and r.landmark_updates >= 1
+    assert tr.localization == "landmarks" and tr.localized and tr.landmark_updates == r.landmark_updates >= 1
     assert tr.truth is not None and len(tr) >= 10 and np.all(np.diff(tr.t) >= 0)
     assert np.hypot(*(tr.odometry[-1, :2] - tr.truth[-1, :2])) == pytest.approx(r.odometry_error_m, abs=1e-9)
     assert np.hypot(*(tr.estimate[-1, :2] - tr.truth[-1, :2])) == pytest.approx(

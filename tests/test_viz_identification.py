@@ -34,7 +34,7 @@ def test_fig5_fig6_fig7_draw_their_data():
     assert len(f.axes) == 2
 
 
-def _track(localization="landmarks", truth=True):
+def _track(localization="landmarks", truth=True, updates=3):
     from lab.runs.tracks import RobotTrack
 
     t = np.linspace(0.0, 4.0, 9)
@@ -42,7 +42,12 @@ def _track(localization="landmarks", truth=True):
     odom = true + np.c_[0.02 * t, -0.01 * t, 0.0 * t]  # drifting wheels
     est = true + 0.003
     return RobotTrack(
-        t, odom, est if localization == "landmarks" else odom, true if truth else None, localization
+        t,
+        odom,
+        est if localization == "landmarks" else odom,
+        true if truth else None,
+        localization,
+        updates if localization == "landmarks" else 0,
     )
 
 
@@ -70,5 +75,9 @@ def test_fig6_draws_the_robots_track_three_ways():
     f = fig6(cand, gains, 3, tr.estimate[-1], (0, 0), track=_track("odometry", truth=False))
     legend = {t.get_text() for t in f.axes[0].get_legend().get_texts()}
     assert "odometry" in legend and not legend & {"true path", "localized (landmarks)"}
+    # localized against landmarks, none of which was seen: the label says the estimate is dead reckoning
+    f = fig6(cand, gains, 3, tr.estimate[-1], (0, 0), track=_track(updates=0))
+    legend = {t.get_text() for t in f.axes[0].get_legend().get_texts()}
+    assert "localized (no landmark seen)" in legend and "localized (landmarks)" not in legend
     f = fig6(cand, gains, 3, tr.estimate[-1], (0, 0), path_xy=tr.estimate[:, :2])
     assert "path" in {t.get_text() for t in f.axes[0].get_legend().get_texts()}

@@ -47,6 +47,9 @@ class RobotTrack:
         The true base pose (scoring and figures only); None where there is no truth (the real robot).
     localization : str
         ``odometry`` or ``landmarks`` (:class:`~lab.navigation.localization.LocalizationMode`).
+    landmark_updates : int
+        Landmark observations the localizer used by the end (0 with ``landmarks``: none was seen, and
+        the estimate is dead reckoning from the start).
     """
 
     t: np.ndarray = field(repr=False)
@@ -54,6 +57,7 @@ class RobotTrack:
     estimate: np.ndarray = field(repr=False)
     truth: np.ndarray | None = field(default=None, repr=False)
     localization: str = "odometry"
+    landmark_updates: int = 0
 
     def __len__(self) -> int:
         return len(self.t)
@@ -128,4 +132,5 @@ class TrackedRobot(RobotWrapper):
             a[:, 4:7].copy(),
             a[:, 7:10].copy() if self._has_truth else None,
             self.base.mode.value,
+            self.base.localizer.n_updates,
         )

@@ -21,8 +21,9 @@ def draw_track(ax, track, end_marks: bool = True) -> list[str]:
     """Draw a run's track (:class:`lab.runs.tracks.RobotTrack`) on ``ax``: the true path where the
     truth is known, the wheel odometry, and the localized estimate when the run localized against
     landmarks (with odometry alone the estimate is the odometry: not drawn twice), each labelled for a
-    legend (:data:`PATH_STYLES`); ``end_marks`` puts a dot where each path ends. Returns the kinds
-    drawn, in order (``truth``, ``odometry``, ``estimate``)."""
+    legend (:data:`PATH_STYLES`; a localized run that saw no landmark says so in its label: its estimate
+    is dead reckoning); ``end_marks`` puts a dot where each path ends. Returns the kinds drawn, in order
+    (``truth``, ``odometry``, ``estimate``)."""
     paths = []
     if track.truth is not None:
         paths.append(("truth", track.truth))
@@ -31,6 +32,8 @@ def draw_track(ax, track, end_marks: bool = True) -> list[str]:
         paths.append(("estimate", track.estimate))
     for kind, xy in paths:
         colour, ls, lw, label = PATH_STYLES[kind]
+        if kind == "estimate" and track.landmark_updates == 0:
+            label = "localized (no landmark seen)"
         ax.plot(xy[:, 0], xy[:, 1], ls=ls, color=colour, lw=lw, label=label)
     if end_marks and len(track):
         for kind, xy in paths:
