@@ -81,3 +81,43 @@ def test_fig6_draws_the_robots_track_three_ways():
     assert "localized (no landmark seen)" in legend and "localized (landmarks)" not in legend
     f = fig6(cand, gains, 3, tr.estimate[-1], (0, 0), path_xy=tr.estimate[:, :2])
     assert "path" in {t.get_text() for t in f.axes[0].get_legend().get_texts()}
+
+
+def test_drive_figure_names_every_poster_inside_the_room_and_leaves_the_backend_alone(tmp_path):
+    """The localization benchmark's figure: each landmark's name sits inside the room on the side its
+    face looks at (none cut off at the plot's edge), the legend does not cover the room, and writing it
+    does not switch the caller's matplotlib backend (a notebook's inline one)."""
+    from types import SimpleNamespace
+
+    import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from lab.training.landmarks import landmark_map_from_scene
+    from lab.viz.localization import drive_figure, trajectories_axes
+
+    t = np.linspace(0.0, 30.0, 60)
+    xy = np.c_[2 * np.cos(t / 5), 3 * np.sin(t / 5), t / 5]
+    tr = np.c_[t, xy, xy + 0.01, xy + 0.001]
+    runs = [
+        SimpleNamespace(trajectory=tr, ellipses=e, seed=1, odometry_error_m=0.4, localization_error_m=0.01,
+                        nees=np.full(5, 2.0))
+        for e in ([], [(xy[30], np.diag([1e-4, 2e-4, 1e-5]))])
+    ]  # fmt: skip
+    landmarks = landmark_map_from_scene("lab_room")
+    backend = matplotlib.get_backend()
+    assert drive_figure(*runs, tmp_path / "d.png", landmarks).stat().st_size > 10_000
+    assert matplotlib.get_backend() == backend
+
+    fig = Figure(figsize=(8, 5), layout="constrained")
+    ax = fig.subplots()
+    trajectories_axes(ax, *runs, landmarks)
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    box = ax.get_window_extent(renderer)
+    names = {a.get_text(): a for a in ax.texts}
+    assert set(names) == {lm.name for lm in landmarks}
+    for lm in landmarks:
+        text = names[lm.name].get_window_extent(renderer)
+        assert box.x0 <= text.x0 and text.x1 <= box.x1 and box.y0 <= text.y0 and text.y1 <= box.y1, lm.name
+    assert not ax.get_legend().get_window_extent(renderer).overlaps(box)

@@ -73,26 +73,35 @@ def trajectories_axes(ax, odometry_run, localized_run, landmarks: LandmarkMap | 
     if landmarks is not None:
         for lm in landmarks:
             ax.plot(*lm.centre_W[:2], "ks", ms=5)
-            ax.annotate(lm.name, lm.centre_W[:2], fontsize=6)
+            # the name inside the room, away from the wall the poster hangs on (its face normal)
+            n = np.asarray(lm.normal_W, float)
+            ax.annotate(
+                lm.name,
+                lm.centre_W[:2],
+                xytext=tuple(6 * n),
+                textcoords="offset points",
+                fontsize=6,
+                ha="left" if n[0] > 0.5 else "right" if n[0] < -0.5 else "center",
+                va="bottom" if n[1] > 0.5 else "top" if n[1] < -0.5 else "center",
+                annotation_clip=False,
+            )
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.legend(fontsize=7, loc="upper right")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
 
 
 def drive_figure(odometry_run, localized_run, path, landmarks: LandmarkMap | None = None):
     """Write the trajectories figure (and the NEES of the updates) as a PNG at ``path``."""
     import io
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) is left alone
     from scipy.stats import chi2
 
     from lab.io import write_bytes_atomic
 
-    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 5))
+    fig = Figure(figsize=(13, 5), layout="constrained")
+    a, b = fig.subplots(1, 2, width_ratios=(1.5, 1))
     trajectories_axes(a, odometry_run, localized_run, landmarks)
     a.set_title(
         f"seed {localized_run.seed}: final error odometry {odometry_run.odometry_error_m * 100:.1f} cm, "
@@ -107,6 +116,5 @@ def drive_figure(odometry_run, localized_run, path, landmarks: LandmarkMap | Non
     b.set_title("NEES with the chi-square(3) 95 % band", fontsize=8)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
-    plt.close(fig)
     write_bytes_atomic(path, buf.getvalue())
     return path
