@@ -44,16 +44,23 @@ def test_rehearsal_toml_selects_the_rendered_camera():
         make_camera_source(cfg)  # it needs the emulators' truth: only a rehearsal can build it
 
 
-def test_check_explains_the_rendered_camera(tmp_path):
-    from lab.hardware.cli import check
+def test_check_explains_the_rendered_camera_and_the_room(tmp_path, capsys):
+    """`lab hardware check --emulate`: the camera line, then the room's lines (lab.runs.room.check_room)
+    before the summary, which counts them."""
+    from lab.cli import main
 
     text = REHEARSAL_TOML.read_text().replace("/tmp/lab-emulators", str(tmp_path / "links"))
     text = text.replace('"calibration/', f'"{REPO}/hardware/calibration/')
     p = tmp_path / "r.toml"
     p.write_text(text)
-    lines = []
-    assert check(p, out=lines.append, emulate=True) == 0, lines
+    capsys.readouterr()
+    assert main(["hardware", "check", "--config", str(p), "--emulate"]) == 0
+    lines = capsys.readouterr().out.splitlines()
     assert any(ln.startswith("PASS  camera: rendered by the simulator (world 'arena')") for ln in lines)
+    kinds = [ln.split(":")[0] for ln in lines]
+    assert kinds[-3:-1] == ["PASS  landmark map", "PASS  start"], lines
+    n = sum(ln.startswith(("PASS", "FAIL")) for ln in lines)
+    assert lines[-1] == f"all checks passed ({n}/{n})"
 
 
 def test_unknown_world_is_one_clear_line(tmp_path):

@@ -88,6 +88,42 @@ def test_a_bad_landmark_file_or_start_is_one_line_before_any_port_is_opened(tmp_
     assert "--start must be 3 comma-separated numbers" in capsys.readouterr().err
 
 
+def test_hardware_check_reads_the_room_map_trains_it_and_says_where_to_stand(tmp_path):
+    """`lab hardware check`'s room lines (lab.runs.room.check_room): the classroom's map is read and its
+    posters trained (the cache's databases are those the runs load), a bad map is one FAIL line naming
+    the file and field with the fix, no map says odometry alone, and the start is the one lab search
+    assumes."""
+    from lab.runs.room import check_room
+    from lab.training.landmarks import trained_landmark_map
+
+    def lines_of(cfg):
+        out = []
+        check_room(cfg, lambda ok, what, detail, fix="": out.append((ok, what, detail, fix)))
+        return {what: (ok, detail, fix) for ok, what, detail, fix in out}
+
+    room = lines_of(load_config(REPO / "hardware" / "robot.toml"))
+    ok, detail, _ = room["landmark map"]
+    assert ok and "6 posters (poster_north, poster_west" in detail and str(LANDMARKS_TOML) in detail
+    assert len(trained_landmark_map(LANDMARKS_TOML, progress=False)) == 6  # trained: in the cache now
+    ok, detail, _ = room["start"]
+    assert ok and "lab search assumes (0 m, -3 m, 90 deg), from the search room's [robot] start" in detail
+    assert "known to 5 cm and 3 deg" in detail
+
+    bad = LANDMARKS_TOML.read_text().replace("../worlds", str(REPO / "worlds"))
+    (tmp_path / "dup.toml").write_text(bad.replace('name = "poster_west"', 'name = "poster_north"'))
+    dup = _emulated_config(tmp_path, 'landmarks = "dup.toml"\nstart = [0.5, -2.0, 80]')
+    room = lines_of(load_config(dup))
+    ok, detail, fix = room["landmark map"]
+    assert not ok and "dup.toml landmark[1] name: duplicate landmark name 'poster_north'" in detail
+    assert "Localize against the room's posters" in fix
+    assert room["start"][0] and "(0.5 m, -2 m, 80 deg), from [room] start of" in room["start"][1]
+
+    room = lines_of(load_config(_emulated_config(tmp_path, name="plain.toml")))
+    assert room["landmark map"] == (
+        True, "none ([room] landmarks): lab search and lab identify will localize by odometry alone", ""
+    )
+
+
 def test_a_map_whose_posters_are_never_seen_falls_back_and_says_so(tmp_path, capsys):
     """The real robot's path on the emulators, whose synthetic random-dot camera shows no poster: with
     the room's map the run looks for its posters, sees none, and says the pose is odometry alone; without

@@ -198,10 +198,11 @@ def _cmd_search(args) -> int:
 
 def _cmd_hardware(args) -> int:
     from lab.hardware import cli as hw
+    from lab.runs.room import check_room
 
     if args.hw_command == "emulate":
         return hw.emulate(args.dir)
-    return hw.check(args.config, emulate=args.emulate)
+    return hw.check(args.config, emulate=args.emulate, room_check=check_room)
 
 
 def _cmd_tables(args) -> int:

@@ -58,11 +58,17 @@ def emulate(
 
 
 def check(
-    config_path: str | os.PathLike, *, out: Callable[[str], None] = print, emulate: bool = False
+    config_path: str | os.PathLike,
+    *,
+    out: Callable[[str], None] = print,
+    emulate: bool = False,
+    room_check: Callable | None = None,
 ) -> int:
     """Bring-up diagnostics for a config; returns 0 when every line passed, else 1.
 
     With ``emulate=True`` the emulators are started on the config's ports first (CI, a first try).
+    ``room_check(cfg, line)`` adds the lines about the room (the landmark map, the start): ``lab hardware
+    check`` passes :func:`lab.runs.room.check_room` (this layer reads no landmark map itself).
     """
     results: list[bool] = []
 
@@ -123,6 +129,8 @@ def check(
         _check_ptu(cfg, line)
         _check_base(cfg, line, in_process=emu is not None)
         _check_camera(cfg, calib, line)
+        if room_check is not None:
+            room_check(cfg, line)
     finally:
         if emu is not None:
             emu.close()

@@ -21,11 +21,12 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from lab.errors import ConfigError
+from lab.errors import ConfigError, LabError
 from lab.geometry import Pose2D
 from lab.hardware.config import HardwareConfig, RoomConfig
 from lab.navigation.landmarks import LandmarkMap
@@ -33,7 +34,7 @@ from lab.navigation.localization import LocalizationMode, LocalizedRobot
 from lab.robot import Robot
 from lab.runs.robots import PlacedRobot, RobotKind
 
-__all__ = ["RobotStart", "RoomLandmarks", "localize", "robot_start", "room_landmarks"]
+__all__ = ["RobotStart", "RoomLandmarks", "check_room", "localize", "robot_start", "room_landmarks"]
 
 
 @dataclass(frozen=True)
@@ -169,6 +170,65 @@ def robot_start(
     s_m, s_deg = (float(v) for v in room.start_sigma)
     Sigma0 = np.diag([s_m**2, s_m**2, math.radians(s_deg) ** 2])
     return RobotStart(Pose2D(x, y, math.radians(yaw_deg)), Sigma0, source)
+
+
+def check_room(config: HardwareConfig, line) -> None:
+    """The bring-up's lines about the room (``lab hardware check``): the landmark map and the start.
+
+    ``[room] landmarks`` is read strictly (a bad file is one FAIL line naming the file and the field),
+    and every poster's database is trained into the cache now if it is not there yet, so that the first
+    run in front of a class does not stop to train. The start is the one ``lab search`` will assume:
+    ``[room] start``, else the search room's ``[robot] start`` (``--start`` overrides both at run time).
+    Nothing moves.
+
+    Parameters
+    ----------
+    config : HardwareConfig
+    line : callable (ok: bool, what: str, detail: str, fix: str = "") -> bool
+        Prints one PASS/FAIL line (:func:`lab.hardware.cli.check`'s).
+    """
+    from lab.scene import load_scene
+    from lab.training.landmarks import load_landmark_map, trained_landmark_map
+
+    room = config.room
+    guide = "hardware/README.md, 'Localize against the room's posters'"
+    size = None
+    if not room.landmarks:
+        line(
+            True,
+            "landmark map",
+            "none ([room] landmarks): lab search and lab identify will localize by odometry alone",
+        )
+    else:
+        try:
+            size = load_landmark_map(room.landmarks).room_size
+        except LabError as e:
+            line(False, "landmark map", str(e), f"edit the landmark file ({guide})")
+        else:
+            t0 = time.perf_counter()
+            trained = trained_landmark_map(room.landmarks, progress=False)
+            names = ", ".join(lm.name for lm in trained)
+            line(
+                True,
+                "landmark map",
+                f"{room.landmarks}: {len(trained)} posters ({names}), their databases ready "
+                f"({time.perf_counter() - t0:.0f} s)",
+            )
+    scene = load_scene("lab_room")
+    try:
+        s = robot_start(config, scene.robot_start, None, size or scene.room.size)
+    except ConfigError as e:
+        line(False, "start", str(e), f"measure the start and fix [room] start in {config.path} ({guide})")
+        return
+    sigma_m, sigma_deg = room.start_sigma
+    source = "the search room's [robot] start" if s.source == "the scene's start" else s.source
+    line(
+        True,
+        "start",
+        f"lab search assumes ({s.pose.x:g} m, {s.pose.y:g} m, {math.degrees(s.pose.theta):g} deg), from "
+        f"{source}, known to {100 * sigma_m:g} cm and {sigma_deg:g} deg ([room] start_sigma): stand the "
+        "robot there, or give --start",
+    )
 
 
 def localize(
