@@ -47,6 +47,7 @@ def test_eval_search_jobs_are_lab_search_runs_and_resume_runs_only_the_missing(t
         assert main(argv) == 0
         assert _strip(job) == _strip(json.loads(peer.read_text()))
         assert r["success"] == "False" and float(r["sim_time_s"]) == job["sim_time_s"] >= 0.5
+        assert job["reason"] == "time budget of 0.5 s used up"  # (not rounded to "0 s")
         assert float(r["path_length_m"]) == job["path_length_m"] and r["error"] == ""
         assert 0.0 < job["shortest_path_m"] < 8.0  # the start to local-search range, round the furniture
     report = (out / "report.md").read_text()

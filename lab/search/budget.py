@@ -54,7 +54,7 @@ class BudgetedRobot(RobotWrapper):
     # budget and bookkeeping
     def step(self, dt: float) -> None:
         if self.base.now() >= self.deadline:
-            raise SearchBudgetExceeded(f"time budget of {self.deadline - self.t_start:.0f} s used up")
+            raise SearchBudgetExceeded(f"time budget of {self.deadline - self.t_start:g} s used up")
         if self.wall_deadline is not None and time.perf_counter() >= self.wall_deadline:
             raise SearchBudgetExceeded("wall-clock budget used up")
         self.base.step(dt)
