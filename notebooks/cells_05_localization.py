@@ -417,9 +417,12 @@ fit's carried by the Jacobian $J = \partial z / \partial [t_{CL}, \phi]$ (3 x 6)
 \Sigma_{rv}\, J^T$; $\partial t_{RL} / \partial t_{CL} = R_{RC}$, and the heading row is in the
 docstring of `observation_of`. The fit cannot see every error: the pan-tilt's zero offsets and the
 camera's calibration bias all the features of a frame together. The localizer therefore adds a floor
-(`LocalizerConfig.observation_floor`), growing with the range $r = \|[z_1, z_2]\|$:
+(`LocalizerConfig.observation_floor`), growing with the range $r = \|[z_1, z_2]\|$ and longer along the
+line of sight $u = [z_1, z_2]/r$ than across it ($v \perp u$), since stereo measures depth worse than
+bearing (a scale error of the baseline grows like $r$, a disparity bias like $r^2$):
 
-$$Q = Q_{fit} + \mathrm{diag}(s^2, s^2, \sigma_{obs,\theta}^2), \qquad s = \sigma_{obs} + \sigma_{rel}\, r.$$""",
+$$Q = Q_{fit} + \begin{bmatrix} s_\parallel^2\, u u^T + s_\perp^2\, v v^T & 0 \\ 0 & \sigma_{obs,\theta}^2 \end{bmatrix},
+\qquad s_\parallel = \sigma_{obs} + \sigma_{rel}\, r + \sigma_{r^2}\, r^2, \quad s_\perp = \sigma_{obs} + \sigma_{rel,\perp}\, r.$$""",
     ),
     (
         "code",

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
+from localization_helpers import NO_FLOOR, num_jac
 from nav_fakes import KinematicRobot
 from scipy.stats import chi2
 
@@ -33,27 +34,13 @@ from lab.training.landmarks import landmark_map_from_scene, load_landmark_map
 RNG = np.random.default_rng(20)
 
 
-def _num_jac(f, x, eps=1e-6):
-    x = np.asarray(x, float)
-    cols = []
-    for i in range(len(x)):
-        d = np.zeros_like(x)
-        d[i] = eps
-        a, b = f(x + d), f(x - d)
-        diff = a - b
-        if len(diff) == 3:
-            diff[2] = wrap_angle(diff[2])
-        cols.append(diff / (2 * eps))
-    return np.stack(cols, axis=1)
-
-
 @pytest.mark.parametrize("k", range(20))
 def test_motion_jacobians_match_finite_differences(k):
     x = RNG.uniform([-3, -4, -np.pi], [3, 4, np.pi])
     u = RNG.uniform([-0.3, -0.05, -0.5], [0.5, 0.05, 0.5])
     F, V = motion_jacobians(x, u)
-    np.testing.assert_allclose(F, _num_jac(lambda s: motion_model(s, u), x), atol=1e-7)
-    np.testing.assert_allclose(V, _num_jac(lambda s: motion_model(x, s), u), atol=1e-7)
+    np.testing.assert_allclose(F, num_jac(lambda s: motion_model(s, u), x), atol=1e-7)
+    np.testing.assert_allclose(V, num_jac(lambda s: motion_model(x, s), u), atol=1e-7)
 
 
 @pytest.mark.parametrize("k", range(20))
@@ -61,7 +48,7 @@ def test_measurement_jacobian_matches_finite_differences(k):
     x = RNG.uniform([-3, -4, -np.pi], [3, 4, np.pi])
     l = RNG.uniform([-3, -4, -np.pi], [3, 4, np.pi])
     H = measurement_jacobian(x, l)
-    np.testing.assert_allclose(H, _num_jac(lambda s: measurement_model(s, l), x), atol=1e-7)
+    np.testing.assert_allclose(H, num_jac(lambda s: measurement_model(s, l), x), atol=1e-7)
 
 
 def test_odometry_increment_inverts_the_motion_model():
@@ -103,7 +90,7 @@ def test_observation_covariance_is_the_fits_through_its_jacobian():
         G[:3, :3] = _exp(p[3:]) @ G_CL[:3, :3]
         return observation_of(G_RC, G, np.eye(6))[0]
 
-    J = _num_jac(z_of, np.zeros(6))
+    J = num_jac(z_of, np.zeros(6))
     Sigma = np.diag(RNG.uniform(1e-6, 1e-4, 6))
     _, Q = observation_of(G_RC, G_CL, Sigma)
     np.testing.assert_allclose(Q, J @ Sigma @ J.T, rtol=1e-5, atol=1e-14)
@@ -111,7 +98,7 @@ def test_observation_covariance_is_the_fits_through_its_jacobian():
 
 def test_update_matches_filterpy():
     """One landmark update equals filterpy's ExtendedKalmanFilter.update (with the same H, h, R)."""
-    cfg = LocalizerConfig(obs_sigma_m=0.0, obs_sigma_rel=0.0, obs_sigma_rad=0.0, gate_prob=0.999999)
+    cfg = LocalizerConfig(**NO_FLOOR, gate_prob=0.999999)
     lm = Landmark("p", (0.0, 3.94, 1.5), 0.0, (1.4, 0.02, 1.0), (0.0, -1.0))
     x0 = np.array([0.3, -1.0, 1.4])
     P0 = np.diag([0.04, 0.02, 0.01])
@@ -154,9 +141,7 @@ def test_filter_is_consistent_on_synthetic_data():
     rng = np.random.default_rng(7)
     # a moderate heading noise: with the default's 0.1 rad/sqrt(rad) the linearisation shows (mean NEES 3.6)
     cfg = LocalizerConfig(
-        obs_sigma_m=0.0,
-        obs_sigma_rel=0.0,
-        obs_sigma_rad=0.0,
+        **NO_FLOOR,
         gate_prob=0.99999,
         sigma_heading_rad_per_sqrt_rad=0.06,
     )
@@ -382,3 +367,21 @@ def test_a_landmark_correction_is_not_distance_driven():
     assert budget.path_length_m == pytest.approx(length(wheels), abs=1e-9)
     assert length(estimate) > length(wheels) + 0.03  # what the path length used to sum
     assert budget.wheel_odometry() == base.odometry() and robot.wheel_odometry() == base.odometry()
+
+
+@pytest.mark.parametrize("r, bearing_deg", [(0.8, 0.0), (2.0, 35.0), (4.5, -120.0), (7.0, 170.0)])
+def test_the_observation_floor_is_long_along_the_line_of_sight(r, bearing_deg):
+    """The floor's position ellipse has its axes along and across the line of sight to the landmark,
+    with the standard deviations the attributes give at that range; the heading's is apart."""
+    cfg = LocalizerConfig()
+    a = math.radians(bearing_deg)
+    Q = cfg.observation_floor([r * math.cos(a), r * math.sin(a), 0.3])
+    u, v = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)])
+    s_along = cfg.obs_sigma_m + cfg.obs_sigma_rel * r + cfg.obs_sigma_per_m * r * r
+    s_across = cfg.obs_sigma_m + cfg.obs_sigma_rel_across * r
+    assert u @ Q[:2, :2] @ u == pytest.approx(s_along**2, rel=1e-12)
+    assert v @ Q[:2, :2] @ v == pytest.approx(s_across**2, rel=1e-12)
+    assert u @ Q[:2, :2] @ v == pytest.approx(0.0, abs=1e-15)
+    assert Q[2, 2] == cfg.obs_sigma_rad**2 and not Q[:2, 2].any() and np.array_equal(Q, Q.T)
+    assert s_along > s_across  # stereo measures range worse than bearing
+    assert not LocalizerConfig(**NO_FLOOR).observation_floor([r, 0.0, 0.0]).any()

@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
+from localization_helpers import NO_FLOOR, num_jac
 from scipy.stats import chi2
 
 from lab.geometry import wrap_angle
@@ -21,18 +22,7 @@ from lab.navigation.localization import Localizer, LocalizerConfig, measurement_
 RNG = np.random.default_rng(20)
 NORTH = Landmark("poster_north", (0.0, 3.94, 1.5), 0.0, (1.4, 0.02, 1.0), (0.0, -1.0))
 Q = np.diag([1e-4, 1e-4, math.radians(0.3) ** 2])
-NO_FLOOR = LocalizerConfig(obs_sigma_m=0.0, obs_sigma_rel=0.0, obs_sigma_rad=0.0)
-
-
-def _num_jac(f, x, eps=1e-6):
-    cols = []
-    for i in range(len(x)):
-        d = np.zeros_like(x)
-        d[i] = eps
-        diff = f(x + d) - f(x - d)
-        diff[2] = wrap_angle(diff[2])
-        cols.append(diff / (2 * eps))
-    return np.stack(cols, axis=1)
+NO_FLOOR_CONFIG = LocalizerConfig(**NO_FLOOR)
 
 
 @pytest.mark.parametrize("k", range(10))
@@ -44,7 +34,7 @@ def test_pose_from_observation_inverts_the_measurement_model(k):
     d = x_back - x
     d[2] = wrap_angle(d[2])
     np.testing.assert_allclose(d, 0.0, atol=1e-12)
-    np.testing.assert_allclose(J, _num_jac(lambda s: pose_from_observation(s, l)[0], z), atol=1e-7)
+    np.testing.assert_allclose(J, num_jac(lambda s: pose_from_observation(s, l)[0], z), atol=1e-7)
 
 
 def _off(x_true, dxy_m: float, dth_deg: float, direction: float):
@@ -86,7 +76,7 @@ def test_a_consistent_first_sighting_is_fused_as_filterpys_update_with_H_identit
     start = _off(x_true, 0.20, 6.0, -0.7)
     Sigma0 = np.diag([0.1**2, 0.1**2, math.radians(5.0) ** 2])
     z = measurement_model(x_true, NORTH.planar)
-    loc = Localizer(start, Sigma0, NO_FLOOR, first_sighting=True)
+    loc = Localizer(start, Sigma0, NO_FLOOR_CONFIG, first_sighting=True)
     rec = loc.update(z, Q, NORTH)
     assert rec.accepted and rec.kind == "fused"
     x_z, J = pose_from_observation(z, NORTH.planar)
@@ -117,7 +107,7 @@ def _first_sighting_nees(rng, Sigma0, start_error, n=300):
         x_true = np.array([rng.uniform(-2, 2), rng.uniform(-3, 1), rng.uniform(1.0, 2.1)])
         start = x_true + start_error(rng)
         z = measurement_model(x_true, NORTH.planar) + rng.multivariate_normal(np.zeros(3), Q)
-        loc = Localizer(start, Sigma0, NO_FLOOR, first_sighting=True)
+        loc = Localizer(start, Sigma0, NO_FLOOR_CONFIG, first_sighting=True)
         rec = loc.update(z, Q, NORTH)
         assert rec.accepted
         kinds.append(rec.kind)

@@ -214,7 +214,8 @@ def observation_of(
 
 @dataclass(frozen=True)
 class LocalizerConfig:
-    """Noise models and thresholds of the localizer (tuned on seeds < 1000, see the benchmark).
+    """Noise models and thresholds of the localizer (tuned on seeds < 1000, see the benchmark; the
+    observation floor on the tuning drives 0-7, their filter inputs recorded and replayed).
 
     Attributes
     ----------
@@ -227,9 +228,13 @@ class LocalizerConfig:
         heading error per distance (unequal wheels curve a straight drive);
     sigma_heading_rad_per_sqrt_rad : float [rad / sqrt(rad)]
         heading error per angle turned (track width error, wheel scrub).
-    obs_sigma_m, obs_sigma_rel, obs_sigma_rad : float [m], [-], [rad]
-        A floor under each landmark observation's covariance, added to the fit's own: pan-tilt zero
-        offsets, camera calibration (baseline, focal length: an error relative to the range).
+    obs_sigma_m, obs_sigma_rel, obs_sigma_per_m, obs_sigma_rel_across, obs_sigma_rad : float
+        A floor under each landmark observation's covariance, added to the fit's own for the errors a
+        fit cannot see because they move every feature of a frame together (see
+        :meth:`observation_floor`): along the line of sight a constant [m], a share of the range [-]
+        (the baseline's and focal lengths' scale error) and a share of its square [1/m] (a disparity
+        bias: depth error ``Z^2 delta_d / (f B)``); across it the constant and a share of the range [-]
+        (the pan-tilt's pointing error); and the heading [rad].
     gate_prob : float
         Observations whose innovation's Mahalanobis distance exceeds the chi-square(3) quantile are
         rejected as outliers.
@@ -256,9 +261,11 @@ class LocalizerConfig:
     sigma_cross_m_per_sqrt_m: float = 0.01
     sigma_heading_rad_per_sqrt_m: float = 0.03
     sigma_heading_rad_per_sqrt_rad: float = 0.1
-    obs_sigma_m: float = 0.005
-    obs_sigma_rel: float = 0.006
-    obs_sigma_rad: float = math.radians(0.5)
+    obs_sigma_m: float = 0.002
+    obs_sigma_rel: float = 0.002
+    obs_sigma_per_m: float = 0.001
+    obs_sigma_rel_across: float = 0.001
+    obs_sigma_rad: float = math.radians(0.3)
     gate_prob: float = 0.999
     max_rejected_in_a_row: int = 3
     reject_inflation: float = 9.0
@@ -279,6 +286,8 @@ class LocalizerConfig:
             "sigma_heading_rad_per_sqrt_rad",
             "obs_sigma_m",
             "obs_sigma_rel",
+            "obs_sigma_per_m",
+            "obs_sigma_rel_across",
             "obs_sigma_rad",
         ):
             v = getattr(self, k)
@@ -309,10 +318,27 @@ class LocalizerConfig:
         )
 
     def observation_floor(self, z) -> np.ndarray:
-        """Covariance (3, 3) added to every landmark observation ``z`` (see the attributes)."""
+        r"""Covariance (3, 3) added to every landmark observation ``z`` (see the attributes).
+
+        Stereo measures range worse than bearing: the landmark's position error is an ellipse with its
+        long axis along the line of sight ``u = [z_1, z_2] / r``, ``r = \|[z_1, z_2]\|``:
+
+        .. math:: Q_{floor} = \begin{bmatrix} R_u\, \mathrm{diag}(s_\parallel^2, s_\perp^2)\, R_u^T & 0 \\
+                              0 & \sigma_{obs,\theta}^2 \end{bmatrix}, \quad
+                  s_\parallel = \sigma_{obs} + \sigma_{rel}\, r + \sigma_{r^2}\, r^2, \quad
+                  s_\perp = \sigma_{obs} + \sigma_{rel,\perp}\, r
+
+        with :math:`R_u = [u, u^\perp]` the rotation onto the line of sight.
+        """
         r = math.hypot(float(z[0]), float(z[1]))
-        s = self.obs_sigma_m + self.obs_sigma_rel * r
-        return np.diag([s * s, s * s, self.obs_sigma_rad**2])
+        s_along = self.obs_sigma_m + self.obs_sigma_rel * r + self.obs_sigma_per_m * r * r
+        s_across = self.obs_sigma_m + self.obs_sigma_rel_across * r
+        u = np.array([z[0], z[1]], float) / r if r > 0 else np.array([1.0, 0.0])  # along the line of sight
+        v = np.array([-u[1], u[0]])  # across it
+        Q = np.zeros((3, 3))
+        Q[:2, :2] = s_along**2 * np.outer(u, u) + s_across**2 * np.outer(v, v)  # R_u diag(.) R_u^T
+        Q[2, 2] = self.obs_sigma_rad**2
+        return Q
 
 
 @dataclass(frozen=True)
