@@ -444,11 +444,13 @@ class SensingProfile:
     def reported_camera(self, camera: StereoCamera) -> StereoCamera:
         """The camera the robot reports: the nominal calibration with its stated accuracy, what a
         calibration report gives (``depth_scale_std`` from the focal length and baseline errors in
-        quadrature, ``pointing_std_deg`` from the pan-tilt's zero offset); not the episode's draw."""
+        quadrature, ``focal_std`` the focal lengths' share, ``pointing_std_deg`` from the pan-tilt's zero
+        offset); not the episode's draw."""
         return dataclasses.replace(
             camera,
             depth_scale_std=math.hypot(self.camera.intrinsics_error, self.camera.baseline_error),
             pointing_std_deg=self.pan_tilt.zero_offset_deg,
+            focal_std=self.camera.intrinsics_error,
         )
 
 
