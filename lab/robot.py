@@ -118,6 +118,11 @@ class StereoCamera:
         it into account (``lab.estimation.CalibrationUncertainty.of_camera``).
     pointing_std_deg : float [deg]
         The same for the camera's orientation on the robot (pan-tilt zero, mount), per axis.
+    focal_std : float
+        The focal lengths' share of ``depth_scale_std``: the relative error of each of ``fx``, ``fy``
+        (0.005 for a checkerboard calibration); the baseline's is the rest,
+        ``sqrt(depth_scale_std**2 - focal_std**2)``. A focal length's error stretches depth and rows
+        against the columns, which one scale cannot say; 0: all of the depth's error is a common scale.
     """
 
     width: int
@@ -131,12 +136,18 @@ class StereoCamera:
     camera_offset_P: tuple[float, float, float] = (0.05, 0.06, 0.0)
     depth_scale_std: float = 0.0
     pointing_std_deg: float = 0.0
+    focal_std: float = 0.0
 
     def __post_init__(self):
-        for name in ("depth_scale_std", "pointing_std_deg"):
+        for name in ("depth_scale_std", "pointing_std_deg", "focal_std"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ConfigError(f"camera {name} must be a finite number >= 0, got {v!r}")
+        if self.focal_std > self.depth_scale_std:
+            raise ConfigError(
+                f"camera focal_std ({self.focal_std}) must be <= depth_scale_std ({self.depth_scale_std}): "
+                "it is the focal lengths' share of the depth's error"
+            )
         if self.width < 16 or self.height < 16:
             raise ConfigError(f"camera size {self.width}x{self.height} px is too small (at least 16x16)")
         if not (self.fx > 0 and self.fy > 0):

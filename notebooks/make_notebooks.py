@@ -1358,8 +1358,8 @@ else:
 robots = {"simulator": sim, "hardware": hw}
 print(f"hardware robot: {hw.state}; PTU limits read from the unit: {hw.pan_tilt_limits}")
 # the rehearsal carries the simulator's calibration (it states a real calibration's accuracy, the ideal
-# simulator none: StereoCamera.depth_scale_std, pointing_std_deg)
-same = dataclasses.replace(hw.camera, depth_scale_std=0.0, pointing_std_deg=0.0) == sim.camera
+# simulator none: StereoCamera.depth_scale_std, pointing_std_deg, focal_std)
+same = dataclasses.replace(hw.camera, depth_scale_std=0.0, pointing_std_deg=0.0, focal_std=0.0) == sim.camera
 assert same or not EMULATED
 """,
     ),

@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2, multivariate_normal
 
+from lab.errors import ConfigError
 from lab.estimation import (
     CalibrationUncertainty,
     EKFBank,
@@ -159,27 +160,40 @@ def test_log_likelihood_is_eq9_against_scipy():
 
 
 def _calibrated_points(h, c):
-    """``(1 + s) Exp(delta) h`` with SciPy's rotation (independent of ``calibration_jacobian``)."""
+    """The points ``h`` (in C) as a stereo pair measures them whose true focal lengths are
+    ``f (1 + a_x)``, ``f (1 + a_y)`` and true baseline ``B / (1 + s)`` while it triangulates with the
+    calibrated ``f``, ``B`` (projected here, triangulated by ``lab.vision.stereo.triangulate``), turned
+    by ``Exp(delta)`` with SciPy's rotation; ``c = [s, delta, a_x, a_y]``. Independent of
+    ``calibration_jacobian``."""
     from scipy.spatial.transform import Rotation
 
-    return (1.0 + c[0]) * Rotation.from_rotvec(c[1:]).apply(h)
+    from lab.vision.stereo import triangulate
+
+    s, delta, a_x, a_y = c[0], c[1:4], c[4], c[5]
+    p = Rotation.from_rotvec(delta).apply(h)
+    fx, fy, B = CAMERA.fx * (1.0 + a_x), CAMERA.fy * (1.0 + a_y), CAMERA.baseline / (1.0 + s)
+    v = fy * p[:, 1] / p[:, 2] + CAMERA.cy
+    uv_left = np.stack([fx * p[:, 0] / p[:, 2] + CAMERA.cx, v], axis=1)
+    uv_right = np.stack([fx * (p[:, 0] - B) / p[:, 2] + CAMERA.cx, v], axis=1)
+    return triangulate(uv_left, uv_right, CAMERA)
 
 
 def test_calibration_update_is_the_dense_update_with_correlated_feature_errors():
     """With a calibration error shared by the frame's features, the update equals the dense textbook
-    one with ``S = C Sigma_bar C^T + U Sigma_c U^T + Sigma_m`` (``U`` by central differences of
-    ``(1 + s) Exp(delta) h`` through SciPy), and its log likelihood is SciPy's on that ``S``."""
+    one with ``S = C Sigma_bar C^T + U Sigma_c U^T + Sigma_m`` (``U`` by central differences of the
+    points a miscalibrated pair triangulates, :func:`_calibrated_points`), and its log likelihood is
+    SciPy's on that ``S``."""
     rng = np.random.default_rng(5)
     b_O, nrm = cube(rng)
     X = np.array([0.05, -0.02, 1.2, 0.4, 0.3, -2.0])
     f = observe(rng, X, b_O, nrm)
     mu_bar = X + rng.normal(0, [0.01, 0.01, 0.02, 0.02, 0.02, 0.02])
     Sigma_bar = np.diag([0.01, 0.01, 0.02, 0.03, 0.03, 0.03]) ** 2
-    cal = CalibrationUncertainty(scale_std=0.007, pointing_std_deg=0.05)
+    cal = CalibrationUncertainty(scale_std=0.005, pointing_std_deg=0.05, focal_std=0.005)
     h = measurement_model(mu_bar, f.b_O)
-    U = np.zeros((h.size, 4))
-    for j in range(4):
-        e = np.zeros(4)
+    U = np.zeros((h.size, 6))
+    for j in range(6):
+        e = np.zeros(6)
         e[j] = 1e-6
         U[:, j] = (_calibrated_points(h, e) - _calibrated_points(h, -e)).reshape(-1) / 2e-6
     C = measurement_jacobian(mu_bar, f.b_O)
@@ -216,9 +230,9 @@ def test_calibration_error_is_considered_not_learned_across_frames():
     rng = np.random.default_rng(11)
     b_O, nrm = cube(rng)
     X = np.array([0.05, -0.02, 1.2, 0.4, 0.3, -2.0])
-    cal = CalibrationUncertainty(scale_std=0.007, pointing_std_deg=0.05)
+    cal = CalibrationUncertainty(scale_std=0.005, pointing_std_deg=0.05, focal_std=0.005)
     mu = X + rng.normal(0, [0.01, 0.01, 0.02, 0.02, 0.02, 0.02])
-    Pa = np.zeros((10, 10))
+    Pa = np.zeros((12, 12))
     Pa[:6, :6] = np.diag([0.01, 0.01, 0.02, 0.03, 0.03, 0.03]) ** 2
     Pa[6:, 6:] = cal.covariance()
     ekf = PoseEKF(EKFConfig(gate=NO_GATE.gate, calibration=cal), rng=rng)
@@ -226,9 +240,9 @@ def test_calibration_error_is_considered_not_learned_across_frames():
     for _ in range(2):
         f = observe(rng, X, b_O, nrm)
         h = measurement_model(mu, f.b_O)
-        U = np.zeros((h.size, 4))
-        for j in range(4):
-            e = np.zeros(4)
+        U = np.zeros((h.size, 6))
+        for j in range(6):
+            e = np.zeros(6)
             e[j] = 1e-6
             U[:, j] = (_calibrated_points(h, e) - _calibrated_points(h, -e)).reshape(-1) / 2e-6
         H = np.hstack([measurement_jacobian(mu, f.b_O), U])
@@ -237,7 +251,7 @@ def test_calibration_error_is_considered_not_learned_across_frames():
         K = np.linalg.solve(S, H @ Pa).T
         K[6:] = 0.0  # consider: c is not updated
         mu = mu + K[:6] @ (f.d_C - h).reshape(-1)
-        I_KH = np.eye(10) - K @ H
+        I_KH = np.eye(12) - K @ H
         Pa = I_KH @ Pa @ I_KH.T + K @ Sm @ K.T
         res = ekf.update(f.d_C, f.b_O, f.Sigma_d)
         assert res.applied, res.reason
@@ -322,7 +336,14 @@ def test_calibration_uncertainty_refuses_bad_values_and_reads_the_camera():
         with pytest.raises(ValueError, match="scale_std must be a finite number >= 0"):
             CalibrationUncertainty(scale_std=bad)
     cam = dataclasses.replace(CAMERA, depth_scale_std=0.007, pointing_std_deg=0.05)
-    assert CalibrationUncertainty.of_camera(cam) == CalibrationUncertainty(0.007, 0.05)
+    assert CalibrationUncertainty.of_camera(cam) == CalibrationUncertainty(0.007, 0.0)  # all a common scale
+    # the focal lengths' share apart, the rest the baseline's; the pan-tilt's zero turns C on the robot,
+    # not the points measured in C: it is not a calibration error of the features
+    cam = dataclasses.replace(cam, depth_scale_std=math.hypot(0.003, 0.004), focal_std=0.004)
+    got = CalibrationUncertainty.of_camera(cam)
+    assert (got.scale_std, got.pointing_std_deg, got.focal_std) == pytest.approx((0.003, 0.0, 0.004))
+    with pytest.raises(ConfigError, match="focal_std .* must be <= depth_scale_std"):
+        dataclasses.replace(cam, focal_std=0.01)
     assert CalibrationUncertainty.of_camera(CAMERA).is_none  # an exact camera: the papers' filter
     rng = np.random.default_rng(3)
     only_scale = PoseEKF(EKFConfig(gate=NO_GATE.gate, calibration=CalibrationUncertainty(0.01, 0.0)), rng=rng)

@@ -104,6 +104,27 @@ def test_frames_follow_the_emulators_true_head_and_base():
         assert _shift_px(f1.left, left) < 0.3 and np.abs(f1.left.astype(int) - left).mean() < 3.0
 
 
+@pytest.mark.parametrize("profile", ["ideal", "realistic"])
+def test_the_rendered_camera_follows_the_sensing_profile_and_the_result_says_so(profile):
+    """Two captures from the same standing pose: identical under ``ideal``; under ``realistic`` they
+    differ by the capture noise (a couple of grey levels, the profile's figure, smoothed a little by the
+    rectification) and the episode's calibration and light move the image off the ideal render."""
+    from lab.runs.robots import make_robot
+
+    with make_robot(REHEARSAL_TOML, true_model=0, seed=5, sensing=profile) as session:
+        a, b = session.robot.capture_stereo(), session.robot.capture_stereo()
+        ideal_left, _ = session.world.render_stereo(session.rehearsal.truth().G_WC, session.robot.camera)
+        assert session.sensing == profile  # the JSON's "sensing"
+        assert session.sensing_applies_to == ["camera"]  # odometry and head are the emulators'
+    diff = a.left.astype(float) - b.left.astype(float)
+    off_ideal = np.abs(a.left.astype(float) - ideal_left).mean()
+    if profile == "ideal":
+        assert not diff.any() and off_ideal < 1.0
+    else:
+        assert 0.8 < diff.std() / math.sqrt(2) < 3.0  # each capture's own noise
+        assert off_ideal > 2.0
+
+
 def test_raw_pair_of_a_real_calibration_is_rectified_to_the_simulators_view(tmp_path):
     """A calibration with unequal intrinsics and a rotated, offset right camera: the source renders the raw
     pinhole pair, the adapter rectifies it, and the result is the ideal rectified pair at the true pose."""

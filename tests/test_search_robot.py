@@ -123,7 +123,8 @@ def test_rehearsed_search_finds_the_object_through_ptu_garbage_and_a_short_strea
     assert res.found and res.success, res.reason
     assert res.position_error_m <= 0.05 and res.orientation_error_deg <= 10.0
     assert problems("search", d) == []  # lab/schemas/search.schema.json
-    assert d["sensing"] == "rehearsal" and d["robot"] == str(REHEARSAL_TOML)
+    assert d["sensing"] == "realistic" and d["robot"] == str(REHEARSAL_TOML)  # run_search's default
+    assert d["sensing_applies_to"] == ["camera"]  # the rendered camera; odometry and head: the emulators
     # the truth is the rendered world's: the object where --place put it (the --truth conversion agrees)
     G_true = measured_pose(load_scene("lab_room"), "cereal_box", NEAR)
     assert np.allclose(d["true_pose"]["position_m"], G_true[:3, 3], atol=1e-4)

@@ -28,7 +28,8 @@ def _sensing_argument(p: argparse.ArgumentParser) -> None:
         help="the simulator's sensor errors (default: realistic: camera noise, calibration error, odometry "
         "drift, pan-tilt backlash; ideal: exact sensors, for teaching the mathematics; FILE.toml: a "
         '[sensing] table, profile = "realistic" plus [sensing.camera], [sensing.odometry], '
-        "[sensing.pan_tilt] fields to change)",
+        "[sensing.pan_tilt] fields to change); with --robot on a rehearsal config, its rendered camera "
+        "follows the camera section (odometry and pan-tilt are the emulators')",
     )
 
 

@@ -142,7 +142,8 @@ def run_identify(
         One line per decision (the robot's console).
     sensing : str or mapping
         The simulator's sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic,
-        or ideal), recorded as the JSON's ``sensing``.
+        or ideal), recorded as the JSON's ``sensing``; a rehearsal's rendered camera follows its camera
+        section (the JSON's ``sensing_applies_to`` says which sections applied).
     localization : {"landmarks", "odometry"}
         Where the robot's pose comes from (:class:`lab.navigation.localization.LocalizedRobot`); the
         landmark map on a robot is its config's ``[room] landmarks``, a rehearsal's by default the posters
@@ -318,7 +319,8 @@ def _start(stack: contextlib.ExitStack, robot_config, true_model, mover, seed, s
     """The robot of the episode, with the box in front of it (in the simulator: the arena, the box on
     a carrier 1.2 m ahead, its unique face (+X) pointing away so that the robot sees shared faces first)."""
     if robot_config is not None:
-        return stack.enter_context(make_robot(robot_config, true_model=true_model, mover=mover, seed=seed))
+        rc = make_robot(robot_config, true_model=true_model, mover=mover, seed=seed, sensing=sensing)
+        return stack.enter_context(rc)
     from lab.sim import SimWorld, load_box_models
     from lab.sim.movers import make_mover
 
@@ -419,6 +421,7 @@ def _episode_json(agent, session, true_model, identified, planner, seed, mover, 
         "planner": planner,
         "seed": seed,
         "sensing": session.sensing,
+        "sensing_applies_to": session.sensing_applies_to,
         "mover": mover if has_truth else None,
         "keep_direction": agent.config.keep_direction,
         "decisions": [d.to_json(t0) for d in agent.decisions],

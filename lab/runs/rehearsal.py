@@ -36,6 +36,16 @@ only sample it. Consequences worth knowing:
 * between two frames the evasive mover sees the observing robot where it was at the later frame (the
   world is only stepped when a frame is rendered).
 
+**Sensing.** The rendered camera follows a sensing profile's camera section (``sensing``, as the
+simulator's :class:`~lab.sim.SimRobot`; ``ideal`` by default, ``realistic`` under ``lab identify`` and
+``lab search``): per episode, seeded by the run's seed, the raw cameras are rendered with perturbed focal
+lengths and baseline and a tilted light while the adapter keeps rectifying with the nominal calibration,
+and each raw pair gets the exposure, vertical residual, blur, left/right mismatch and pixel noise of
+:func:`lab.sim.sensing.corrupt_stereo` (before rectification, as on a real sensor). The profile's
+odometry and pan-tilt sections do not apply: the base's encoders and the head's axes are the emulators'
+(their own step quantisation and timing; no wheel-radius, track or slip errors, no backlash or zero
+offset).
+
 Ground truth (:meth:`Rehearsal.truth`) is for tests and scoring only, as ``SimWorld.truth`` is.
 """
 
@@ -123,6 +133,12 @@ class SimRenderedStereoSource(StereoSource):
     robot_start : Pose2D, optional
         Where the base stands in the world when the emulator's pose is (0, 0, 0) (default: the config's
         ``[sim] robot_start``; a search rehearsal gives its scene's start).
+    sensing : SensingProfile, str or mapping
+        The profile whose camera section the rendered pairs follow (:func:`lab.sim.sensing.sensing_profile`;
+        its odometry and pan-tilt sections are the emulators' business and ignored; see the module
+        docstring). Default ``ideal``: exact renders.
+    seed : int
+        Seeds the profile's per-episode draws and the capture noise (the same seed, the same images).
     """
 
     def __init__(
@@ -136,6 +152,8 @@ class SimRenderedStereoSource(StereoSource):
         clock: Callable[[], float] = time.monotonic,
         dt_world: float = 0.02,
         robot_start: Pose2D | None = None,
+        sensing="ideal",
+        seed: int = 0,
     ):
         if np.any(np.asarray(calibration.D1) != 0) or np.any(np.asarray(calibration.D2) != 0):
             raise ConfigError(
@@ -150,10 +168,22 @@ class SimRenderedStereoSource(StereoSource):
         self.image_size = tuple(calibration.image_size)
         #: the rectified camera, as the adapter builds it: its frame C is the robot's camera frame
         self.camera: StereoCamera = calibration.camera_model(c.mount_R, c.camera_offset_P)
-        self._raw = [self._pinhole(calibration.K1), self._pinhole(calibration.K2)]
+        from lab.sim.sensing import EpisodeSensing, sensing_profile  # a rendered camera needs the simulator
+
+        self.sensing = sensing_profile(sensing)  # SensingProfile
+        self._episode = None  # the camera errors' draws and capture noise (None: exact renders)
+        focal, baseline = 1.0, 1.0
+        if not self.sensing.camera.is_none:
+            self._episode = EpisodeSensing(self.sensing, seed, self.camera, world.settings.light_direction)
+            drawn = self._episode.camera.render_camera  # the rectified camera with this episode's errors
+            focal = (drawn.fx / self.camera.fx, drawn.fy / self.camera.fy)
+            baseline = drawn.baseline / self.camera.baseline
+        # the raw cameras as they are (their focal lengths off by the draw's), not as calibrated
+        self._raw = [self._pinhole(calibration.K1, focal), self._pinhole(calibration.K2, focal)]
         # rectified left C -> raw left L: x_C = R1 x_L, so G_CL = se3(R1); raw right: x_R = R x_L + T
         self._G_CL = se3(np.asarray(calibration.R1))
-        self._G_LR = se3_inv(se3(np.asarray(calibration.R), np.asarray(calibration.T).reshape(3)))
+        T = baseline * np.asarray(calibration.T, float).reshape(3)  # the true baseline, off by the draw's
+        self._G_LR = se3_inv(se3(np.asarray(calibration.R), T))
         self.robot_start = _pose_from(config.sim.robot_start) if robot_start is None else robot_start
         p = config.ptu
         self._sign = {"P": p.pan_sign, "T": p.tilt_sign}
@@ -162,10 +192,13 @@ class SimRenderedStereoSource(StereoSource):
         self.last_truth: RehearsalTruth | None = None
         self.frames = 0
 
-    def _pinhole(self, K) -> StereoCamera:
+    def _pinhole(self, K, focal=1.0) -> StereoCamera:
+        """The raw camera of ``K``, its focal lengths times ``focal`` (a factor, or one per axis)."""
         w, h = self.image_size
         K = np.asarray(K)
-        return StereoCamera(w, h, float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), 1.0)
+        sx, sy = np.broadcast_to(np.asarray(focal, float), (2,))
+        fx, fy = float(K[0, 0]) * sx, float(K[1, 1]) * sy
+        return StereoCamera(w, h, float(fx), float(fy), float(K[0, 2]), float(K[1, 2]), 1.0)
 
     # --- the emulators' truth ----------------------------------------------------------------------
     def base_pose_W(self) -> Pose2D:
@@ -207,8 +240,11 @@ class SimRenderedStereoSource(StereoSource):
         self.advance_world(t)
         G_WC = base_W.G() @ self.camera.G_RC(pan, tilt)
         G_WL = G_WC @ self._G_CL
-        left, _, _ = self.world.render(G_WL, self._raw[0])
-        right, _, _ = self.world.render(G_WL @ self._G_LR, self._raw[1])
+        light = None if self._episode is None else self._episode.camera.light_direction
+        left, _, _ = self.world.render(G_WL, self._raw[0], light_direction=light)
+        right, _, _ = self.world.render(G_WL @ self._G_LR, self._raw[1], light_direction=light)
+        if self._episode is not None:  # the sensor's errors on the raw pair, before the rectification
+            left, right = self._episode.corrupt(left, right)
         carrier = next(iter(self.world.carriers.values()), None)
         self.last_truth = RehearsalTruth(
             t, base_W, pan, tilt, G_WC, None if carrier is None else carrier.G_WO.copy()
@@ -254,7 +290,7 @@ class Rehearsal:
         return None if self.source is None else self.source.last_truth
 
 
-def _scene_world(scene, emu: EmulatorSet, cfg: HardwareConfig, calib: StereoCalibration):
+def _scene_world(scene, emu: EmulatorSet, cfg: HardwareConfig, calib: StereoCalibration, sensing, seed: int):
     """The world of ``scene`` and the camera that renders it, the robot standing as the scene's robot
     (its start; its mast height as the camera's ``mount_R`` z): the world, the source and the config."""
     import dataclasses
@@ -270,7 +306,14 @@ def _scene_world(scene, emu: EmulatorSet, cfg: HardwareConfig, calib: StereoCali
     world = SimWorld(sc, RenderSettings(supersample=cfg.sim.supersample))
     try:
         source = SimRenderedStereoSource(
-            world, emu.create, emu.ptu, cfg, calib, robot_start=_pose_from(sc.robot_start)
+            world,
+            emu.create,
+            emu.ptu,
+            cfg,
+            calib,
+            robot_start=_pose_from(sc.robot_start),
+            sensing=sensing,
+            seed=seed,
         )
     except BaseException:
         world.close()
@@ -290,6 +333,7 @@ def rehearsal(
     on_event=None,
     scene=None,
     emulator_setup: Callable[[EmulatorSet], None] | None = None,
+    sensing="ideal",
 ) -> Iterator[Rehearsal]:
     """Start the emulators (and, for ``[camera] source = "sim"``, the rendered world) and a
     :class:`~lab.hardware.robot.HardwareRobot` on them; stop everything on exit.
@@ -303,7 +347,8 @@ def rehearsal(
     mover : str
         What moves the carrier: static, scripted, random, evasive (the paper's operator) or teleop.
     seed : int
-        Seeds the box's yaw on the carrier (uniform in +-0.3 rad, as ``lab identify``) and the mover.
+        Seeds the box's yaw on the carrier (uniform in +-0.3 rad, as ``lab identify``), the mover and
+        the rendered camera's errors.
     box_yaw : float [rad], optional
         The box's yaw on the carrier instead of the seeded one.
     link_dir : path, optional
@@ -317,6 +362,9 @@ def rehearsal(
     emulator_setup : callable, optional
         ``emulator_setup(emulators)`` once the emulators run, before the robot connects: inject faults
         (``emulators.ptu.garbage_every = 3``, ``emulators.create.known_packets = {...}``).
+    sensing : SensingProfile, str or mapping
+        The profile whose camera section the rendered camera follows (``[camera] source = "sim"`` only;
+        :class:`SimRenderedStereoSource`). Default ``ideal``: exact renders.
     """
     from lab.hardware.robot import HardwareRobot
 
@@ -333,7 +381,7 @@ def rehearsal(
             emulator_setup(emu)
         cfg = cfg.with_ports(base=emu.base_port, ptu=emu.ptu_port)
         if c.source == "sim" and scene is not None:
-            world, source, cfg = _scene_world(scene, emu, cfg, calib)
+            world, source, cfg = _scene_world(scene, emu, cfg, calib, sensing, seed)
         elif c.source == "sim":
             from lab.sim import SimWorld, box_model
             from lab.sim.movers import make_mover
@@ -344,7 +392,9 @@ def rehearsal(
             yaw = float(rng.uniform(-0.3, 0.3)) if box_yaw is None else float(box_yaw)
             world = SimWorld(cfg.sim.world, RenderSettings(supersample=cfg.sim.supersample))
             carrier = world.add_carrier(model, _pose_from(cfg.sim.carrier_start), box_yaw=yaw)
-            source = SimRenderedStereoSource(world, emu.create, emu.ptu, cfg, calib)
+            source = SimRenderedStereoSource(
+                world, emu.create, emu.ptu, cfg, calib, sensing=sensing, seed=seed
+            )
             carrier.mover = make_mover(mover, carrier, observer_pose=source.base_pose_W, seed=seed)
         robot = HardwareRobot(cfg, camera_source=source, on_event=on_event)
         yield Rehearsal(robot, emu, cfg, world, carrier, true_model if carrier is not None else None, source)

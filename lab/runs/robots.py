@@ -69,10 +69,26 @@ class RobotSession:
     rehearsal: object = None
 
     @property
+    def _rendered(self):
+        """A rehearsal's rendered camera (None: the simulator, the real robot, an emulated pair)."""
+        return None if self.rehearsal is None else self.rehearsal.source
+
+    @property
     def sensing(self) -> str:
-        """The ``sensing`` field of a result: the simulator's profile, or the robot kind's name (a
-        rehearsal's and a real robot's errors are their devices')."""
-        return self.robot.sensing.name if self.kind is RobotKind.SIM else self.kind.value
+        """The ``sensing`` field of a result: the profile of the simulator or of a rehearsal's rendered
+        camera, else the robot kind's name (a real robot's errors are its devices')."""
+        if self.kind is RobotKind.SIM:
+            return self.robot.sensing.name
+        return self._rendered.sensing.name if self._rendered is not None else self.kind.value
+
+    @property
+    def sensing_applies_to(self) -> list[str]:
+        """The ``sensing_applies_to`` field: which of the profile's sections the run's sensors follow
+        (all three in the simulator; a rehearsal's camera only, its odometry and head are the
+        emulators'; none on the real robot)."""
+        if self.kind is RobotKind.SIM:
+            return ["camera", "odometry", "pan_tilt"]
+        return ["camera"] if self._rendered is not None else []
 
     @property
     def name(self) -> str:
@@ -126,8 +142,9 @@ def make_robot(
     true_model, mover :
         A rehearsal's box (index into the box models) and what moves its carrier.
     sensing : str or mapping
-        The simulated robot's sensing profile (:func:`lab.sim.sensing.sensing_profile`); devices and a
-        rehearsal's emulators have their own errors.
+        The sensing profile (:func:`lab.sim.sensing.sensing_profile`) of the simulated robot, or of a
+        rehearsal's rendered camera (its camera section only: the emulators have their own odometry and
+        head); the real devices have their own errors.
     scene, emulator_setup :
         A rehearsal's scene instead of its config's ``[sim]`` world and carrier (the search's room), and
         a hook that injects faults into its emulators before the robot connects
@@ -150,7 +167,7 @@ def make_robot(
     if cfg.camera.source == "sim":
         from lab.runs.rehearsal import rehearsal
 
-        kw = {"scene": scene, "emulator_setup": emulator_setup}
+        kw = {"scene": scene, "emulator_setup": emulator_setup, "sensing": sensing}
         with rehearsal(cfg, true_model=true_model, mover=mover, seed=seed, **kw) as r:
             yield RobotSession(RobotKind.REHEARSAL, r.robot, r.world, r.carrier, r.config, r)
         return

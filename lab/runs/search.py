@@ -223,7 +223,11 @@ class SearchResult:
     recording : str or None
         The animation written (``record``): one frame per event.
     sensing : str
-        The simulator's sensing profile the trial ran under; ``rehearsal`` or ``hardware`` on a robot.
+        The sensing profile the trial ran under (the simulator's, or a rehearsal's rendered camera's);
+        ``hardware`` on the real robot.
+    sensing_applies_to : tuple of str
+        The profile's sections the sensors followed: camera, odometry and pan_tilt in the simulator,
+        camera in a rehearsal (the emulators have their own odometry and head), none on the robot.
     robot : str
         ``sim``, or the robot config's path.
     watchdog_stops : int or None
@@ -262,6 +266,7 @@ class SearchResult:
     trace: SearchTrace | None = field(default=None, repr=False, compare=False)
     recording: str | None = None
     sensing: str = "ideal"
+    sensing_applies_to: tuple[str, ...] = ("camera", "odometry", "pan_tilt")
     robot: str = "sim"
     watchdog_stops: int | None = None
     t0: float = 0.0
@@ -304,6 +309,7 @@ class SearchResult:
             "events": [{**e.as_dict(), "t": round(e.t - t0, 3)} for e in self.events],
             "recording": self.recording,
             "sensing": self.sensing,
+            "sensing_applies_to": list(self.sensing_applies_to),
             "robot": self.robot,
             "watchdog_stops": self.watchdog_stops,
             "map_snapshots": [
@@ -438,7 +444,7 @@ def run_search(
         hook = _with_progress(attach, t0) if progress else attach
         parts = (db, navigate, spec, cfg, seed, recorder, hook, (max_time, max_wall_time))
         out, truth_end, budget, odom, track = _search(robot, truth_of, *parts)
-        profile = run.sensing
+        profile, applies = run.sensing, tuple(run.sensing_applies_to)
         estimate = robot.pose_estimate()
         watchdog = None if kind is RobotKind.SIM else int(run.robot.watchdog_stops)
     if note is None and mode is LocalizationMode.LANDMARKS and estimate.n_updates == 0:
@@ -468,6 +474,7 @@ def run_search(
         trace=SearchTrace(out, spec, np.array(budget.trajectory), scene, db, track),
         recording=None if recorder is None or (p := recorder.close()) is None else str(p),
         sensing=profile,
+        sensing_applies_to=applies,
         robot=run.name,
         watchdog_stops=watchdog,
         t0=t0,
@@ -493,7 +500,8 @@ def _session(stack, kind, robot_config, scene, object, seed, sensing, supersampl
         run = stack.enter_context(make_robot(world=w, seed=seed, sensing=sensing))
         t = w.truth
         return run, _TruthOf(lambda: t.G_W(object), t.G_WC, t.robot_pose, lambda: int(t.collisions))
-    run = stack.enter_context(make_robot(robot_config, seed=seed, scene=scene, emulator_setup=emulator_setup))
+    robot = make_robot(robot_config, seed=seed, scene=scene, emulator_setup=emulator_setup, sensing=sensing)
+    run = stack.enter_context(robot)
     bumps = lambda: int(run.robot.bumps)  # noqa: E731 - the bumpers' count: a robot's own collisions
     if kind is RobotKind.REHEARSAL:
         r = run.rehearsal

@@ -444,11 +444,13 @@ class SensingProfile:
     def reported_camera(self, camera: StereoCamera) -> StereoCamera:
         """The camera the robot reports: the nominal calibration with its stated accuracy, what a
         calibration report gives (``depth_scale_std`` from the focal length and baseline errors in
-        quadrature, ``pointing_std_deg`` from the pan-tilt's zero offset); not the episode's draw."""
+        quadrature, ``focal_std`` the focal lengths' share, ``pointing_std_deg`` from the pan-tilt's zero
+        offset); not the episode's draw."""
         return dataclasses.replace(
             camera,
             depth_scale_std=math.hypot(self.camera.intrinsics_error, self.camera.baseline_error),
             pointing_std_deg=self.pan_tilt.zero_offset_deg,
+            focal_std=self.camera.intrinsics_error,
         )
 
 
@@ -567,7 +569,12 @@ class EpisodeSensing:
         """The pair the camera delivers: rendered with this episode's calibration and light, corrupted."""
         d = self.camera
         left, right = world.render_stereo(G_WC, d.render_camera, light_direction=d.light_direction)
-        return corrupt_stereo(left, right, self.profile.camera, d, self._image_rng)
+        return self.corrupt(left, right)
+
+    def corrupt(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A rendered pair as this episode's camera delivers it (:func:`corrupt_stereo` with this
+        episode's draw and capture noise); a rehearsal renders its raw pair itself and corrupts it here."""
+        return corrupt_stereo(left, right, self.profile.camera, self.camera, self._image_rng)
 
     def odometry_increment(self, ds: float, dth: float, wheel_base: float) -> tuple[float, float]:
         z_left, z_right = self._odometry_rng.standard_normal(2)

@@ -86,12 +86,13 @@ class StereoCalibration:
         camera_offset_P=(0.05, 0.06, 0.0),
         depth_scale_std: float = 0.007,
         pointing_std_deg: float = 0.05,
+        focal_std: float = 0.005,
     ) -> StereoCamera:
         """The :class:`lab.robot.StereoCamera` of the *rectified* images.
 
-        ``depth_scale_std`` and ``pointing_std_deg``: how well a checkerboard calibration and a homed
-        pan-tilt know the camera (0.5 % on the focal length and the baseline each, one PTU step); the
-        pose filters use them (:attr:`lab.robot.StereoCamera.depth_scale_std`)."""
+        ``depth_scale_std``, ``pointing_std_deg`` and ``focal_std``: how well a checkerboard calibration
+        and a homed pan-tilt know the camera (0.5 % on the focal length and the baseline each, one PTU
+        step); the pose filters use them (:attr:`lab.robot.StereoCamera.depth_scale_std`)."""
         w, h = self.image_size
         P = self.P1
         return StereoCamera(
@@ -106,6 +107,7 @@ class StereoCalibration:
             tuple(float(v) for v in camera_offset_P),
             float(depth_scale_std),
             float(pointing_std_deg),
+            float(focal_std),
         )
 
     def save(self, path: str | Path) -> None:
