@@ -227,10 +227,11 @@ class IdentificationAgent:
     # --- where to look ----------------------------------------------------------------------------
     def region_of_interest(self, predicted, camera) -> RegionOfInterest | None:
         """The region of the left image to extract while tracking: the box (the largest database
-        extent) at every filter's predicted pose and each of its look-alike turns, grown by
-        ``roi_n_sigma`` standard deviations (:func:`~lab.vision.roi.tracked_roi`). None (the full
-        frame) with ``roi`` off, when the track is lost, no filter has a pose, or the region would
-        cover more than ``roi_max_fraction`` of the image."""
+        extent) at every filter's predicted pose and each of its look-alike turns, each corner widened
+        by ``roi_n_sigma`` standard deviations of its pixel position (:func:`~lab.vision.roi.tracked_roi`).
+
+        None (the full frame) with ``roi`` off, when the track is lost, no filter has a pose, or the
+        region would cover more than ``roi_max_fraction`` of the image."""
         cfg = self.config
         if not cfg.roi or self._lost:
             return None

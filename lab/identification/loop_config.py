@@ -77,7 +77,8 @@ class AgentConfig:
         turn (:func:`~lab.vision.roi.tracked_roi`), and in the right image only in the band that can
         hold its features' partners; the full frame otherwise. False: always the full frame.
     roi_n_sigma : float
-        The boxes are grown by this many standard deviations of the predicted pose ...
+        Each box corner is widened by this many standard deviations of its pixel position and depth
+        under the predicted pose's covariance ...
     roi_margin_px : float [px]
         ... and the region by this margin.
     roi_max_fraction : float

@@ -6,15 +6,17 @@ bounding box projected into the left image at the predicted pose ``G_CO``:
 
 * :func:`object_roi`: the box at one pose, grown by a fixed margin in pixels (the search's refinement);
 * :func:`tracked_roi`: the union over several poses (a filter bank's predictions and their look-alike
-  turns), each box first grown in 3D by ``n_sigma`` standard deviations of its pose,
+  turns), each corner ``p = R b + t`` of each box widened by ``n_sigma`` standard deviations of its
+  pixel position and depth. Under the pose covariance ``Sigma_rv`` over ``[x, phi]`` (the
+  rotation-vector chart) a corner's covariance in C is the scoring's ``C Sigma_rv C^T`` with
+  ``C = [I, -[R b]_x]``, and its pixel covariance follows through the projection's Jacobian,
 
-  .. math:: \delta = n_\sigma \left(\sigma_x + r\,\sigma_\phi\right),
+  .. math:: \Sigma_{uv} = J \, C \Sigma_{rv} C^T J^T, \qquad
+            J = \begin{bmatrix} f_x / Z & 0 & -f_x X / Z^2 \\ 0 & f_y / Z & -f_y Y / Z^2 \end{bmatrix}.
 
-  with ``sigma_x`` the largest position standard deviation [m] and ``sigma_phi`` the largest rotation
-  standard deviation [rad] of ``Sigma_rv`` (the rotation-vector chart), ``r`` the box's half diagonal:
-  a corner moves at most ``sigma_x + r sigma_phi`` per standard deviation. The grown corners' depths
-  give the disparities ``d = f_x B / Z`` the region's features can have, which bound the band of the
-  right image that can hold their partners (:meth:`RegionOfInterest.right_band`).
+  The corners' depths ``Z -+ n_sigma sigma_Z`` give the disparities ``d = f_x B / Z`` the region's
+  features can have, which bound the band of the right image that can hold their partners
+  (:meth:`RegionOfInterest.right_band`).
 
 A region that would cover most of the image (``max_fraction``) is no region: the caller extracts the
 full frame, as it does when the track is lost.
@@ -129,17 +131,31 @@ def _rect(uv: np.ndarray, camera: StereoCamera, margin_px: float) -> tuple[int, 
     return x0, y0, x1 - x0, y1 - y0
 
 
-def _grown_corners(G_CO: np.ndarray, Sigma_rv, extent, n_sigma: float) -> np.ndarray:
-    """The box's corners in C (8, 3) [m], the box grown by ``delta = n_sigma (sigma_x + r sigma_phi)``
-    each side (module docstring); ``Sigma_rv`` None grows nothing."""
-    extent = np.asarray(extent, dtype=float)
-    delta = 0.0
-    if Sigma_rv is not None:
-        S = np.asarray(Sigma_rv, dtype=float)
-        sigma_x = np.sqrt(max(0.0, float(np.linalg.eigvalsh(S[:3, :3])[-1])))
-        sigma_phi = np.sqrt(max(0.0, float(np.linalg.eigvalsh(S[3:6, 3:6])[-1])))
-        delta = n_sigma * (sigma_x + 0.5 * float(np.linalg.norm(extent)) * sigma_phi)
-    return transform_points(G_CO, box_corners(extent + 2.0 * delta))
+def _corner_spread(G_CO: np.ndarray, Sigma_rv, extent, camera: StereoCamera):
+    """The box's corners projected at ``G_CO``: pixels ``uv`` (8, 2) [px], depths ``Z`` (8,) [m], and the
+    standard deviations of ``u``, ``v`` (8, 2) [px] and of ``Z`` (8,) [m] that ``Sigma_rv`` gives them
+    (module docstring; zeros when ``Sigma_rv`` is None)."""
+    R, t = G_CO[:3, :3], G_CO[:3, 3]
+    q = box_corners(extent) @ R.T  # R b, (8, 3)
+    p = q + t
+    X, Y, Z = p[:, 0], p[:, 1], p[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = np.stack([camera.fx * X / Z + camera.cx, camera.fy * Y / Z + camera.cy], axis=1)
+    if Sigma_rv is None:
+        return uv, Z, np.zeros((8, 2)), np.zeros(8)
+    C = np.zeros((8, 3, 6))  # d p / d [x, phi] = [I, -[q]_x]
+    C[:, :, :3] = np.eye(3)
+    C[:, 0, 4], C[:, 0, 5] = q[:, 2], -q[:, 1]
+    C[:, 1, 3], C[:, 1, 5] = -q[:, 2], q[:, 0]
+    C[:, 2, 3], C[:, 2, 4] = q[:, 1], -q[:, 0]
+    S_p = C @ np.asarray(Sigma_rv, dtype=float) @ np.swapaxes(C, 1, 2)  # (8, 3, 3)
+    J = np.zeros((8, 2, 3))  # d (u, v) / d p
+    with np.errstate(divide="ignore", invalid="ignore"):
+        J[:, 0, 0], J[:, 0, 2] = camera.fx / Z, -camera.fx * X / Z**2
+        J[:, 1, 1], J[:, 1, 2] = camera.fy / Z, -camera.fy * Y / Z**2
+    S_uv = J @ S_p @ np.swapaxes(J, 1, 2)
+    sd_uv = np.sqrt(np.maximum(np.stack([S_uv[:, 0, 0], S_uv[:, 1, 1]], axis=1), 0.0))
+    return uv, Z, sd_uv, np.sqrt(np.maximum(S_p[:, 2, 2], 0.0))
 
 
 def tracked_roi(
@@ -159,9 +175,10 @@ def tracked_roi(
     ----------
     poses : sequence of (ndarray (4, 4), ndarray (6, 6) or None)
         ``(G_CO, Sigma_rv)``: the object in the camera frame C and the covariance of ``[x, phi]``
-        [m, rad] (the rotation-vector chart); each box is grown by ``n_sigma`` standard deviations
-        (module docstring). A pose whose grown box lies (partly) behind the camera makes the region
-        unknown (None); one whose box falls wholly outside the image adds nothing.
+        [m, rad] (the rotation-vector chart); each corner is widened by ``n_sigma`` standard deviations
+        of its pixel position and depth (module docstring). A pose that can put a corner behind the
+        camera makes the region unknown (None); one whose box falls wholly outside the image adds
+        nothing.
     extent : array_like, shape (3,) [m]
         The box's size along O's axes.
     camera : StereoCamera
@@ -170,11 +187,11 @@ def tracked_roi(
     margin_px : float [px]
         Added around the projected boxes (a keypoint's support reaches beyond its centre).
     n_sigma : float
-        Standard deviations the boxes are grown by.
+        Standard deviations the corners are widened by.
     max_fraction : float
         A region larger than this fraction of the image is no region (None: the full frame).
     disparity_margin_px : float [px]
-        Added to each end of the boxes' disparity range (the disparity's own noise).
+        Added to each end of the corners' disparity range (the disparity's own noise).
 
     Returns
     -------
@@ -184,25 +201,27 @@ def tracked_roi(
     """
     if not 0 < max_fraction <= 1:
         raise ConfigError(f"max_fraction must be within (0, 1], got {max_fraction}")
-    uv, depth = [], []
+    lo, hi, z_near, z_far = [], [], [], []
     for G_CO, Sigma_rv in poses:
-        p = _grown_corners(G_CO, Sigma_rv, extent, n_sigma)
-        if np.any(p[:, 2] <= _MIN_DEPTH_M):
+        uv, Z, sd_uv, sd_Z = _corner_spread(np.asarray(G_CO, dtype=float), Sigma_rv, extent, camera)
+        z0 = Z - n_sigma * sd_Z
+        if np.any(z0 <= _MIN_DEPTH_M):
             return None
-        q = camera.project(p)
-        if _rect(q, camera, margin_px) is None:  # wholly outside the image
+        a, b = uv - n_sigma * sd_uv, uv + n_sigma * sd_uv
+        if _rect(np.concatenate([a, b]), camera, margin_px) is None:  # wholly outside the image
             continue
-        uv.append(q)
-        depth.append(p[:, 2])
-    if not uv:
+        lo.append(a)
+        hi.append(b)
+        z_near.append(z0)
+        z_far.append(Z + n_sigma * sd_Z)
+    if not lo:
         return None
-    rect = _rect(np.concatenate(uv), camera, margin_px)
+    rect = _rect(np.concatenate(lo + hi), camera, margin_px)
     if rect is None or rect[2] * rect[3] > max_fraction * camera.width * camera.height:
         return None
-    z = np.concatenate(depth)
     fB = camera.fx * camera.baseline
-    d_lo = max(min_disparity, fB / z.max() - disparity_margin_px)
-    d_hi = min(max_disparity, fB / z.min() + disparity_margin_px)
+    d_lo = max(min_disparity, fB / np.concatenate(z_far).max() - disparity_margin_px)
+    d_hi = min(max_disparity, fB / np.concatenate(z_near).min() + disparity_margin_px)
     if d_lo > d_hi:  # the boxes lie outside the stereo range: their features cannot be matched
         return None
     return RegionOfInterest(*rect, d_lo, d_hi)
