@@ -89,7 +89,7 @@ from lab.identification.scoring import ModelScorer, ScoringConfig
 from lab.identification.step import observe_frame
 from lab.navigation.follower import PathFollower
 from lab.robot import Robot, frame_motion
-from lab.vision import FeatureDatabase, Matcher, StereoParams, stereo_features
+from lab.vision import FeatureDatabase, JointIndex, Matcher, StereoParams, stereo_features
 from lab.vision.roi import RegionOfInterest, tracked_roi
 
 __all__ = ["PlannerChoice", "AgentConfig", "StepRecord", "DecisionRecord", "IdentificationAgent"]
@@ -172,7 +172,9 @@ class IdentificationAgent:
         self.scoring = (scoring or ScoringConfig()).for_camera(robot.camera)  # clutter density: this camera's
         self.action_config = action_config or ActionConfig()
         self.rng = np.random.default_rng(seed)
-        self.scorers = [ModelScorer(db, self.scoring) for db in self.dbs]
+        # one exact search of every model's database a frame (the shared faces' features stored once)
+        self.index = JointIndex(self.dbs, self.scoring.k_neighbours)
+        self.scorers = [ModelScorer(db, self.scoring, self.index, i) for i, db in enumerate(self.dbs)]
         # the EKF's correspondences from the scorers' exact search, made once per frame and model
         # (observe_frame): exact, and faster than a FLANN search of a few hundred features
         self.matchers = [
