@@ -131,31 +131,29 @@ def _rect(uv: np.ndarray, camera: StereoCamera, margin_px: float) -> tuple[int, 
     return x0, y0, x1 - x0, y1 - y0
 
 
-def _corner_spread(G_CO: np.ndarray, Sigma_rv, extent, camera: StereoCamera):
-    """The box's corners projected at ``G_CO``: pixels ``uv`` (8, 2) [px], depths ``Z`` (8,) [m], and the
-    standard deviations of ``u``, ``v`` (8, 2) [px] and of ``Z`` (8,) [m] that ``Sigma_rv`` gives them
-    (module docstring; zeros when ``Sigma_rv`` is None)."""
-    R, t = G_CO[:3, :3], G_CO[:3, 3]
-    q = box_corners(extent) @ R.T  # R b, (8, 3)
-    p = q + t
-    X, Y, Z = p[:, 0], p[:, 1], p[:, 2]
+def _corner_spread(G_CO: np.ndarray, Sigma_rv: np.ndarray, extent, camera: StereoCamera):
+    """The box's corners projected at each of P poses ``G_CO`` (P, 4, 4): pixels ``uv`` (P, 8, 2) [px],
+    depths ``Z`` (P, 8) [m], and the standard deviations of ``u``, ``v`` (P, 8, 2) [px] and of ``Z``
+    (P, 8) [m] that the covariances ``Sigma_rv`` (P, 6, 6) give them (module docstring)."""
+    R, t = G_CO[:, :3, :3], G_CO[:, :3, 3]
+    q = box_corners(extent)[None] @ np.swapaxes(R, 1, 2)  # R b, (P, 8, 3)
+    p = q + t[:, None, :]
+    X, Y, Z = p[..., 0], p[..., 1], p[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        uv = np.stack([camera.fx * X / Z + camera.cx, camera.fy * Y / Z + camera.cy], axis=1)
-    if Sigma_rv is None:
-        return uv, Z, np.zeros((8, 2)), np.zeros(8)
-    C = np.zeros((8, 3, 6))  # d p / d [x, phi] = [I, -[q]_x]
-    C[:, :, :3] = np.eye(3)
-    C[:, 0, 4], C[:, 0, 5] = q[:, 2], -q[:, 1]
-    C[:, 1, 3], C[:, 1, 5] = -q[:, 2], q[:, 0]
-    C[:, 2, 3], C[:, 2, 4] = q[:, 1], -q[:, 0]
-    S_p = C @ np.asarray(Sigma_rv, dtype=float) @ np.swapaxes(C, 1, 2)  # (8, 3, 3)
-    J = np.zeros((8, 2, 3))  # d (u, v) / d p
+        uv = np.stack([camera.fx * X / Z + camera.cx, camera.fy * Y / Z + camera.cy], axis=-1)
+    C = np.zeros(q.shape[:2] + (3, 6))  # d p / d [x, phi] = [I, -[q]_x]
+    C[..., :, :3] = np.eye(3)
+    C[..., 0, 4], C[..., 0, 5] = q[..., 2], -q[..., 1]
+    C[..., 1, 3], C[..., 1, 5] = -q[..., 2], q[..., 0]
+    C[..., 2, 3], C[..., 2, 4] = q[..., 1], -q[..., 0]
+    S_p = C @ Sigma_rv[:, None] @ np.swapaxes(C, -1, -2)  # (P, 8, 3, 3)
+    J = np.zeros(q.shape[:2] + (2, 3))  # d (u, v) / d p
     with np.errstate(divide="ignore", invalid="ignore"):
-        J[:, 0, 0], J[:, 0, 2] = camera.fx / Z, -camera.fx * X / Z**2
-        J[:, 1, 1], J[:, 1, 2] = camera.fy / Z, -camera.fy * Y / Z**2
-    S_uv = J @ S_p @ np.swapaxes(J, 1, 2)
-    sd_uv = np.sqrt(np.maximum(np.stack([S_uv[:, 0, 0], S_uv[:, 1, 1]], axis=1), 0.0))
-    return uv, Z, sd_uv, np.sqrt(np.maximum(S_p[:, 2, 2], 0.0))
+        J[..., 0, 0], J[..., 0, 2] = camera.fx / Z, -camera.fx * X / Z**2
+        J[..., 1, 1], J[..., 1, 2] = camera.fy / Z, -camera.fy * Y / Z**2
+    S_uv = J @ S_p @ np.swapaxes(J, -1, -2)
+    sd_uv = np.sqrt(np.maximum(np.stack([S_uv[..., 0, 0], S_uv[..., 1, 1]], axis=-1), 0.0))
+    return uv, Z, sd_uv, np.sqrt(np.maximum(S_p[..., 2, 2], 0.0))
 
 
 def tracked_roi(
@@ -201,27 +199,27 @@ def tracked_roi(
     """
     if not 0 < max_fraction <= 1:
         raise ConfigError(f"max_fraction must be within (0, 1], got {max_fraction}")
-    lo, hi, z_near, z_far = [], [], [], []
-    for G_CO, Sigma_rv in poses:
-        uv, Z, sd_uv, sd_Z = _corner_spread(np.asarray(G_CO, dtype=float), Sigma_rv, extent, camera)
-        z0 = Z - n_sigma * sd_Z
-        if np.any(z0 <= _MIN_DEPTH_M):
-            return None
-        a, b = uv - n_sigma * sd_uv, uv + n_sigma * sd_uv
-        if _rect(np.concatenate([a, b]), camera, margin_px) is None:  # wholly outside the image
-            continue
-        lo.append(a)
-        hi.append(b)
-        z_near.append(z0)
-        z_far.append(Z + n_sigma * sd_Z)
-    if not lo:
+    if not len(poses):
         return None
-    rect = _rect(np.concatenate(lo + hi), camera, margin_px)
+    G = np.stack([np.asarray(g, dtype=float) for g, _ in poses])
+    Sigma = np.stack([np.zeros((6, 6)) if S is None else np.asarray(S, dtype=float) for _, S in poses])
+    uv, Z, sd_uv, sd_Z = _corner_spread(G, Sigma, extent, camera)  # all poses' corners at once
+    z_near, z_far = Z - n_sigma * sd_Z, Z + n_sigma * sd_Z
+    if np.any(z_near <= _MIN_DEPTH_M):
+        return None
+    lo, hi = uv - n_sigma * sd_uv, uv + n_sigma * sd_uv  # (P, 8, 2)
+    W, H = camera.width, camera.height
+    u0, v0 = lo[..., 0].min(axis=1) - margin_px, lo[..., 1].min(axis=1) - margin_px
+    u1, v1 = hi[..., 0].max(axis=1) + margin_px, hi[..., 1].max(axis=1) + margin_px
+    seen = (np.minimum(u1, W) - np.maximum(u0, 0) >= 8) & (np.minimum(v1, H) - np.maximum(v0, 0) >= 8)
+    if not seen.any():  # every box wholly outside the image
+        return None
+    rect = _rect(np.concatenate([lo[seen].reshape(-1, 2), hi[seen].reshape(-1, 2)]), camera, margin_px)
     if rect is None or rect[2] * rect[3] > max_fraction * camera.width * camera.height:
         return None
     fB = camera.fx * camera.baseline
-    d_lo = max(min_disparity, fB / np.concatenate(z_far).max() - disparity_margin_px)
-    d_hi = min(max_disparity, fB / np.concatenate(z_near).min() + disparity_margin_px)
+    d_lo = max(min_disparity, fB / z_far[seen].max() - disparity_margin_px)
+    d_hi = min(max_disparity, fB / z_near[seen].min() + disparity_margin_px)
     if d_lo > d_hi:  # the boxes lie outside the stereo range: their features cannot be matched
         return None
     return RegionOfInterest(*rect, d_lo, d_hi)
