@@ -34,6 +34,7 @@ from lab.estimation.ekf import (
 )
 from lab.estimation.estimate import PoseEstimate
 from lab.estimation.fit import _check_matches, _valid_rows
+from lab.estimation.gate import _gate_many
 from lab.estimation.models import odometry_covariance
 
 __all__ = ["EKFBank"]
@@ -106,15 +107,34 @@ class EKFBank:
         """
         if len(matches) != len(self.filters):
             raise ValueError(f"need one match set per model: {len(matches)} for {len(self.filters)} filters")
-        valid: dict = {}  # rows' validity, once per match set that several filters share
-
-        def begin(f, m):
+        checked, valid = {}, {}  # once per match set that several filters share
+        rows = []  # each filter's usable rows, when its update will gate them
+        for f, m in zip(self.filters, matches, strict=True):
             key = tuple(id(a) for a in m)
             if key not in valid:
-                valid[key] = _valid_rows(*_check_matches(*m))
-            return f._begin_update(*m, valid=valid[key])
-
-        pending = [begin(f, m) for f, m in zip(self.filters, matches, strict=True)]
+                checked[key] = _check_matches(*m)
+                valid[key] = _valid_rows(*checked[key])
+            ok = valid[key]
+            gates = f.mu is not None and f.divergence is None
+            rows.append(np.flatnonzero(ok) if gates and ok.sum() >= f.config.gate.min_matches else None)
+        gated: list = [None] * len(self.filters)
+        todo = [i for i, idx in enumerate(rows) if idx is not None]
+        if todo:  # every filter's gate at once, the matches' rows stacked
+            f0 = self.filters[0]
+            keys = [tuple(id(a) for a in matches[i]) for i in todo]
+            outs = _gate_many(
+                [self.filters[i].mu for i in todo],
+                [self.filters[i].P for i in todo],
+                *([checked[k][j][rows[i]] for i, k in zip(todo, keys, strict=True)] for j in range(3)),
+                f0.config.gate,
+                f0.config.chart,
+            )
+            for i, out in zip(todo, outs, strict=True):
+                gated[i] = out
+        pending = [
+            f._begin_update(*m, valid=valid[tuple(id(a) for a in m)], gated=g)
+            for f, m, g in zip(self.filters, matches, gated, strict=True)
+        ]
         ready = [i for i, p in enumerate(pending) if not isinstance(p, UpdateResult)]
         outs = _batched_updates([pending[i] for i in ready]) if ready else []
         results = list(pending)

@@ -837,10 +837,12 @@ class PoseEKF:
             return self._update_failed(pending)
         return self._end_update(pending, *out)
 
-    def _begin_update(self, d_C, b_O, Sigma_d, valid=None) -> UpdateResult | _PendingUpdate:
+    def _begin_update(self, d_C, b_O, Sigma_d, valid=None, gated=None) -> UpdateResult | _PendingUpdate:
         """:meth:`update` up to its linear algebra: the checks, the gate, and the prior and Jacobian
         with the calibration error; or the result, when the update is skipped or initialises.
-        ``valid``: the rows' ``_valid_rows``, when already known (a bank whose filters share them)."""
+        ``valid``: the rows' ``_valid_rows``, when already known (a bank whose filters share them);
+        ``gated``: ``_gate``'s output on the valid rows, when already known (a bank gates its filters
+        together)."""
         d, b, S = _check_matches(d_C, b_O, Sigma_d)
         n = d.shape[0]
         valid = _valid_rows(d, b, S) if valid is None else valid
@@ -860,7 +862,7 @@ class PoseEKF:
         idx = np.flatnonzero(valid)
         d, b, S = d[idx], b[idx], S[idx]
 
-        keep, r, C, inliers, why_not = self._feasible_matches(d, b, S, idx, n, n_valid, note)
+        keep, r, C, inliers, why_not = self._feasible_matches(d, b, S, idx, n, n_valid, note, gated)
         if why_not is not None:
             return self._skip(why_not, n, inliers)
         cal = self.config.calibration
@@ -903,7 +905,7 @@ class PoseEKF:
         self.last_result = res
         return res
 
-    def _feasible_matches(self, d, b, S, idx, n: int, n_valid: int, note: str):
+    def _feasible_matches(self, d, b, S, idx, n: int, n_valid: int, note: str, gated=None):
         """The geometric feasibility check before an update: which usable matches pass the gate.
 
         Returns ``(keep, r, C, inliers, why_not)``: the gate's verdict, residuals and Jacobians on the
@@ -912,7 +914,7 @@ class PoseEKF:
         track is lost) or their model points are collinear.
         """
         gc = self.config.gate
-        keep, r, C = _gate(self.mu, self.P, d, b, S, gc, self.config.chart)
+        keep, r, C = _gate(self.mu, self.P, d, b, S, gc, self.config.chart) if gated is None else gated
         inliers = np.zeros(n, bool)
         inliers[idx[keep]] = True
         n_used = int(np.count_nonzero(keep))
