@@ -65,7 +65,7 @@ from lab.vision.stereo import (  # noqa: E402
     _check_pair,
     _epipolar_matches,
     _grey,
-    _matching_params,
+    _in_disparities,
     _roi_rects,
     detect_in,
     sift,
@@ -153,11 +153,14 @@ def staged_perceive(agent: IdentificationAgent, frame, det) -> np.ndarray:
     marks.append(_now())
     f = Features3D.empty(frame.t)
     if des_l is not None and des_r is not None:
-        il, ir = _epipolar_matches(kp_l, des_l, kp_r, des_r, _matching_params(roi, params))
+        il, ir = _epipolar_matches(kp_l, des_l, kp_r, des_r, params)
+        uv_l = np.array([kp_l[i].pt for i in il], dtype=float).reshape(-1, 2)
+        uv_r = np.array([kp_r[i].pt for i in ir], dtype=float).reshape(-1, 2)
+        disp = uv_l[:, 0] - uv_r[:, 0]
+        keep = _in_disparities(roi, disp)
+        if keep is not None:
+            il, uv_l, uv_r, disp = il[keep], uv_l[keep], uv_r[keep], disp[keep]
         if len(il):
-            uv_l = np.array([kp_l[i].pt for i in il], dtype=float)
-            uv_r = np.array([kp_r[i].pt for i in ir], dtype=float)
-            disp = uv_l[:, 0] - uv_r[:, 0]
             cov = triangulation_covariance(uv_l, disp, frame.camera, params)
             pts = triangulate(uv_l, uv_r, frame.camera)
             f = Features3D(pts, des_l[il].astype(np.float32), uv_l, disp, cov, frame.t)

@@ -25,7 +25,8 @@ SIGMA_RV = np.diag([0.01**2] * 3 + [math.radians(3.0) ** 2] * 3)  # a tracked po
 @pytest.fixture(scope="module")
 def scene():
     """A rendered frame of model M1's box 1 m in front of the robot, turned 23 degrees, the head aimed
-    a little beside it: the frame, the box's true G_CO, its pixels in the left image, its extent."""
+    a little beside it: the frame, the box's true G_CO, its pixels in the left image, its extent, the
+    depth buffer [m]."""
     spec = load_box_models()[1]
     with SimWorld("box_database") as w:
         carrier = w.add_carrier(spec, Pose2D(0.0, 0.0, 0.0), box_yaw=0.4)
@@ -40,14 +41,15 @@ def scene():
         G_CO = se3_inv(G_WC) @ carrier.G_WO
         seg = w.truth.segmentation(G_WC, robot.camera)
         box_pixels = np.argwhere(seg == w.body_id(carrier.name))[:, ::-1]  # (u, v)
+        depth = w.truth.depth(G_WC, robot.camera)
     db = get_database(spec.name, progress=False)
-    return frame, G_CO, box_pixels, np.asarray(db.extent)
+    return frame, G_CO, box_pixels, np.asarray(db.extent), depth
 
 
 def test_the_region_holds_the_true_box(scene):
     """Predicted 1.5 standard deviations off the truth, the 3-sigma region still holds every pixel of the
     box (the segmentation) and the disparities of the box's corners."""
-    frame, G_CO, box_pixels, extent = scene
+    frame, G_CO, box_pixels, extent, _ = scene
     assert len(box_pixels) > 500
     off = G_CO @ se3(Ry(1.5 * math.radians(3.0)))  # 1.5 sigma off in rotation and on each axis
     off[:3, 3] += 1.5 * 0.01 * np.array([1.0, -1.0, 1.0])
@@ -63,7 +65,7 @@ def test_the_region_holds_the_true_box(scene):
 def test_features_outside_the_region_are_not_extracted(scene):
     """Every feature lies inside the region and its right partner inside the right band; most are the
     full frame's features at the same pixel and 3D point."""
-    frame, G_CO, _, extent = scene
+    frame, G_CO, _, extent, _ = scene
     roi = tracked_roi([(G_CO, SIGMA_RV)], extent, frame.camera, 0.5, 96.0)
     full = stereo_features(frame.left, frame.right, frame.camera)
     f = stereo_features(frame.left, frame.right, frame.camera, roi=roi)
@@ -76,22 +78,40 @@ def test_features_outside_the_region_are_not_extracted(scene):
     assert not roi.contains(full.uv).all()  # the full frame has features the region drops
     # the full frame's features inside the region and its disparities are (almost all) found again, at
     # the same pixel and 3D point (SIFT on the crop differs only at the coarse octaves, whose blur the
-    # crop cuts); the region finds more of its own (fewer right candidates compete in the ratio test)
-    inside = (
-        roi.contains(full.uv) & (full.disparity >= roi.min_disparity) & (full.disparity <= roi.max_disparity)
-    )
-    peer = full.subset(inside)
+    # crop cuts), and the region adds few of its own (its matches are made over the whole disparity
+    # range, as the full frame's)
+    in_range = (full.disparity >= roi.min_disparity) & (full.disparity <= roi.max_disparity)
+    peer = full.subset(roi.contains(full.uv) & in_range)
     gap = np.abs(peer.uv[:, None, :] - f.uv[None, :, :]).sum(axis=2)
     nearest = gap.argmin(axis=1)
     found = gap[np.arange(len(peer)), nearest] < 1e-3
     assert len(peer) >= 20 and found.mean() >= 0.8
     assert np.allclose(peer.points_C[found], f.points_C[nearest[found]], atol=1e-6)
-    assert len(f) >= len(peer)
+    assert found.sum() >= 0.8 * len(f)
+
+
+def test_the_regions_features_lie_where_the_depth_buffer_says(scene):
+    """Against the rendered depth: the region's features are no farther off than the full frame's in the
+    same region (matching over the region's disparities alone would seat background features at the
+    box's depth)."""
+    frame, G_CO, _, extent, depth = scene
+    roi = tracked_roi([(G_CO, SIGMA_RV)], extent, frame.camera, 0.5, 96.0)
+    full = stereo_features(frame.left, frame.right, frame.camera)
+    full = full.subset(
+        roi.contains(full.uv) & (full.disparity >= roi.min_disparity) & (full.disparity <= roi.max_disparity)
+    )
+    f = stereo_features(frame.left, frame.right, frame.camera, roi=roi)
+
+    def off(F):  # features more than 5 cm from the depth buffer at their pixel
+        u, v = (np.clip(np.rint(F.uv[:, i]).astype(int), 0, n - 1) for i, n in ((0, 320), (1, 240)))
+        return int(np.count_nonzero(np.abs(F.points_C[:, 2] - depth[v, u]) > 0.05))
+
+    assert off(f) <= off(full) + 3 and len(f) <= len(full) + 5
 
 
 def test_a_plain_rectangle_is_the_search_refinements_region(scene):
     """The search's ``object_roi`` rectangle: features only inside it, partners over the whole range."""
-    frame, G_CO, _, extent = scene
+    frame, G_CO, _, extent, _ = scene
     rect = object_roi(G_CO, extent, frame.camera, 20)
     f = stereo_features(frame.left, frame.right, frame.camera, roi=rect)
     x, y, w, h = rect
@@ -127,7 +147,7 @@ class _Robot:
 
 
 def test_the_agent_looks_at_the_tracked_box_and_returns_to_the_full_frame_when_lost(scene):
-    frame, G_CO, _, _ = scene
+    frame, G_CO, _, _, _ = scene
     cam = frame.camera
     dbs = [get_database(f"M{i}", progress=False) for i in range(4)]
     agent = IdentificationAgent(_Robot(cam), dbs, None, planner="random", seed=0)

