@@ -12,22 +12,27 @@ Run (from the repository root)::
    two replays a pass, alternately:
 
    * **step**: the agent's own perception step (``IdentificationAgent._perceive``: the bank's
-     prediction, the stereo features with the right image's SIFT in a second thread, every model's
-     database search, EKF update and Eq. (9) score, the turn keyframes), timed whole, wall and CPU;
+     prediction, the region of interest while tracking, the stereo features with the right image's
+     SIFT in a second thread, every model's database search, EKF update and Eq. (9) score, the turn
+     keyframes), timed whole, wall and CPU;
    * **stages**: the same step cut into stages, each timed on its own (SIFT of the left and of the
      right image one after the other, epipolar matching and triangulation, the database searches and
-     ratio tests, the EKF bank, the model probabilities, the turn keyframes).
+     ratio tests, the EKF bank, the model probabilities, the turn keyframes);
+   * **full frame**: the step of an agent with the region of interest off (``AgentConfig(roi=False)``),
+     every frame extracted whole.
 
-   Both replays must reproduce the episode's model probabilities at every frame (printed: the largest
-   difference); they are the same computation as the closed loop's.
+   The first two must reproduce the episode's model probabilities at every frame (printed: the largest
+   difference); they are the same computation as the closed loop's. The whole-frame agent's
+   probabilities are printed against the episode's (they differ by what the region drops and adds).
 3. **The EKF bank against filterpy**: 4 filters (the papers' Euler chart, no gate, each from its own
    start) against 4 filterpy ``ExtendedKalmanFilter`` on the same synthetic frames
    (:func:`lab.estimation.synthetic.rocking_robot_frames`, 50 matched features), timed round robin;
    their states are printed side by side (the tests hold them equal to 1e-9).
 
 Medians and 90th percentiles in ms; the step rate is 1000 / the median step. "While tracking" counts
-the frames with at least one filter's estimate before the frame; the full-frame step is every frame
-(no region of interest is used: the two differ only by the frames before the first initialisation).
+the frames with at least one filter's estimate before the frame and the track not lost (the region is
+used on those, unless it would cover most of the image: the share is printed); the full-frame step is
+the whole-frame agent's, over every frame.
 The machine is shared: the load average is printed at the start and the end; ratios measured side by
 side (round robin) are the robust figures. ``--json FILE`` writes them all (``perception_step_ms_median``,
 ``full_frame_step_ms_median``, ``bank_ms_median``, ``filterpy_bank_ms_median``, ``sensing``, ...).
@@ -47,18 +52,22 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from lab.estimation import UpdateOutcome  # noqa: E402
 from lab.geometry import relative_pose2d  # noqa: E402
 from lab.identification.agent import IdentificationAgent  # noqa: E402
 from lab.identification.belief import calc_current_entropy  # noqa: E402
+from lab.identification.loop_config import AgentConfig  # noqa: E402
 from lab.identification.scoring import state_for_scoring  # noqa: E402
 from lab.identification.step import _shared  # noqa: E402
 from lab.io import write_json_atomic  # noqa: E402
 from lab.vision import Features3D  # noqa: E402
 from lab.vision.stereo import (  # noqa: E402
-    StereoParams,
     _check_pair,
     _epipolar_matches,
     _grey,
+    _in_disparities,
+    _roi_rects,
+    detect_in,
     sift,
     triangulate,
     triangulation_covariance,
@@ -112,38 +121,46 @@ class _Robot:
         self.camera, self.pan_tilt_limits, self.base_limits = camera, PanTiltLimits(), BaseLimits()
 
 
-def fresh_agent(frames, dbs, seed: int) -> IdentificationAgent:
-    """An agent as the episode's (same databases, seed and scoring); its planner is never asked."""
-    return IdentificationAgent(_Robot(frames[0].camera), dbs, None, planner="random", seed=seed)
+def fresh_agent(frames, dbs, seed: int, roi: bool = True) -> IdentificationAgent:
+    """An agent as the episode's (same databases, seed and scoring); its planner is never asked. With
+    ``roi`` False it extracts every frame whole."""
+    config = AgentConfig(roi=roi)
+    return IdentificationAgent(_Robot(frames[0].camera), dbs, None, config, planner="random", seed=seed)
 
 
 def _now() -> tuple[float, float]:
     return time.perf_counter(), time.process_time()
 
 
-def staged_perceive(agent: IdentificationAgent, frame, params: StereoParams, det) -> np.ndarray:
+def staged_perceive(agent: IdentificationAgent, frame, det) -> np.ndarray:
     """``agent._perceive(frame)`` cut into :data:`STAGES`, each timed: (stages, 2) seconds, wall and CPU."""
+    params = agent.stereo
     marks = [_now()]
     prev = agent._prev
     if prev is not None:
         agent.bank.predict(prev.G_RC, frame.G_RC, relative_pose2d(prev.odom, frame.odom), frame.t - prev.t)
     agent._prev = frame
     predicted = agent.bank.estimates
+    agent.last_roi = roi = agent.region_of_interest(predicted, frame.camera)  # the region, or None
     marks.append(_now())
-    # stereo_features, the right image after the left
+    # stereo_features, the right image after the left, each in its rectangle (None: whole)
     _check_pair(frame.left, frame.right, frame.camera)
     gl, gr = _grey(frame.left), _grey(frame.right)
-    kp_l, des_l = det.detectAndCompute(gl, None)
+    rects = (None, None) if roi is None else _roi_rects(roi, frame.camera, params)
+    kp_l, des_l = detect_in(gl, rects[0], det)
     marks.append(_now())
-    kp_r, des_r = det.detectAndCompute(gr, None)
+    kp_r, des_r = detect_in(gr, rects[1], det)
     marks.append(_now())
     f = Features3D.empty(frame.t)
     if des_l is not None and des_r is not None:
         il, ir = _epipolar_matches(kp_l, des_l, kp_r, des_r, params)
+        uv_l = np.array([kp_l[i].pt for i in il], dtype=float).reshape(-1, 2)
+        uv_r = np.array([kp_r[i].pt for i in ir], dtype=float).reshape(-1, 2)
+        disp = uv_l[:, 0] - uv_r[:, 0]
+        keep = _in_disparities(roi, disp)
+        if keep is not None:
+            il, uv_l, uv_r, disp = il[keep], uv_l[keep], uv_r[keep], disp[keep]
         if len(il):
-            uv_l = np.array([kp_l[i].pt for i in il], dtype=float)
-            uv_r = np.array([kp_r[i].pt for i in ir], dtype=float)
-            disp = uv_l[:, 0] - uv_r[:, 0]
             cov = triangulation_covariance(uv_l, disp, frame.camera, params)
             pts = triangulate(uv_l, uv_r, frame.camera)
             f = Features3D(pts, des_l[il].astype(np.float32), uv_l, disp, cov, frame.t)
@@ -158,6 +175,8 @@ def staged_perceive(agent: IdentificationAgent, frame, params: StereoParams, det
     belief = calc_current_entropy(agent.P, f, agent.scorers, states, agent.scoring, agent.turns)
     marks.append(_now())
     agent.P = belief.P
+    if any(u.outcome is not UpdateOutcome.SKIPPED for u in updates):
+        agent._last_seen_t = frame.t
     agent._follow_reinitialised_filters(predicted, updates)
     agent._keyframe(frame, f)
     agent._note_decisive_turn(belief)
@@ -166,34 +185,47 @@ def staged_perceive(agent: IdentificationAgent, frame, params: StereoParams, det
 
 
 def replay(frames, posteriors, dbs, seed: int, repeats: int):
-    """The two replays, alternately, ``repeats`` passes: per-frame timings and the probabilities' check."""
-    params = StereoParams()
-    det = sift(params.n_features, params.contrast_threshold)
-    step_wall, step_cpu, stages, tracking, n_feat = [], [], [], [], []
-    worst = 0.0
+    """The replays, in turn, ``repeats`` passes: the agent's step (with its region of interest), the
+    staged step, and the step of an agent that extracts every frame whole; per-frame timings and the
+    probabilities' check (the first two must reproduce the episode's; the whole-frame agent's may
+    differ, by how much is returned)."""
+    det = sift()
+    keys = ("wall", "cpu", "tracking", "roi", "n_feat", "full_wall", "full_cpu", "full_n_feat")
+    out = {k: [] for k in keys}
+    stages = []
+    worst = worst_full = 0.0
     for _ in range(repeats):
         a = fresh_agent(frames, dbs, seed)
         for k, fr in enumerate(frames):
-            tracking_k = any(f.initialized for f in a.bank.filters)  # an estimate before the frame
+            tracking_k = any(f.initialized for f in a.bank.filters) and not a._lost  # a track before it
             w0, c0 = time.perf_counter(), time.process_time()
             f, _ = a._perceive(fr)
-            step_wall.append(time.perf_counter() - w0)
-            step_cpu.append(time.process_time() - c0)
-            tracking.append(tracking_k)
-            n_feat.append(len(f))
+            out["wall"].append(time.perf_counter() - w0)
+            out["cpu"].append(time.process_time() - c0)
+            a._check_track(fr)  # the loop's, after the step: lost or not for the next frame's region
+            out["tracking"].append(tracking_k)
+            out["roi"].append(a.last_roi is not None)
+            out["n_feat"].append(len(f))
             worst = max(worst, float(np.abs(a.P - posteriors[k]).max()))
         b = fresh_agent(frames, dbs, seed)
         for k, fr in enumerate(frames):
-            stages.append(staged_perceive(b, fr, params, det))
+            stages.append(staged_perceive(b, fr, det))
+            b._check_track(fr)
             worst = max(worst, float(np.abs(b.P - posteriors[k]).max()))
-    return (
-        np.array(step_wall) * 1e3,
-        np.array(step_cpu) * 1e3,
-        np.array(stages) * 1e3,
-        np.array(tracking),
-        np.array(n_feat),
-        worst,
-    )
+        c = fresh_agent(frames, dbs, seed, roi=False)
+        for k, fr in enumerate(frames):
+            w0, c0 = time.perf_counter(), time.process_time()
+            f, _ = c._perceive(fr)
+            out["full_wall"].append(time.perf_counter() - w0)
+            out["full_cpu"].append(time.process_time() - c0)
+            c._check_track(fr)
+            out["full_n_feat"].append(len(f))
+            worst_full = max(worst_full, float(np.abs(c.P - posteriors[k]).max()))
+    out = {k: np.array(v) for k, v in out.items()}
+    for k in ("wall", "cpu", "full_wall", "full_cpu"):
+        out[k] = out[k] * 1e3
+    out["full_final_P"] = c.P.copy()
+    return out, np.array(stages) * 1e3, worst, worst_full
 
 
 def bank_against_filterpy(n_steps: int, n_features: int = 50):
@@ -287,7 +319,8 @@ def main(argv=None) -> int:
     load0 = os.getloadavg()[0]
     frames, posteriors, render_s, result = record_episode(args.model, args.seed, args.sensing, args.max_time)
     dbs = [get_database(name) for name in ("M0", "M1", "M2", "M3")]
-    wall, cpu, stages, tracking, n_feat, worst = replay(frames, posteriors, dbs, args.seed, args.repeats)
+    r, stages, worst, worst_full = replay(frames, posteriors, dbs, args.seed, args.repeats)
+    wall, cpu, tracking, n_feat = r["wall"], r["cpu"], r["tracking"], r["n_feat"]
     bank_med, bank_p90, bank_ratio, bank_diff, bank_diff_P = bank_against_filterpy(args.bank_steps)
     load1 = os.getloadavg()[0]
 
@@ -300,12 +333,22 @@ def main(argv=None) -> int:
     )
     print(f"rendering (excluded): {1e3 * np.median(render_s):.1f} ms per stereo frame (median)")
     print(f"replays reproduce the episode's probabilities: largest difference {worst:.1e}")
-    print(f"features per frame: median {np.median(n_feat):.0f}, p90 {_p90(n_feat):.0f}")
+    print(
+        f"whole-frame agent's probabilities against the episode's (region of interest off): largest "
+        f"difference {worst_full:.2g}, final {np.array2string(r['full_final_P'], precision=3)} against "
+        f"{np.array2string(posteriors[-1], precision=3)}"
+    )
+    print(
+        f"features per frame, tracking: median {np.median(n_feat[tracking]):.0f} with the region, "
+        f"{np.median(r['full_n_feat'][tracking]):.0f} whole; region used on "
+        f"{np.mean(r['roi'][tracking]):.0%} of the tracking frames"
+    )
     print(f"{'ms per frame':34s}{'median':>9s}{'p90':>9s}{'CPU med':>9s}")
     ctrk = cpu[tracking]
     print(f"{'perception step (tracking)':34s}{step_med:9.1f}{_p90(trk):9.1f}{np.median(ctrk):9.1f}")
-    print(f"{'full-frame step (all frames)':34s}{np.median(wall):9.1f}{_p90(wall):9.1f}{np.median(cpu):9.1f}")
-    st_trk = stages[np.tile(tracking[: len(frames)], args.repeats)]
+    fw, fc = r["full_wall"], r["full_cpu"]
+    print(f"{'full-frame step (all frames)':34s}{np.median(fw):9.1f}{_p90(fw):9.1f}{np.median(fc):9.1f}")
+    st_trk = stages[tracking]
     for j, name in enumerate(STAGES):
         w, c = st_trk[:, j, 0], st_trk[:, j, 1]
         print(f"{'  ' + name:34s}{np.median(w):9.1f}{_p90(w):9.1f}{np.median(c):9.1f}")
@@ -328,12 +371,18 @@ def main(argv=None) -> int:
             "load_average": [load0, load1],
             "render_ms_median": 1e3 * float(np.median(render_s)),
             "probabilities_max_difference": worst,
+            "full_frame_probabilities_max_difference": worst_full,
             "features_median": float(np.median(n_feat)),
+            "features_tracking_median": float(np.median(n_feat[tracking])),
+            "full_frame_features_median": float(np.median(r["full_n_feat"])),
+            "full_frame_features_tracking_median": float(np.median(r["full_n_feat"][tracking])),
+            "roi_fraction_of_tracking_frames": float(np.mean(r["roi"][tracking])),
             "perception_step_ms_median": step_med,
             "perception_step_ms_p90": _p90(trk),
             "perception_step_cpu_ms_median": float(np.median(cpu[tracking])),
-            "full_frame_step_ms_median": float(np.median(wall)),
-            "full_frame_step_ms_p90": _p90(wall),
+            "full_frame_step_ms_median": float(np.median(fw)),
+            "full_frame_step_ms_p90": _p90(fw),
+            "full_frame_step_cpu_ms_median": float(np.median(fc)),
             "step_rate_hz": 1e3 / step_med,
             "stages_ms_median": {s: float(np.median(st_trk[:, j, 0])) for j, s in enumerate(STAGES)},
             "stages_ms_p90": {s: _p90(st_trk[:, j, 0]) for j, s in enumerate(STAGES)},

@@ -9,6 +9,7 @@ take stacks.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +41,9 @@ __all__ = [
 
 def wrap_angle(a):
     """Wrap an angle (or array of angles) [rad] to (-pi, pi]."""
+    if isinstance(a, (float, int, np.floating, np.integer)):  # a scalar: Python's float modulo, as np.mod's
+        w = (float(a) + math.pi) % (2.0 * math.pi) - math.pi
+        return math.pi if w == -math.pi else w
     w = np.mod(np.asarray(a, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
     w = np.where(w == -np.pi, np.pi, w)
     return float(w) if np.ndim(w) == 0 else w

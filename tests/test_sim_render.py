@@ -191,3 +191,26 @@ def test_egl_renderer_matches_the_same_intrinsics(models):
             expect, _ = _silhouette_centroid(transform_points(G_CO, _box_corners_O(models[0].size)), CAM)
             assert np.linalg.norm([u.mean() - expect[0], v.mean() - expect[1]]) < 0.25
             assert rgb[v, u].std() > 20  # the atlas texture is there, not a flat colour
+
+
+def test_a_view_that_did_not_change_is_not_rendered_again(models):
+    """The same camera over the same scene gives the last render's images without rendering (they equal
+    a fresh world's render); moving the camera or a body renders anew."""
+    G_WC = viewpoint_G_WC((1.0, 0.2, 0.7), (0.0, 0.0, 0.49))
+    with SimWorld("box_database") as fresh:
+        fresh.add_carrier(models[2], Pose2D(0.0, 0.0, 0.0), box_yaw=0.3)
+        truth = fresh.render_stereo(G_WC, CAM)
+    with SimWorld("box_database") as w:
+        c = w.add_carrier(models[2], Pose2D(0.0, 0.0, 0.0), box_yaw=0.3)
+        first = w.render_stereo(G_WC, CAM)
+        assert (w.n_renders, w.n_renders_reused) == (2, 0)
+        first[0][:] = 0  # the caller's copy: what is kept is not touched
+        again = w.render_stereo(G_WC, CAM)
+        assert (w.n_renders, w.n_renders_reused) == (4, 2)
+        for a, b in zip(again, truth, strict=True):
+            np.testing.assert_array_equal(a, b)
+        moved = w.render_stereo(viewpoint_G_WC((1.0, 0.25, 0.7), (0.0, 0.0, 0.49)), CAM)
+        assert w.n_renders_reused == 2 and not np.array_equal(moved[0], truth[0])
+        c.set_pose(Pose2D(0.1, 0.0, 0.0))  # the box moves under a still camera
+        shifted = w.render_stereo(G_WC, CAM)
+        assert w.n_renders_reused == 2 and not np.array_equal(shifted[0], truth[0])

@@ -414,3 +414,32 @@ def test_spatial_aliases_keep_one_point_seen_from_two_views():
     assert Matcher(far, method="brute", alias_radius=0.015).match(f).n_matched == 0
     with pytest.raises(ConfigError, match="alias_radius"):
         Matcher(small, alias_radius=-1.0)
+
+
+def test_one_index_over_all_models_gives_each_models_own_exact_search_bit_for_bit(dbs):
+    """The joint index stores the shared faces' descriptors once, knows which models hold each, and
+    gives every model the neighbours (indices, distances, order among equal distances) of its own brute
+    search, on real frames (full and region-restricted) and on descriptors that are not integers."""
+    from lab.vision import JointIndex
+
+    models = list(dbs.values())
+    index = JointIndex(models, k=8)
+    total = sum(len(db) for db in models)
+    assert index.exact and len(index) < 0.7 * total  # the shared faces once
+    np.testing.assert_array_equal(index.members.sum(axis=0), [len(np.unique(c)) for c in index.columns])
+    for i, db in enumerate(models):
+        np.testing.assert_array_equal(index.descriptors[index.columns[i]], db.descriptors)
+    with SimWorld("box_database") as w:
+        w.add_carrier(load_box_models()[1], Pose2D(0, 0, 0), box_yaw=0.3)
+        frames = [
+            stereo_features(*w.render_stereo(viewpoint_G_WC((c, s, 0.7), (0, 0, 0.49)), CAM), CAM)
+            for c, s in RING[::2]
+        ]
+    queries = [f.descriptors for f in frames] + [frames[0].descriptors + np.float32(0.25)]
+    for q in queries:
+        joint = index.neighbours(q)
+        assert index.neighbours(q) is joint  # kept for the other models
+        for db, (idx, dist) in zip(models, joint, strict=True):
+            own_idx, own_dist = Matcher(db, method="brute", k=8).neighbours(q)
+            np.testing.assert_array_equal(idx, own_idx)
+            np.testing.assert_array_equal(dist, own_dist)

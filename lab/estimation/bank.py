@@ -28,10 +28,14 @@ from lab.estimation.ekf import (
     PoseEKF,
     UpdateResult,
     _checked_motion,
+    _health_many,
     _information_update,
     _whitened,
 )
 from lab.estimation.estimate import PoseEstimate
+from lab.estimation.fit import _check_matches, _valid_rows
+from lab.estimation.gate import _gate_many
+from lab.estimation.models import odometry_covariance
 
 __all__ = ["EKFBank"]
 
@@ -72,7 +76,21 @@ class EKFBank:
         a model whose filter is not initialised yet).
         """
         motion = _checked_motion(G_RC_prev, G_RC, G_odom, dt, G_OO)  # once for the bank
-        return tuple(f._predict_motion(motion, Sigma_odom) for f in self.filters)
+        if Sigma_odom is None and not motion.bad:  # the odometry's error: once for the bank too
+            Sigma_odom = odometry_covariance(motion.mats["G_odom"], self.filters[0].config.process)
+        staged = [f._predict_staged(motion, Sigma_odom) for f in self.filters]
+        live = [i for i, st in enumerate(staged) if st is not None]
+        if live:  # every filter's health at once
+            f0 = self.filters[0]
+            problems = _health_many(
+                f0.config.divergence,
+                f0._euler,
+                np.stack([staged[i][0] for i in live]),
+                np.stack([staged[i][2] for i in live]),
+            )
+            for i, problem in zip(live, problems, strict=True):
+                self.filters[i]._predict_commit(*staged[i], problem)
+        return tuple(f.estimate for f in self.filters)
 
     def update(self, i: int, d_C, b_O, Sigma_d) -> UpdateResult:
         """Update model ``i``'s filter with its matched pairs (same arguments as :meth:`PoseEKF.update`)."""
@@ -89,10 +107,38 @@ class EKFBank:
         """
         if len(matches) != len(self.filters):
             raise ValueError(f"need one match set per model: {len(matches)} for {len(self.filters)} filters")
-        pending = [f._begin_update(*m) for f, m in zip(self.filters, matches, strict=True)]
+        checked, valid = {}, {}  # once per match set that several filters share
+        rows = []  # each filter's usable rows, when its update will gate them
+        for f, m in zip(self.filters, matches, strict=True):
+            key = tuple(id(a) for a in m)
+            if key not in valid:
+                checked[key] = _check_matches(*m)
+                valid[key] = _valid_rows(*checked[key])
+            ok = valid[key]
+            gates = f.mu is not None and f.divergence is None
+            rows.append(np.flatnonzero(ok) if gates and ok.sum() >= f.config.gate.min_matches else None)
+        gated: list = [None] * len(self.filters)
+        todo = [i for i, idx in enumerate(rows) if idx is not None]
+        if todo:  # every filter's gate at once, the matches' rows stacked
+            f0 = self.filters[0]
+            keys = [tuple(id(a) for a in matches[i]) for i in todo]
+            outs = _gate_many(
+                [self.filters[i].mu for i in todo],
+                [self.filters[i].P for i in todo],
+                *([checked[k][j][rows[i]] for i, k in zip(todo, keys, strict=True)] for j in range(3)),
+                f0.config.gate,
+                f0.config.chart,
+            )
+            for i, out in zip(todo, outs, strict=True):
+                gated[i] = out
+        pending = [
+            f._begin_update(*m, valid=valid[tuple(id(a) for a in m)], gated=g)
+            for f, m, g in zip(self.filters, matches, gated, strict=True)
+        ]
         ready = [i for i, p in enumerate(pending) if not isinstance(p, UpdateResult)]
         outs = _batched_updates([pending[i] for i in ready]) if ready else []
         results = list(pending)
+        corrected = {}  # i: (mu, P, P_xc, nis, loglik)
         for i, out in zip(ready, outs, strict=True):
             f, p = self.filters[i], pending[i]
             if out is None:  # the batch could not factorise: this filter alone, as update() does
@@ -101,7 +147,19 @@ class EKFBank:
                 except np.linalg.LinAlgError:
                     results[i] = f._update_failed(p)
                     continue
-            results[i] = f._end_update(p, *out)
+            dx, P, nis, loglik = out
+            corrected[i] = (*f._corrected_state(dx, P), nis, loglik)
+        if corrected:  # every corrected state's health at once
+            idx = list(corrected)
+            f0 = self.filters[0]
+            problems = _health_many(
+                f0.config.divergence,
+                f0._euler,
+                np.stack([corrected[i][0] for i in idx]),
+                np.stack([corrected[i][1] for i in idx]),
+            )
+            for i, problem in zip(idx, problems, strict=True):
+                results[i] = self.filters[i]._end_update_checked(pending[i], *corrected[i], problem)
         return tuple(results)
 
     @property

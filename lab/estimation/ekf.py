@@ -86,6 +86,7 @@ gimbal lock (see :class:`OrientationChart`).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from enum import Enum
@@ -383,10 +384,11 @@ def _whitened(r, C, S):
     return sol[..., 0].reshape(-1), sol[..., 1:].reshape(-1, C.shape[2]), logdet_m
 
 
-def _calibration_columns(calibration: CalibrationUncertainty) -> list[int]:
+@functools.lru_cache(maxsize=64)
+def _calibration_columns(calibration: CalibrationUncertainty) -> tuple[int, ...]:
     """The parts of ``c = [s, delta]`` with a non-zero std (only those join the update, so that its
-    prior stays SPD)."""
-    return [j for j, sd in enumerate(np.diag(calibration.covariance())) if sd > 0]
+    prior stays SPD); worked out once per (immutable) calibration."""
+    return tuple(j for j, sd in enumerate(np.diag(calibration.covariance())) if sd > 0)
 
 
 def _with_calibration(Sigma_bar, P_xc, r, C, d, calibration: CalibrationUncertainty):
@@ -531,6 +533,53 @@ def _checked_motion(G_RC_prev, G_RC, G_odom, dt, G_OO=None) -> _Motion:
                 raise ValueError(f"{name} is not a rigid transform (its 3x3 block is not a rotation)")
     A = None if bad else _camera_motion(mats["G_RC_prev"], mats["G_RC"], mats["G_odom"])
     return _Motion(mats, bad, dt, A)
+
+
+def _health_many(dc: DivergenceConfig, euler: bool, mu: np.ndarray, P: np.ndarray) -> list[str | None]:
+    """Why each of k states ``mu`` (k, 6) with covariance ``P`` (k, 6, 6) is not a usable estimate, or
+    None: the first of non-finite, not symmetric, not positive definite, a covariance blow-up (the
+    largest position or angle standard deviation over ``dc``'s bound), gimbal lock (Euler chart). The
+    checks run on all k at once (one Cholesky call: a bank checks its filters together)."""
+    k = len(mu)
+    out: list[str | None] = [None] * k
+    finite = np.isfinite(mu).all(axis=1) & np.isfinite(P).all(axis=(1, 2))
+    with np.errstate(invalid="ignore"):  # non-finite ones are reported as such
+        scale = np.maximum(1.0, np.abs(P).max(axis=(1, 2), initial=0.0))
+        sym = np.abs(P - np.swapaxes(P, 1, 2)).max(axis=(1, 2), initial=0.0) <= 1e-9 * scale
+    for i in range(k):
+        if not finite[i]:
+            out[i] = "non-finite state or covariance"
+        elif not sym[i]:
+            out[i] = "covariance is not symmetric"
+    rest = [i for i in range(k) if out[i] is None]
+    if not rest:
+        return out
+    try:
+        np.linalg.cholesky(P[rest])
+    except np.linalg.LinAlgError:  # which ones: each alone
+        for i in rest:
+            try:
+                np.linalg.cholesky(P[i])
+            except np.linalg.LinAlgError:
+                out[i] = "covariance is not positive definite"
+        rest = [i for i in rest if out[i] is None]
+    # the largest variance of each block is at most its trace (P is positive definite): only a block
+    # whose trace exceeds its bound needs its eigenvalues
+    tr_pos = P[:, 0, 0] + P[:, 1, 1] + P[:, 2, 2]
+    tr_rot = P[:, 3, 3] + P[:, 4, 4] + P[:, 5, 5]
+    for i in rest:
+        if tr_pos[i] > dc.max_position_std_m**2 or tr_rot[i] > dc.max_rotation_std_rad**2:
+            top = np.linalg.eigvalsh(np.stack([P[i, :3, :3], P[i, 3:, 3:]]))[:, -1]  # largest variances
+            pos_std, rot_std = math.sqrt(max(0.0, float(top[0]))), math.sqrt(max(0.0, float(top[1])))
+            if pos_std > dc.max_position_std_m:
+                out[i] = f"covariance blow-up: position std {pos_std:.3g} m > {dc.max_position_std_m} m"
+                continue
+            if rot_std > dc.max_rotation_std_rad:
+                out[i] = f"covariance blow-up: angle std {rot_std:.3g} rad > {dc.max_rotation_std_rad} rad"
+                continue
+        if euler and abs(math.cos(mu[i, 4])) < dc.min_cos_beta:
+            out[i] = f"gimbal lock: beta = {mu[i, 4]:.6f} rad, the Euler state is singular"
+    return out
 
 
 class PoseEKF:
@@ -689,29 +738,7 @@ class PoseEKF:
 
     def _health(self, mu, P) -> str | None:
         """Why (mu, P) is not a usable estimate, or None."""
-        dc = self.config.divergence
-        if not (np.all(np.isfinite(mu)) and np.all(np.isfinite(P))):
-            return "non-finite state or covariance"
-        if np.abs(P - P.T).max() > 1e-9 * max(1.0, float(np.abs(P).max())):
-            return "covariance is not symmetric"
-        try:
-            np.linalg.cholesky(P)
-        except np.linalg.LinAlgError:
-            return "covariance is not positive definite"
-        # the largest variance of each block is at most its trace (P is positive definite): only a
-        # block whose trace exceeds its bound needs its eigenvalues
-        if P[0, 0] + P[1, 1] + P[2, 2] > dc.max_position_std_m**2 or (
-            P[3, 3] + P[4, 4] + P[5, 5] > dc.max_rotation_std_rad**2
-        ):
-            top = np.linalg.eigvalsh(np.stack([P[:3, :3], P[3:, 3:]]))[:, -1]  # largest variances
-            pos_std, rot_std = math.sqrt(max(0.0, float(top[0]))), math.sqrt(max(0.0, float(top[1])))
-            if pos_std > dc.max_position_std_m:
-                return f"covariance blow-up: position std {pos_std:.3g} m > {dc.max_position_std_m} m"
-            if rot_std > dc.max_rotation_std_rad:
-                return f"covariance blow-up: angle std {rot_std:.3g} rad > {dc.max_rotation_std_rad} rad"
-        if self._euler and abs(math.cos(mu[4])) < dc.min_cos_beta:
-            return f"gimbal lock: beta = {mu[4]:.6f} rad, the Euler state is singular"
-        return None
+        return _health_many(self.config.divergence, self._euler, mu[None], P[None])[0]
 
     # ---------------------------------------------------------------- predict
     def predict(
@@ -741,12 +768,20 @@ class PoseEKF:
 
     def _predict_motion(self, motion: _Motion, Sigma_odom=None) -> PoseEstimate | None:
         """:meth:`predict` with its inputs checked (:func:`_checked_motion`; a bank checks them once)."""
+        staged = self._predict_staged(motion, Sigma_odom)
+        if staged is not None:
+            self._predict_commit(*staged, self._health(staged[0], staged[2]))
+        return self.estimate
+
+    def _predict_staged(self, motion: _Motion, Sigma_odom=None):
+        """The prediction before its health check: ``(mu_bar, F, P_bar)``, or None when there is none
+        to make (not initialised, or the motion is unknown: then the filter is marked diverged)."""
         self.t += motion.dt
         if self.mu is None:
             return None
         if motion.bad:  # the robot's motion is unknown: we no longer know where the object is
             self.divergence = f"prediction impossible: non-finite or absurd (> 1 km) {', '.join(motion.bad)}"
-            return self.estimate
+            return None
         chart = self.config.chart
         mats = motion.mats
         G_RC, G_odom = mats["G_RC"], mats["G_odom"]
@@ -756,13 +791,15 @@ class PoseEKF:
         Q = process_noise_covariance(mu_bar, G_RC, G_odom, motion.dt, self.config.process, Sigma_odom, chart)
         P_bar = F @ self.P @ F.T + Q  # Sigma_bar = F Sigma F^T + Q
         P_bar = 0.5 * (P_bar + P_bar.T)
-        problem = self._health(mu_bar, P_bar)
+        return mu_bar, F, P_bar
+
+    def _predict_commit(self, mu_bar, F, P_bar, problem: str | None) -> None:
+        """Keep a staged prediction unless its health ``problem`` makes it unusable."""
         if problem is None or problem.startswith(("covariance blow-up", "gimbal")):
             self.mu, self.P = mu_bar, P_bar  # finite and SPD: keep it, even if it is lost
             self.P_xc = F @ self.P_xc  # the calibration error c stays what it was
         if problem is not None and self.divergence is None:
             self.divergence = problem
-        return self.estimate
 
     # ----------------------------------------------------------------- update
     def _skip(self, reason, n, inliers=None) -> UpdateResult:
@@ -835,12 +872,15 @@ class PoseEKF:
             return self._update_failed(pending)
         return self._end_update(pending, *out)
 
-    def _begin_update(self, d_C, b_O, Sigma_d) -> UpdateResult | _PendingUpdate:
+    def _begin_update(self, d_C, b_O, Sigma_d, valid=None, gated=None) -> UpdateResult | _PendingUpdate:
         """:meth:`update` up to its linear algebra: the checks, the gate, and the prior and Jacobian
-        with the calibration error; or the result, when the update is skipped or initialises."""
+        with the calibration error; or the result, when the update is skipped or initialises.
+        ``valid``: the rows' ``_valid_rows``, when already known (a bank whose filters share them);
+        ``gated``: ``_gate``'s output on the valid rows, when already known (a bank gates its filters
+        together)."""
         d, b, S = _check_matches(d_C, b_O, Sigma_d)
         n = d.shape[0]
-        valid = _valid_rows(d, b, S)
+        valid = _valid_rows(d, b, S) if valid is None else valid
         n_valid = int(np.count_nonzero(valid))
         dropped = n - n_valid
         note = f" ({dropped} non-finite or invalid rows dropped)" if dropped else ""
@@ -857,7 +897,7 @@ class PoseEKF:
         idx = np.flatnonzero(valid)
         d, b, S = d[idx], b[idx], S[idx]
 
-        keep, r, C, inliers, why_not = self._feasible_matches(d, b, S, idx, n, n_valid, note)
+        keep, r, C, inliers, why_not = self._feasible_matches(d, b, S, idx, n, n_valid, note, gated)
         if why_not is not None:
             return self._skip(why_not, n, inliers)
         cal = self.config.calibration
@@ -870,11 +910,21 @@ class PoseEKF:
 
     def _end_update(self, pending: _PendingUpdate, dx, P, nis: float, loglik: float) -> UpdateResult:
         """:meth:`update` after its linear algebra (``_information_update``'s outputs)."""
+        mu, P, P_xc = self._corrected_state(dx, P)
+        return self._end_update_checked(pending, mu, P, P_xc, nis, loglik, self._health(mu, P))
+
+    def _corrected_state(self, dx, P):
+        """``(mu, P, P_xc)`` after the update: the correction in the filter's chart, the state's
+        covariance (6, 6) and its cross-covariance with the calibration error."""
         dx = dx[:6]  # consider update: the estimate of c stays 0 (module docstring)
-        n, inliers = pending.n, pending.inliers
         mu, P = self._corrected(self.mu, dx, P)  # P still (6 + m, 6 + m): the chart acts on its rows
-        P, P_xc = P[:6, :6], P[:6, 6:]  # and Sigma_c stays Sigma_c
-        problem = self._health(mu, P)
+        return mu, P[:6, :6], P[:6, 6:]  # and Sigma_c stays Sigma_c
+
+    def _end_update_checked(
+        self, pending: _PendingUpdate, mu, P, P_xc, nis: float, loglik: float, problem: str | None
+    ) -> UpdateResult:
+        """:meth:`_end_update` with the corrected state's health ``problem`` known."""
+        n, inliers = pending.n, pending.inliers
         if problem is not None and not problem.startswith(("covariance blow-up", "gimbal")):
             self.divergence = problem
             return self._skip(f"update rejected: {problem}", n, inliers)
@@ -890,7 +940,7 @@ class PoseEKF:
         self.last_result = res
         return res
 
-    def _feasible_matches(self, d, b, S, idx, n: int, n_valid: int, note: str):
+    def _feasible_matches(self, d, b, S, idx, n: int, n_valid: int, note: str, gated=None):
         """The geometric feasibility check before an update: which usable matches pass the gate.
 
         Returns ``(keep, r, C, inliers, why_not)``: the gate's verdict, residuals and Jacobians on the
@@ -899,7 +949,7 @@ class PoseEKF:
         track is lost) or their model points are collinear.
         """
         gc = self.config.gate
-        keep, r, C = _gate(self.mu, self.P, d, b, S, gc, self.config.chart)
+        keep, r, C = _gate(self.mu, self.P, d, b, S, gc, self.config.chart) if gated is None else gated
         inliers = np.zeros(n, bool)
         inliers[idx[keep]] = True
         n_used = int(np.count_nonzero(keep))

@@ -11,10 +11,13 @@ import numpy as np
 from lab.estimation.fit import _check_matches, _valid_rows, chi2_quantile
 from lab.estimation.models import (
     OrientationChart,
+    euler_rate_matrix,
     measurement_jacobian,
     measurement_jacobian_rv,
     measurement_model,
+    skew,
 )
+from lab.geometry import euler_zyx_to_R
 
 __all__ = ["GateConfig", "gate_matches"]
 
@@ -67,6 +70,37 @@ def _gate(mu_bar, Sigma_bar, d, b, S, gate: GateConfig, chart=OrientationChart.E
         m2 = np.einsum("na,na->n", r, np.linalg.solve(S_jj, r[..., None])[..., 0])
         keep &= m2 <= chi2_quantile(gate.gate_prob, 3)  # Mahalanobis gate, 3 dof
     return keep, r, C
+
+
+def _gate_many(mus, Sigmas, ds, bs, Ss, gate: GateConfig, chart=OrientationChart.EULER) -> list:
+    """:func:`_gate` of several filters at once, their matches' rows stacked (a bank's update): the
+    residuals ``r_j = d_j - (x_r + R b_j)``, the Jacobians ``C_j = [I, -[R b_j]_x E]`` (``E = I`` in
+    the rotation-vector chart) and both gates over all rows in one pass; ``[(keep, r, C), ...]``, one per
+    filter, as ``_gate(mus[i], Sigmas[i], ds[i], bs[i], Ss[i], gate, chart)`` gives to round-off."""
+    counts = [len(d) for d in ds]
+    fi = np.repeat(np.arange(len(counts)), counts)  # each row's filter
+    d, b, S = np.concatenate(ds), np.concatenate(bs), np.concatenate(Ss)
+    mus = np.asarray(mus, dtype=float)
+    R = np.stack([euler_zyx_to_R(mu[3], mu[4], mu[5]) for mu in mus])  # (F, 3, 3)
+    q = np.einsum("nij,nj->ni", R[fi], b)  # q_j = R b_j
+    r = d - (q + mus[fi, :3])  # residual of each match under its filter's predicted pose
+    C = np.zeros((len(d), 3, 6))
+    C[:, 0, 0] = C[:, 1, 1] = C[:, 2, 2] = 1.0
+    if chart is OrientationChart.EULER:
+        E = np.stack([euler_rate_matrix(mu[3], mu[4]) for mu in mus])
+        C[:, :, 3:] = -skew(q) @ E[fi]  # d d_j / d x_o = -[q_j]_x E
+    else:
+        C[:, :, 3:] = -skew(q)
+    keep = np.ones(len(d), bool)
+    if np.isfinite(gate.dist_max_m):
+        keep &= np.linalg.norm(r, axis=1) <= gate.dist_max_m  # Euclidean feasibility check
+    if gate.gate_prob is not None:
+        Sigma_bar = np.asarray(Sigmas, dtype=float)[fi]
+        S_jj = C @ Sigma_bar @ np.swapaxes(C, 1, 2) + S  # predicted covariance of each match
+        m2 = np.einsum("na,na->n", r, np.linalg.solve(S_jj, r[..., None])[..., 0])
+        keep &= m2 <= chi2_quantile(gate.gate_prob, 3)  # Mahalanobis gate, 3 dof
+    bounds = np.cumsum([0] + counts)
+    return [(keep[a:z], r[a:z], C[a:z]) for a, z in zip(bounds[:-1], bounds[1:], strict=True)]
 
 
 def gate_matches(mu_bar, Sigma_bar, d_C, b_O, Sigma_d, gate: GateConfig | None = None) -> np.ndarray:

@@ -5,7 +5,8 @@ One control step (period ``dt``, the same on the simulator and on the real robot
 
     frame    = robot.capture_stereo()                         # images, G_RC and odometry at capture
     bank.predict(...)                                         # Eq. (1)-(2) for every model
-    D_k      = stereo_features(frame)                         # 3D SIFT features
+    roi      = the box at every predicted pose, or None       # full frame when lost or too large
+    D_k      = stereo_features(frame, roi)                    # 3D SIFT features
     bank.update_all(matches of D_k against each B_i)          # EKF per model, batched
     belief   = calcCurrentEntropy(...)                        # Eq. (7)-(9), (5)
     head     : tracking (Eq. (16)-(17)) or scanning           # HeadController
@@ -88,7 +89,8 @@ from lab.identification.scoring import ModelScorer, ScoringConfig
 from lab.identification.step import observe_frame
 from lab.navigation.follower import PathFollower
 from lab.robot import Robot, frame_motion
-from lab.vision import FeatureDatabase, Matcher, stereo_features
+from lab.vision import FeatureDatabase, JointIndex, Matcher, StereoParams, stereo_features
+from lab.vision.roi import RegionOfInterest, tracked_roi
 
 __all__ = ["PlannerChoice", "AgentConfig", "StepRecord", "DecisionRecord", "IdentificationAgent"]
 
@@ -170,7 +172,9 @@ class IdentificationAgent:
         self.scoring = (scoring or ScoringConfig()).for_camera(robot.camera)  # clutter density: this camera's
         self.action_config = action_config or ActionConfig()
         self.rng = np.random.default_rng(seed)
-        self.scorers = [ModelScorer(db, self.scoring) for db in self.dbs]
+        # one exact search of every model's database a frame (the shared faces' features stored once)
+        self.index = JointIndex(self.dbs, self.scoring.k_neighbours)
+        self.scorers = [ModelScorer(db, self.scoring, self.index, i) for i, db in enumerate(self.dbs)]
         # the EKF's correspondences from the scorers' exact search, made once per frame and model
         # (observe_frame): exact, and faster than a FLANN search of a few hundred features
         self.matchers = [
@@ -218,6 +222,34 @@ class IdentificationAgent:
         # per model: (log-likelihood lead, turn of its filter) of the frame that favoured it most
         self._decisive: list[tuple[float, int] | None] = [None] * len(self.dbs)
         self._direction = 0  # the last drive's direction round the ring (+1 ccw, -1 cw, 0 none yet)
+        self.stereo = StereoParams()
+        self._extent = np.max([np.asarray(db.extent, dtype=float) for db in self.dbs], axis=0)
+        self.last_roi: RegionOfInterest | None = None  # the last frame's region (None: the full frame)
+
+    # --- where to look ----------------------------------------------------------------------------
+    def region_of_interest(self, predicted, camera) -> RegionOfInterest | None:
+        """The region of the left image to extract while tracking: the box (the largest database
+        extent) at every filter's predicted pose and each of its look-alike turns, each corner widened
+        by ``roi_n_sigma`` standard deviations of its pixel position (:func:`~lab.vision.roi.tracked_roi`).
+
+        None (the full frame) with ``roi`` off, when the track is lost, no filter has a pose, or the
+        region would cover more than ``roi_max_fraction`` of the image."""
+        cfg = self.config
+        if not cfg.roi or self._lost:
+            return None
+        poses = [(e.G_CO @ T, e.Sigma_rv) for e in predicted if e is not None for T in self.turns]
+        if not poses:
+            return None
+        return tracked_roi(
+            poses,
+            self._extent,
+            camera,
+            self.stereo.min_disparity,
+            self.stereo.max_disparity,
+            margin_px=cfg.roi_margin_px,
+            n_sigma=cfg.roi_n_sigma,
+            max_fraction=cfg.roi_max_fraction,
+        )
 
     # --- one step ---------------------------------------------------------------------------------
     def _perceive(self, frame):
@@ -231,7 +263,8 @@ class IdentificationAgent:
             )
         self._prev = frame
         predicted = self.bank.estimates
-        f = stereo_features(frame.left, frame.right, frame.camera, t=frame.t)
+        self.last_roi = roi = self.region_of_interest(predicted, frame.camera)
+        f = stereo_features(frame.left, frame.right, frame.camera, self.stereo, roi=roi, t=frame.t)
         obs = observe_frame(
             self.P, f, self.bank, predicted, self.matchers, self.scorers, self.scoring, self.turns
         )

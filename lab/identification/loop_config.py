@@ -71,6 +71,18 @@ class AgentConfig:
         goal that way has at least this fraction of the best gain
         (:func:`~lab.identification.planner.continue_direction`): against an operator who turns the
         unique face away, only travel one way round gains on it. 1.0: always Eq. (6)'s argmax.
+    roi : bool
+        While the object is tracked (a filter has a pose and the track is not lost), extract SIFT only
+        in the region of interest that holds the box at every filter's predicted pose and look-alike
+        turn (:func:`~lab.vision.roi.tracked_roi`), and in the right image only in the band that can
+        hold its features' partners; the full frame otherwise. False: always the full frame.
+    roi_n_sigma : float
+        Each box corner is widened by this many standard deviations of its pixel position and depth
+        under the predicted pose's covariance ...
+    roi_margin_px : float [px]
+        ... and the region by this margin.
+    roi_max_fraction : float
+        A region larger than this fraction of the image gives the full frame.
     """
 
     dt: float = 0.2
@@ -91,6 +103,10 @@ class AgentConfig:
     replan_shift_m: float = 0.3
     retry_s: float = 2.0
     keep_direction: float = 0.5
+    roi: bool = True
+    roi_n_sigma: float = 3.0
+    roi_margin_px: float = 10.0
+    roi_max_fraction: float = 0.6
 
     def __post_init__(self):
         if not 0.02 <= self.dt <= 1.0:
@@ -99,6 +115,11 @@ class AgentConfig:
             raise ConfigError(f"stop_probability must be within (0.5, 1), got {self.stop_probability}")
         if self.max_actions < 0:
             raise ConfigError(f"max_actions must be >= 0, got {self.max_actions}")
+        if not (self.roi_n_sigma >= 0 and self.roi_margin_px >= 0 and 0 < self.roi_max_fraction <= 1):
+            raise ConfigError(
+                f"need roi_n_sigma >= 0, roi_margin_px >= 0 and roi_max_fraction within (0, 1], got "
+                f"{self.roi_n_sigma}, {self.roi_margin_px}, {self.roi_max_fraction}"
+            )
         if not 0 < self.keep_direction <= 1:
             raise ConfigError(f"keep_direction must be within (0, 1], got {self.keep_direction}")
         if self.symmetry_turns < 1 or self.keyframes < 1 or not self.reseat_margin > 0:

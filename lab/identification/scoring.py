@@ -73,7 +73,7 @@ from lab.estimation import (
 from lab.estimation.fit import chi2_quantile
 from lab.geometry import euler_zyx_to_R
 from lab.robot import StereoCamera
-from lab.vision import FeatureDatabase, Features3D, Matcher, StereoParams
+from lab.vision import FeatureDatabase, Features3D, JointIndex, Matcher, StereoParams
 
 __all__ = [
     "Explanation",
@@ -377,13 +377,28 @@ class ModelScorer:
     config : ScoringConfig
         With its clutter density resolved (:meth:`ScoringConfig.for_camera`); else
         :class:`~lab.errors.ConfigError`.
+    index : JointIndex, optional
+        One index over every model's database, searched once a frame for all of them
+        (:class:`~lab.vision.JointIndex`: the same neighbours as this model's own exact search) ...
+    model : int
+        ... in which ``db`` is database ``model``.
     """
 
-    def __init__(self, db: FeatureDatabase, config: ScoringConfig):
+    def __init__(
+        self, db: FeatureDatabase, config: ScoringConfig, index: JointIndex | None = None, model: int = 0
+    ):
         config.require_clutter_density()
         self.db = db
         self.config = config
         self._matcher = Matcher(db, method="brute", k=self.config.k_neighbours)
+        if index is not None and not (
+            0 <= model < len(index.dbs) and index.dbs[model] is db and index.k[model] == self._matcher.k
+        ):
+            raise ConfigError(
+                f"the joint index's database {model} must be this scorer's ({db.name}), searched for "
+                f"{self._matcher.k} neighbours"
+            )
+        self._index, self._model = index, model
         self._gate_m2 = chi2_quantile(self.config.gate_prob, 3)
         self._nn_cache: tuple | None = None  # (features, idx, dist) of the last feature set
         self._cand_cache: tuple | None = None  # (features, its descriptor candidates)
@@ -421,7 +436,10 @@ class ModelScorer:
         c = self._nn_cache
         if c is not None and c[0] is features:
             return c[1], c[2]
-        idx, dist = self._matcher.neighbours(features.descriptors)
+        if self._index is not None:  # every model's search at once, kept by the index for the others
+            idx, dist = self._index.neighbours(features.descriptors)[self._model]
+        else:
+            idx, dist = self._matcher.neighbours(features.descriptors)
         self._nn_cache = (features, idx, dist)
         return idx, dist
 

@@ -51,6 +51,7 @@ from lab.geometry import transform_points, wrap_angle
 from lab.robot import Robot, StereoCamera, StereoFrame, frame_motion
 from lab.vision.database import FeatureDatabase
 from lab.vision.matching import Matcher
+from lab.vision.roi import object_roi
 from lab.vision.stereo import sift, stereo_features
 
 __all__ = [
@@ -223,30 +224,6 @@ def aim_at(p_R: np.ndarray, camera: StereoCamera, limits=None) -> tuple[float, f
         pan = min(max(pan, limits.pan_min), limits.pan_max)
         tilt = min(max(tilt, limits.tilt_min), limits.tilt_max)
     return pan, tilt
-
-
-def object_roi(
-    G_CO: np.ndarray, extent, camera: StereoCamera, margin_px: int
-) -> tuple[int, int, int, int] | None:
-    """The region of interest ``(x, y, w, h)`` [px] around the object's box projected at pose ``G_CO``.
-
-    None when the object is (partly) behind the camera or the box falls outside the image.
-    """
-    h = 0.5 * np.asarray(extent, dtype=float)
-    corners = np.array(
-        [[sx * h[0], sy * h[1], sz * h[2]] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
-    )
-    p = transform_points(G_CO, corners)
-    if np.any(p[:, 2] <= 0.05):
-        return None
-    uv = camera.project(p)
-    x0, y0 = np.floor(uv.min(axis=0)) - margin_px
-    x1, y1 = np.ceil(uv.max(axis=0)) + margin_px
-    x0, y0 = max(0, int(x0)), max(0, int(y0))
-    x1, y1 = min(camera.width, int(x1)), min(camera.height, int(y1))
-    if x1 - x0 < 8 or y1 - y0 < 8:
-        return None
-    return x0, y0, x1 - x0, y1 - y0
 
 
 #: Database features closer than this [m] in the object frame are one physical point for the ratio

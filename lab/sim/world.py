@@ -131,6 +131,8 @@ class SimWorld:
         self.carriers: dict[str, Carrier] = {}
         self.robot = None  # set by SimRobot
         self.truth = Truth(self)
+        self._renders: dict = {}  # the last few renders by what they saw (render())
+        self.n_renders = self.n_renders_reused = 0
         self._build()
 
     # --- construction ---------------------------------------------------------------------------
@@ -338,6 +340,13 @@ class SimWorld:
         rgb : ndarray, shape (H, W, 3), uint8
         depth : ndarray, shape (H', W') float32 [m], or None
         seg : ndarray, shape (H', W') int32, or None
+
+        Notes
+        -----
+        A view whose camera, image settings and every body's pose are those of one of the last
+        :attr:`RENDERS_KEPT` renders is not rendered again: copies of that render's images are returned
+        (the renderer is deterministic, so they are the very images; a stereo pair keeps two).
+        ``n_renders`` counts the calls, ``n_renders_reused`` those answered so.
         """
         s = self.settings.supersample if supersample is None else supersample
         W, H = camera.width * s, camera.height * s
@@ -352,13 +361,34 @@ class SimWorld:
             if self.settings.renderer == "tiny"
             else pybullet.ER_BULLET_HARDWARE_OPENGL
         )
+        light = tuple(self.settings.light_direction if light_direction is None else light_direction)
+        key = (
+            tuple(view),
+            tuple(proj),
+            W,
+            H,
+            s,
+            flags,
+            want_depth,
+            want_seg,
+            self.settings.shadows,
+            light,
+            renderer,
+            self._scene_state(),
+        )
+        self.n_renders += 1
+        kept = self._renders.get(key)
+        if kept is not None:  # nothing in view moved: the same images
+            self.n_renders_reused += 1
+            self._renders[key] = self._renders.pop(key)  # most recent last
+            return tuple(None if a is None else a.copy() for a in kept)
         _, _, rgba, depth_buf, seg = self.p.getCameraImage(
             W,
             H,
             view,
             proj,
             shadow=int(self.settings.shadows),
-            lightDirection=self.settings.light_direction if light_direction is None else light_direction,
+            lightDirection=light,
             renderer=renderer,
             flags=flags,
         )
@@ -373,7 +403,21 @@ class SimWorld:
         segm = np.asarray(seg, dtype=np.int32).reshape(H, W) if want_seg else None
         if segm is not None:
             segm = np.where(segm >= 0, segm & ((1 << 24) - 1), -1)
-        return np.ascontiguousarray(rgb), depth, segm
+        out = (np.ascontiguousarray(rgb), depth, segm)
+        self._renders[key] = tuple(None if a is None else a.copy() for a in out)
+        while len(self._renders) > self.RENDERS_KEPT:
+            self._renders.pop(next(iter(self._renders)))  # the oldest
+        return out
+
+    #: Renders kept for a view that did not change (a stereo pair is two).
+    RENDERS_KEPT = 2
+
+    def _scene_state(self) -> tuple:
+        """Every body's base pose: what a render sees of the scene (the bodies have no joints and
+        their looks never change after they are made)."""
+        p = self.p
+        poses = (p.getBasePositionAndOrientation(p.getBodyUniqueId(i)) for i in range(p.getNumBodies()))
+        return tuple(pos + quat for pos, quat in poses)
 
     def projection_matrix(self, camera, supersample: int = 1) -> list[float]:
         """OpenGL projection (column-major, 16 floats) whose image has exactly ``camera``'s intrinsics.

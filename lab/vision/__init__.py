@@ -9,7 +9,7 @@ likelihood map of the global search; ``StereoRectifier`` turns a real camera's r
 from lab.vision.colour import back_project, chromaticity, colour_histogram
 from lab.vision.database import FeatureDatabase, load_database, save_database
 from lab.vision.dense import dense_points, disparity_map
-from lab.vision.matching import Correspondences, Matcher
+from lab.vision.matching import Correspondences, JointIndex, Matcher
 from lab.vision.rectify import StereoCalibration, StereoRectifier, load_calibration
 from lab.vision.stereo import Features3D, StereoParams, stereo_features, triangulate
 
@@ -17,6 +17,7 @@ __all__ = [
     "Correspondences",
     "FeatureDatabase",
     "Features3D",
+    "JointIndex",
     "Matcher",
     "StereoCalibration",
     "StereoParams",

@@ -2,6 +2,8 @@
 
 :class:`Matcher` finds it with Lowe's Best-Bin-First search (a FLANN KD-tree, or an exact matrix
 product) and an alias-aware ratio test; :class:`Correspondences` holds the candidates.
+:class:`JointIndex` searches several databases at once, exactly: one matrix product over their
+distinct descriptors (the box models share three faces), each model's nearest neighbours picked from it.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from lab.errors import ConfigError
 from lab.vision.database import FeatureDatabase
 from lab.vision.stereo import Features3D, _small_integers
 
-__all__ = ["Correspondences", "Matcher"]
+__all__ = ["Correspondences", "JointIndex", "Matcher"]
 
 
 @dataclass(frozen=True)
@@ -116,6 +118,84 @@ def _k_smallest(d2: np.ndarray, k: int):
     return idx, val
 
 
+def _nearest(d2: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``k`` nearest columns of each row of the squared distances ``d2`` (n, N): indices (n, k) and
+    L2 distances (n, k), nearest first (all N, sorted, when ``k >= N``)."""
+    if k < d2.shape[1]:
+        idx, part = _k_smallest(d2, k)
+    else:
+        idx, part = _k_smallest_by_partition(d2, np.tile(np.arange(d2.shape[1]), (len(d2), 1)))
+    return idx, np.sqrt(np.maximum(part, 0.0))
+
+
+class JointIndex:
+    r"""One exact nearest-neighbour index over the features of several databases ``B_1 .. B_L``.
+
+    Each distinct descriptor is stored once, with the models that hold it (the box models' three shared
+    faces: 2753 descriptors of the four box databases are 1534 distinct ones). A frame's descriptors
+    ``q`` are compared with all of them in one matrix product,
+
+    .. math:: d^2(q, b) = |q|^2 + |b|^2 - 2\, q \cdot b,
+
+    and each model's ``k`` nearest are picked from its own columns, in its database's order: the very
+    neighbours (indices into ``B_i``, distances, order among equals) of ``Matcher(B_i,
+    method="brute", k=k)``. That holds because SIFT's descriptors are integers (at most 255), so every
+    squared distance is an integer below 2^24, exact in float32 however the product sums it; a set with
+    other descriptors is searched model by model, as the matcher would.
+
+    Parameters
+    ----------
+    databases : sequence of FeatureDatabase
+    k : int
+        Neighbours per model (at most each database's size).
+    """
+
+    def __init__(self, databases, k: int = 8):
+        self.dbs = list(databases)
+        if not self.dbs:
+            raise ConfigError("a JointIndex needs at least one database")
+        if int(k) != k or k < 1:
+            raise ConfigError(f"k must be a positive integer, got {k}")
+        self.k = [min(int(k), len(db)) for db in self.dbs]
+        D = [np.ascontiguousarray(db.descriptors, dtype=np.float32) for db in self.dbs]
+        self.exact = all(_small_integers(d) for d in D)
+        if self.exact:
+            stacked = np.concatenate(D) if sum(len(d) for d in D) else np.zeros((0, 128), np.float32)
+            self.descriptors, inverse = np.unique(stacked, axis=0, return_inverse=True)
+            bounds = np.cumsum([0] + [len(d) for d in D])
+            #: each model's features as columns of the distinct descriptors, in the database's order
+            self.columns = [inverse.reshape(-1)[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+            #: which models hold each distinct descriptor, (U, L) bool
+            self.members = np.zeros((len(self.descriptors), len(D)), bool)
+            for i, c in enumerate(self.columns):
+                self.members[c, i] = True
+            self._sq = np.einsum("ij,ij->i", self.descriptors, self.descriptors)
+        self._per_model: list | None = None  # Matcher(B_i, brute) each, for other descriptors (on first use)
+        self._cache: tuple | None = None  # (descriptors, result) of the last search
+
+    def __len__(self) -> int:
+        """Distinct descriptors stored (the databases' total without an exact index)."""
+        return len(self.descriptors) if self.exact else sum(len(db) for db in self.dbs)
+
+    def neighbours(self, descriptors: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Every model's ``k`` nearest database features of each descriptor (n, 128): per model, indices
+        into its database (n, k_i) and L2 distances (n, k_i), nearest first. The last search is kept:
+        asking again with the same array returns it."""
+        c = self._cache
+        if c is not None and c[0] is descriptors:
+            return c[1]
+        q = np.ascontiguousarray(descriptors, dtype=np.float32)
+        if not self.exact or not _small_integers(q):
+            out = [
+                Matcher(db, method="brute", k=k).neighbours(q) for db, k in zip(self.dbs, self.k, strict=True)
+            ]
+        else:
+            d2 = np.einsum("ij,ij->i", q, q)[:, None] + self._sq[None, :] - 2.0 * q @ self.descriptors.T
+            out = [_nearest(d2[:, cols], k) for cols, k in zip(self.columns, self.k, strict=True)]
+        self._cache = (descriptors, out)
+        return out
+
+
 class Matcher:
     """Lowe's Best-Bin-First matching of measured features against one database (FLANN KD-tree).
 
@@ -177,11 +257,7 @@ class Matcher:
             idx, d2 = self._index.knnSearch(q, self.k, params={"checks": self._checks})
             return idx.astype(int), np.sqrt(np.maximum(d2, 0.0))
         d2 = np.einsum("ij,ij->i", q, q)[:, None] + self._D_sq[None, :] - 2.0 * q @ self._D.T
-        if self.k < len(self._D):
-            idx, part = _k_smallest(d2, self.k)
-        else:
-            idx, part = _k_smallest_by_partition(d2, np.tile(np.arange(len(self._D)), (len(q), 1)))
-        return idx, np.sqrt(np.maximum(part, 0.0))
+        return _nearest(d2, self.k)
 
     _ALIAS_TABLE_MAX = 4096  # database features up to which the alias table is kept (16 MB at most)
 

@@ -6,8 +6,10 @@ stereo error model (the EKF's measurement noise ``Sigma_m`` is built from these)
 
 Pipeline for a rectified pair (rows are epipolar lines):
 
-1. SIFT keypoints and descriptors in the left and right grey images (optionally inside a region of
-   interest of the left image, as the search paper does once a track exists).
+1. SIFT keypoints and descriptors in the left and right grey images; optionally only inside a region of
+   interest of the left image (as both papers do once a track exists: :mod:`lab.vision.roi`) and the
+   band of the right image that can hold its features' partners, SIFT then running on those
+   rectangles alone (each grown by :data:`ROI_PAD_PX` for the keypoints' support).
 2. For each left keypoint, candidate right keypoints lie on the same row (``|v_L - v_R| <= max_dy``)
    at a positive disparity ``d = u_L - u_R`` within ``[min_disparity, max_disparity]``. Among the
    candidates the nearest descriptor must beat the second nearest by Lowe's ratio, and the pair must be
@@ -30,8 +32,24 @@ import cv2
 import numpy as np
 
 from lab.errors import ConfigError
+from lab.vision.roi import RegionOfInterest
 
-__all__ = ["Features3D", "StereoParams", "stereo_features", "triangulate", "triangulation_covariance", "sift"]
+__all__ = [
+    "ROI_PAD_PX",
+    "Features3D",
+    "StereoParams",
+    "stereo_features",
+    "triangulate",
+    "triangulation_covariance",
+    "sift",
+]
+
+#: Pixels of image kept around a region of interest when SIFT runs on it alone: a keypoint's
+#: descriptor window at the first octaves (and the blur before it) reaches this far. Measured on a
+#: rendered box at 1 m (realistic profile): 91 % of the keypoints found inside a region are the full
+#: image's at the same pixel (16 px or 32 px alike; the rest differ at the coarse octaves, whose blur
+#: the crop cuts), at a quarter of the full image's SIFT time.
+ROI_PAD_PX = 16
 
 
 @dataclass(frozen=True)
@@ -285,7 +303,7 @@ def stereo_features(
     right: np.ndarray,
     camera,
     params: StereoParams | None = None,
-    roi: tuple[int, int, int, int] | None = None,
+    roi: RegionOfInterest | tuple[int, int, int, int] | None = None,
     t: float = 0.0,
     detector: cv2.SIFT | None = None,
 ) -> Features3D:
@@ -297,8 +315,13 @@ def stereo_features(
         Rectified images whose intrinsics are ``camera``'s.
     camera : lab.robot.StereoCamera
     params : StereoParams, optional
-    roi : (x, y, w, h), optional [px]
-        Detect left keypoints only inside this rectangle (right keypoints on the same rows).
+    roi : RegionOfInterest or (x, y, w, h) [px], optional
+        Extract left keypoints only inside this rectangle, and right keypoints only in the band that can
+        hold their partners (:meth:`~lab.vision.roi.RegionOfInterest.right_band`: the same rows, the
+        disparities of the region, or ``params``' whole range for a plain rectangle); SIFT runs on
+        those rectangles alone, each grown by :data:`ROI_PAD_PX`. A region's features are matched
+        over ``params``' whole disparity range, then those outside the region's disparities (the
+        background behind its object) dropped. None: the full images.
     t : float [s]
         Time stamp carried into the result.
     detector : cv2.SIFT, optional
@@ -312,18 +335,21 @@ def stereo_features(
     _check_pair(left, right, camera)
     det = detector or sift(params.n_features, params.contrast_threshold)
     gl, gr = _grey(left), _grey(right)
-    masks = (None, None) if roi is None else _roi_masks(roi, gl.shape, camera, params)
-    if masks is None:  # the region lies outside the image
+    rects = (None, None) if roi is None else _roi_rects(roi, camera, params)
+    if rects is None:  # the region lies outside the image
         return Features3D.empty(t)
-    (kp_l, des_l), (kp_r, des_r) = _detect_pair(gl, gr, *masks, det, params)
+    (kp_l, des_l), (kp_r, des_r) = _detect_pair(gl, gr, *rects, det, params)
     if des_l is None or des_r is None:
         return Features3D.empty(t)
     il, ir = _epipolar_matches(kp_l, des_l, kp_r, des_r, params)
+    uv_l = np.array([kp_l[i].pt for i in il], dtype=float).reshape(-1, 2)
+    uv_r = np.array([kp_r[i].pt for i in ir], dtype=float).reshape(-1, 2)
+    disp = uv_l[:, 0] - uv_r[:, 0]
+    keep = _in_disparities(roi, disp)
+    if keep is not None:
+        il, uv_l, uv_r, disp = il[keep], uv_l[keep], uv_r[keep], disp[keep]
     if len(il) == 0:
         return Features3D.empty(t)
-    uv_l = np.array([kp_l[i].pt for i in il], dtype=float)
-    uv_r = np.array([kp_r[i].pt for i in ir], dtype=float)
-    disp = uv_l[:, 0] - uv_r[:, 0]
     pts = triangulate(uv_l, uv_r, camera)
     cov = triangulation_covariance(uv_l, disp, camera, params)
     return Features3D(pts, des_l[il].astype(np.float32), uv_l, disp, cov, t)
@@ -340,40 +366,84 @@ def _check_pair(left: np.ndarray, right: np.ndarray, camera) -> None:
         )
 
 
-def _roi_masks(roi, shape, camera, params: StereoParams):
-    """Detection masks (uint8, ``shape``) for a region ``(x, y, w, h)`` [px] of the left image: the
-    region itself on the left, on the right the same rows (2 px more each side) from ``max_disparity``
-    further left to its right edge. None when the region, clipped to the image, is empty."""
-    x, y, w, h = (int(v) for v in roi)
-    x, y = max(0, x), max(0, y)
-    w, h = min(w, camera.width - x), min(h, camera.height - y)
-    if w <= 0 or h <= 0:
+def _in_disparities(roi, disparity: np.ndarray) -> np.ndarray | None:
+    """Which matches (their disparities (n,) [px]) lie in a :class:`RegionOfInterest`'s disparity range
+    (None: keep all, for no region or a plain rectangle).
+
+    The matches themselves are made over ``params``' whole range, as for the full frame: restricting
+    the search to the region's range instead leaves a feature of the background behind the object
+    without its true partner and passes the ratio test on a wrong one at the object's depth (measured
+    on 6 rendered views: 411 features of which 34 % lie more than 5 cm off the depth buffer, against
+    326 and 20 % this way, and 319 and 19 % for the full frame's features in the same region)."""
+    if not isinstance(roi, RegionOfInterest):
         return None
-    mask_l = np.zeros(shape, np.uint8)
-    mask_l[y : y + h, x : x + w] = 255
-    mask_r = np.zeros(shape, np.uint8)
-    x0 = max(0, x - int(params.max_disparity))
-    mask_r[max(0, y - 2) : y + h + 2, x0 : x + w] = 255
-    return mask_l, mask_r
+    return (disparity >= roi.min_disparity) & (disparity <= roi.max_disparity)
 
 
-def _detect_pair(gl, gr, mask_l, mask_r, det: cv2.SIFT, params: StereoParams):
-    """SIFT keypoints and descriptors of the left and the right grey image, ``((kp_l, des_l), (kp_r,
-    des_r))``; with ``params.parallel`` the right image in a second thread with its own detector."""
+def _roi_rects(roi, camera, params: StereoParams):
+    """The rectangles ``(x, y, w, h)`` [px] of the left and the right image to extract, for a region
+    (a :class:`RegionOfInterest`, or a plain rectangle with ``params``' disparity range) clipped to the
+    image; None when it is empty."""
+    if not isinstance(roi, RegionOfInterest):
+        x, y, w, h = (int(v) for v in roi)
+        x0, y0 = max(0, x), max(0, y)
+        w, h = min(x + w, camera.width) - x0, min(y + h, camera.height) - y0
+        if w <= 0 or h <= 0:
+            return None
+        roi = RegionOfInterest(x0, y0, w, h, params.min_disparity, params.max_disparity)
+    band = roi.right_band(camera, params.max_dy)
+    if band is None:
+        return None
+    return roi.rect, band.rect
+
+
+def detect_in(grey: np.ndarray, rect, det: cv2.SIFT, pad: int = ROI_PAD_PX):
+    """SIFT keypoints and descriptors of ``grey`` inside the rectangle ``rect`` = ``(x, y, w, h)`` [px]
+    only (None: the whole image). SIFT runs on the rectangle grown by ``pad`` px (clipped to the image);
+    the keypoints are moved to the whole image's pixels and those outside ``rect`` dropped.
+
+    Returns
+    -------
+    keypoints : sequence of cv2.KeyPoint
+    descriptors : ndarray, shape (n, 128), float32, or None
+        As ``detectAndCompute``'s (None: no keypoint at all).
+    """
+    if rect is None:
+        return det.detectAndCompute(grey, None)
+    x, y, w, h = rect
+    H, W = grey.shape[:2]
+    x0, y0 = max(0, x - pad), max(0, y - pad)
+    x1, y1 = min(W, x + w + pad), min(H, y + h + pad)
+    kp, des = det.detectAndCompute(np.ascontiguousarray(grey[y0:y1, x0:x1]), None)
+    if des is None or len(kp) == 0:
+        return (), None
+    keep = []
+    for i, k in enumerate(kp):
+        u, v = k.pt[0] + x0, k.pt[1] + y0
+        if x <= u < x + w and y <= v < y + h:
+            k.pt = (u, v)
+            keep.append(i)
+    return [kp[i] for i in keep], des[keep]
+
+
+def _detect_pair(gl, gr, rect_l, rect_r, det: cv2.SIFT, params: StereoParams):
+    """SIFT keypoints and descriptors of the left and the right grey image, each inside its rectangle
+    (None: the whole image), ``((kp_l, des_l), (kp_r, des_r))``; with ``params.parallel`` the right
+    image in a second thread with its own detector."""
     if not params.parallel:
-        return det.detectAndCompute(gl, mask_l), det.detectAndCompute(gr, mask_r)
+        return detect_in(gl, rect_l, det), detect_in(gr, rect_r, det)
     right: dict = {}
 
     def detect_right():
         try:
-            right["kp_des"] = sift(params.n_features, params.contrast_threshold).detectAndCompute(gr, mask_r)
+            right["kp_des"] = detect_in(gr, rect_r, sift(params.n_features, params.contrast_threshold))
         except BaseException as e:  # re-raised in the caller's thread
             right["error"] = e
 
     worker = threading.Thread(target=detect_right, name="sift-right")
     worker.start()
     try:
-        left = det.detectAndCompute(gl, mask_l)
+        left = detect_in(gl, rect_l, det)
     finally:
         worker.join()
     if "error" in right:
