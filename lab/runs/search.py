@@ -603,14 +603,13 @@ def _relocalizing(navigate, robot: LocalizedRobot | TrackedRobot):
 
 
 def _relocalized_find(out: AgentResult, robot: LocalizedRobot | TrackedRobot) -> AgentResult:
-    """Active re-localization before reporting a found object: the object's pose relative to the robot
+    """Active re-localization before reporting a found object, to the report's tighter thresholds
+    at the object (:meth:`LocalizedRobot.relocalize_to_report`): the object's pose relative to the robot
     stays; its world pose follows the corrected robot pose ``G_WO' = G_WR' G_WR^-1 G_WO``."""
     if not out.found or out.G_WO is None or robot.mode is not LocalizationMode.LANDMARKS:
         return out
     before = robot.odometry()
-    if robot.certain():
-        return out
-    robot.relocalize()
+    robot.relocalize_to_report(at_W=out.G_WO[:2, 3])
     after = robot.odometry()
     return replace(out, G_WO=after.G() @ se3_inv(before.G()) @ out.G_WO)
 
