@@ -253,7 +253,8 @@ class LocalizerConfig:
     report_max_views, report_passes : int
         At most this many head views for the reporting re-localization, going round the landmarks in
         view up to ``report_passes`` times (a second look at a poster brings fresh image noise, not a
-        fresh calibration: more passes would make the filter trust the shared error more than it should).
+        fresh calibration: more passes would make the filter trust the shared error more than it should;
+        a later pass looks again only where the one before saw a landmark the filter accepted).
     first_sighting_max_offset_m, first_sighting_max_offset_rad : float [m], [rad]
         A start pose measured by hand (:class:`Localizer` with ``first_sighting=True``): the first
         landmark sighting that disagrees with it beyond the gate replaces it when the pose it implies is
@@ -788,7 +789,8 @@ class LocalizedRobot(RobotWrapper):
         ``sigma_m``, ``sigma_rad``, ``at_W``: the thresholds of :meth:`certain` and the point they hold
         at (default the re-localization's, at the robot; a report uses ``report_sigma_m`` at the object,
         :meth:`relocalize_to_report`); ``passes``: how many times round the landmarks in view, at most
-        ``max_views`` views in all.
+        ``max_views`` views in all; a pass after the first looks only where the one before it saw a
+        landmark the filter accepted.
 
         Returns True when the pose is (or became) within the thresholds; the head is put back where
         it was.
@@ -799,14 +801,29 @@ class LocalizedRobot(RobotWrapper):
             return True
         self.base.stop()
         start = self.base.pan_tilt()
-        views = self.landmark_views(tilt_max) * max(int(passes), 1)
-        done = False
-        for pan, tilt, _name in views[:max_views]:
-            self.base.command_pan_tilt(pan, tilt)
-            self.base.wait_pan_tilt(timeout=15.0)  # a swing across the whole pan range takes > 5 s
-            self.capture_stereo()
-            if self.certain(sigma_m, sigma_rad, at_W):
-                done = True
+        views = self.landmark_views(tilt_max)
+        done, n_views = False, 0
+        for _ in range(max(int(passes), 1)):
+            productive = []
+            for view in views:
+                if n_views >= max_views:
+                    break
+                pan, tilt, _name = view
+                self.base.command_pan_tilt(pan, tilt)
+                self.base.wait_pan_tilt(timeout=15.0)  # a swing across the whole pan range takes > 5 s
+                n0 = len(self.localizer.history)
+                self.capture_stereo()
+                n_views += 1
+                if any(r.accepted for r in self.localizer.history[n0:]):
+                    productive.append(view)
+                if self.certain(sigma_m, sigma_rad, at_W):
+                    done = True
+                    break
+            # the next pass looks again only where this one saw a landmark it accepted: the robot stands
+            # still, so a view that showed none, or an outlier (a look-alike poster's fit), shows the same
+            # again, and repeated rejections would trip the gate lock-out recovery for nothing
+            views = productive
+            if done or not views or n_views >= max_views:
                 break
         self.base.command_pan_tilt(start.pan, start.tilt)
         self.base.wait_pan_tilt(timeout=15.0)
