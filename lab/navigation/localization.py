@@ -820,7 +820,7 @@ class LocalizedRobot(RobotWrapper):
                     done = True
                     break
             # the next pass looks again only where this one saw a landmark it accepted: the robot stands
-            # still, so a view that showed none, or an outlier (a look-alike poster's fit), shows the same
+            # still, so a view that showed none, or an outlier (a wrong fit), shows the same
             # again, and repeated rejections would trip the gate lock-out recovery for nothing
             views = productive
             if done or not views or n_views >= max_views:
