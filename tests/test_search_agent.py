@@ -238,6 +238,9 @@ def test_closed_loop_finds_the_toy_block():
     assert res.sim_time_s <= 120.0
     assert res.camera_frame_error["position_m"] <= 0.02 and res.camera_frame_error["orientation_deg"] <= 10.0
     assert res.odometry_error_m < 0.05
+    rr = res.report_relocalization  # found: re-localized before the report, at the object's point
+    assert rr is not None and rr["point_sigma_after_m"] <= rr["point_sigma_before_m"]
+    assert rr["within_report_sigma"] == (rr["point_sigma_after_m"] <= 0.015)
     check_contract(res.to_json())
 
 

@@ -262,6 +262,7 @@ class SearchResult:
     localization: str = "landmarks"
     landmark_updates: int = 0
     localization_note: str | None = None
+    report_relocalization: dict | None = None
     events: tuple[SearchEvent, ...] = field(default=(), repr=False)
     trace: SearchTrace | None = field(default=None, repr=False, compare=False)
     recording: str | None = None
@@ -306,6 +307,7 @@ class SearchResult:
             "localization": self.localization,
             "landmark_updates": int(self.landmark_updates),
             "localization_note": self.localization_note,
+            "report_relocalization": self.report_relocalization,
             "events": [{**e.as_dict(), "t": round(e.t - t0, 3)} for e in self.events],
             "recording": self.recording,
             "sensing": self.sensing,
@@ -443,7 +445,7 @@ def run_search(
         t0 = 0.0 if kind is RobotKind.SIM else robot.now()
         hook = _with_progress(attach, t0) if progress else attach
         parts = (db, navigate, spec, cfg, seed, recorder, hook, (max_time, max_wall_time))
-        out, truth_end, budget, odom, track = _search(robot, truth_of, *parts)
+        out, truth_end, budget, odom, track, report_reloc = _search(robot, truth_of, *parts)
         profile, applies = run.sensing, tuple(run.sensing_applies_to)
         estimate = robot.pose_estimate()
         watchdog = None if kind is RobotKind.SIM else int(run.robot.watchdog_stops)
@@ -460,6 +462,7 @@ def run_search(
         localization=mode.value,
         landmark_updates=estimate.n_updates,
         localization_note=note,
+        report_relocalization=report_reloc,
         path_length_m=budget.path_length_m,
         global_searches=out.global_searches,
         local_searches=out.local_searches,
@@ -585,8 +588,9 @@ def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, 
     if attach is not None:
         attach(agent)
     out = agent.run()  # the robot stopped on its way out (also after Ctrl-C: then reason "interrupted")
+    report_reloc = None
     if out.reason != INTERRUPTED:
-        out = _relocalized_find(out, tracked)
+        out, report_reloc = _relocalized_find(out, tracked)
     tracked.record(force=True)  # where the run ended
     truth = _TrialTruth(
         G_WO=truth_of.G_WO(),
@@ -595,7 +599,7 @@ def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, 
         collisions=truth_of.collisions(),
         robot_time_s=robot.now(),
     )
-    return out, truth, budget, robot.base.odometry(), tracked.track()
+    return out, truth, budget, robot.base.odometry(), tracked.track(), report_reloc
 
 
 def _relocalizing(navigate, robot: LocalizedRobot | TrackedRobot):
@@ -610,17 +614,31 @@ def _relocalizing(navigate, robot: LocalizedRobot | TrackedRobot):
     return go
 
 
-def _relocalized_find(out: AgentResult, robot: LocalizedRobot | TrackedRobot) -> AgentResult:
-    """Active re-localization before reporting a found object: the object's pose relative to the robot
-    stays; its world pose follows the corrected robot pose ``G_WO' = G_WR' G_WR^-1 G_WO``."""
+def _relocalized_find(
+    out: AgentResult, robot: LocalizedRobot | TrackedRobot
+) -> tuple[AgentResult, dict | None]:
+    """Active re-localization before reporting a found object, to the report's tighter thresholds
+    at the object (:meth:`LocalizedRobot.relocalize_to_report`): the object's pose relative to the robot
+    stays; its world pose follows the corrected robot pose ``G_WO' = G_WR' G_WR^-1 G_WO``.
+
+    Also returns what it did, for the JSON's ``report_relocalization`` (None when nothing was reported):
+    the landmark updates it made, the object point's position standard deviation before and after, and
+    how far the reported object moved."""
     if not out.found or out.G_WO is None or robot.mode is not LocalizationMode.LANDMARKS:
-        return out
-    before = robot.odometry()
-    if robot.certain():
-        return out
-    robot.relocalize()
-    after = robot.odometry()
-    return replace(out, G_WO=after.G() @ se3_inv(before.G()) @ out.G_WO)
+        return out, None
+    p_W = out.G_WO[:2, 3].copy()
+    est0 = robot.pose_estimate()
+    robot.relocalize_to_report(at_W=p_W)
+    est1 = robot.pose_estimate()
+    G_WO = est1.pose.G() @ se3_inv(est0.pose.G()) @ out.G_WO
+    info = {
+        "updates": int(est1.n_updates - est0.n_updates),
+        "point_sigma_before_m": round(est0.point_sigma_m(p_W), 4),
+        "point_sigma_after_m": round(est1.point_sigma_m(p_W), 4),
+        "within_report_sigma": bool(est1.point_sigma_m(p_W) <= robot.config.report_sigma_m),
+        "shift_m": round(float(np.linalg.norm(G_WO[:3, 3] - out.G_WO[:3, 3])), 4),
+    }
+    return replace(out, G_WO=G_WO), info
 
 
 def _scored(object: str, out: AgentResult, truth: _TrialTruth, odom) -> dict:

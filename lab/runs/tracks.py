@@ -123,6 +123,12 @@ class TrackedRobot(RobotWrapper):
         self.record(force=True)
         return done
 
+    def relocalize_to_report(self, at_W=None) -> bool:
+        """The localized robot's re-localization before a report, then a sample (as :meth:`relocalize`)."""
+        done = self.base.relocalize_to_report(at_W)
+        self.record(force=True)
+        return done
+
     def track(self) -> RobotTrack:
         """What was recorded so far."""
         a = np.array(self._rows, dtype=float).reshape(-1, 10)

@@ -49,6 +49,7 @@ from lab.estimation import (
 )
 from lab.geometry import transform_points, wrap_angle
 from lab.robot import Robot, StereoCamera, StereoFrame, frame_motion
+from lab.search.pose_check import PoseCheckConfig, check_pose
 from lab.vision.database import FeatureDatabase
 from lab.vision.matching import Matcher
 from lab.vision.roi import object_roi
@@ -113,6 +114,9 @@ class LocalSearchConfig:
         revisit).
     process : ProcessNoise
         The EKF's static-object process noise (Eq. (4): ``X_k = X_{k-1} + eta``).
+    pose_check : PoseCheckConfig or None
+        The last check before "found": the pose must explain enough of the database features it
+        predicts in view (:mod:`lab.search.pose_check`); None skips it.
     """
 
     pans_deg: tuple[float, ...] = (0.0, 60.0, -60.0)
@@ -134,6 +138,7 @@ class LocalSearchConfig:
     process: ProcessNoise = field(
         default_factory=lambda: ProcessNoise(sigma_v=0.0, sigma_w=0.0, eta_m=2e-3, eta_rad=5e-3)
     )
+    pose_check: PoseCheckConfig | None = field(default_factory=PoseCheckConfig)
 
     def __post_init__(self):
         if len(self.pans_deg) * len(self.tilts_deg) < 1:
@@ -391,7 +396,8 @@ def _refine(robot, db, matcher, detector, ekf: PoseEKF, frame: StereoFrame, cfg:
         ekf.predict(prev.G_RC, cur.G_RC, frame_motion(prev, cur), max(0.0, cur.t - prev.t))
         roi = object_roi(ekf.estimate.G_CO, db.extent, cur.camera, cfg.roi_margin_px)
         f = stereo_features(cur.left, cur.right, cur.camera, roi=roi, t=cur.t, detector=detector)
-        res = ekf.update(*matcher.match(f).pairs(f, db))  # gated by the geometric feasibility check
+        corr = matcher.match(f)
+        res = ekf.update(*corr.pairs(f, db))  # gated by the geometric feasibility check
         last_used = res.n_used if res.applied else 0
         if res.applied and res.n_used >= cfg.confirm_matches:
             confirmed += 1
@@ -417,9 +423,15 @@ def _refine(robot, db, matcher, detector, ekf: PoseEKF, frame: StereoFrame, cfg:
         )
     if pos_std > cfg.max_position_std_m or rot_std > cfg.max_rotation_std_deg:
         return _Track(False, f"pose too uncertain: std {pos_std * 100:.1f} cm, {rot_std:.1f} deg", **base)
+    check = ""
+    if cfg.pose_check is not None:  # does the pose explain the last frame? (lab.search.pose_check)
+        pc = check_pose(f, corr, db, ekf.estimate.G_CO, prev.camera, cfg.pose_check, roi)
+        if not pc.confirmed:
+            return _Track(False, f"pose not confirmed: {pc.reason}", **base)
+        check = f"; {pc.reason}"
     return _Track(
         True,
-        f"found: {confirmed} confirming updates, std {pos_std * 100:.2f} cm, {rot_std:.2f} deg",
+        f"found: {confirmed} confirming updates, std {pos_std * 100:.2f} cm, {rot_std:.2f} deg{check}",
         **base,
     )
 
