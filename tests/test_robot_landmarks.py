@@ -120,7 +120,9 @@ def test_hardware_check_reads_the_room_map_trains_it_and_says_where_to_stand(tmp
 
     room = lines_of(load_config(_emulated_config(tmp_path, name="plain.toml")))
     assert room["landmark map"] == (
-        True, "none ([room] landmarks): lab search and lab identify will localize by odometry alone", ""
+        True,
+        "none ([room] landmarks): lab search and lab identify will localize by odometry alone",
+        "",
     )
 
 

@@ -74,8 +74,12 @@ def test_realistic_reports_the_nominal_camera_and_angles():
         f = _drive_and_look(r)
         d = w.truth.sensing.camera
         # the nominal calibration, with its stated accuracy (not the episode's draw)
-        assert f.camera == r.camera == dataclasses.replace(
-            nominal, depth_scale_std=math.hypot(0.005, 0.005), pointing_std_deg=0.05, focal_std=0.005
+        assert (
+            f.camera
+            == r.camera
+            == dataclasses.replace(
+                nominal, depth_scale_std=math.hypot(0.005, 0.005), pointing_std_deg=0.05, focal_std=0.005
+            )
         )
         assert nominal.depth_scale_std == nominal.pointing_std_deg == 0.0  # ideal: exact
         assert (d.render_camera.fx, d.render_camera.baseline) != (nominal.fx, nominal.baseline)
