@@ -9,8 +9,8 @@ so updates are per model, and :meth:`EKFBank.update_all` batches their linear al
   written out (no LAPACK call per match) and ``L_j^-1 [y_j, C_j]`` by forward substitution, the
   filters' rows stacked;
 * the 6x6 information-form update of :mod:`lab.estimation.ekf` ((6 + m) x (6 + m) with the
-  calibration error's m entries) stacked over the filters: one Cholesky factor of ``Sigma_bar`` and one of ``B`` per filter, solves
-  instead of inverses.
+  calibration error's m entries) stacked over the filters: one Cholesky factor of ``Sigma_bar`` and
+  one of ``B`` per filter, solves instead of inverses.
 
 The results are :meth:`PoseEKF.update`'s, filter by filter, to round-off (``tests/test_ekf_filter.py``
 checks them against it and against filterpy).
