@@ -81,16 +81,16 @@ class EKFBank:
         staged = [f._predict_staged(motion, Sigma_odom) for f in self.filters]
         live = [i for i, st in enumerate(staged) if st is not None]
         if live:  # every filter's health at once
-            f0 = self.filters[0]
-            problems = _health_many(
-                f0.config.divergence,
-                f0._euler,
-                np.stack([staged[i][0] for i in live]),
-                np.stack([staged[i][2] for i in live]),
-            )
+            problems = self._health([staged[i][0] for i in live], [staged[i][2] for i in live])
             for i, problem in zip(live, problems, strict=True):
                 self.filters[i]._predict_commit(*staged[i], problem)
         return tuple(f.estimate for f in self.filters)
+
+    def _health(self, mus, Sigmas) -> list:
+        """The divergence check of several filters' states at once (:func:`_health_many`; the filters
+        share their config)."""
+        f0 = self.filters[0]
+        return _health_many(f0.config.divergence, f0._euler, np.stack(mus), np.stack(Sigmas))
 
     def update(self, i: int, d_C, b_O, Sigma_d) -> UpdateResult:
         """Update model ``i``'s filter with its matched pairs (same arguments as :meth:`PoseEKF.update`)."""
@@ -151,13 +151,7 @@ class EKFBank:
             corrected[i] = (*f._corrected_state(dx, P), nis, loglik)
         if corrected:  # every corrected state's health at once
             idx = list(corrected)
-            f0 = self.filters[0]
-            problems = _health_many(
-                f0.config.divergence,
-                f0._euler,
-                np.stack([corrected[i][0] for i in idx]),
-                np.stack([corrected[i][1] for i in idx]),
-            )
+            problems = self._health([corrected[i][0] for i in idx], [corrected[i][1] for i in idx])
             for i, problem in zip(idx, problems, strict=True):
                 results[i] = self.filters[i]._end_update_checked(pending[i], *corrected[i], problem)
         return tuple(results)
