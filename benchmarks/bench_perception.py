@@ -147,9 +147,9 @@ def staged_perceive(agent: IdentificationAgent, frame, det) -> np.ndarray:
     _check_pair(frame.left, frame.right, frame.camera)
     gl, gr = _grey(frame.left), _grey(frame.right)
     rects = (None, None) if roi is None else _roi_rects(roi, frame.camera, params)
-    kp_l, des_l = detect_in(gl, rects[0], det)
+    kp_l, des_l = detect_in(gl, rects[0], det, params.roi_pad_px)
     marks.append(_now())
-    kp_r, des_r = detect_in(gr, rects[1], det)
+    kp_r, des_r = detect_in(gr, rects[1], det, params.roi_pad_px)
     marks.append(_now())
     f = Features3D.empty(frame.t)
     if des_l is not None and des_r is not None:

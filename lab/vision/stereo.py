@@ -9,7 +9,7 @@ Pipeline for a rectified pair (rows are epipolar lines):
 1. SIFT keypoints and descriptors in the left and right grey images; optionally only inside a region of
    interest of the left image (as both papers do once a track exists: :mod:`lab.vision.roi`) and the
    band of the right image that can hold its features' partners, SIFT then running on those
-   rectangles alone (each grown by :data:`ROI_PAD_PX` for the keypoints' support).
+   rectangles alone (each grown by :attr:`StereoParams.roi_pad_px` for the keypoints' support).
 2. For each left keypoint, candidate right keypoints lie on the same row (``|v_L - v_R| <= max_dy``)
    at a positive disparity ``d = u_L - u_R`` within ``[min_disparity, max_disparity]``. Among the
    candidates the nearest descriptor must beat the second nearest by Lowe's ratio, and the pair must be
@@ -44,12 +44,16 @@ __all__ = [
     "sift",
 ]
 
-#: Pixels of image kept around a region of interest when SIFT runs on it alone: a keypoint's
-#: descriptor window at the first octaves (and the blur before it) reaches this far. Measured on a
-#: rendered box at 1 m (realistic profile): 91 % of the keypoints found inside a region are the full
-#: image's at the same pixel (16 px or 32 px alike; the rest differ at the coarse octaves, whose blur
-#: the crop cuts), at a quarter of the full image's SIFT time.
-ROI_PAD_PX = 16
+#: Pixels of image kept around a region of interest when SIFT runs on it alone (the default of
+#: :attr:`StereoParams.roi_pad_px`): a keypoint's descriptor window at the first octaves (and the blur
+#: before it) reaches beyond the region. Measured on the 84 frames of an identification episode
+#: (model 2, seed 0, realistic profile; the agent's regions): of the keypoints found inside a region,
+#: 71.5 / 74.9 / 82.6 / 92.0 / 95.3 % are the full image's (same position, size and descriptor) with
+#: 0 / 4 / 8 / 16 / 32 px; those that differ lie near the region's border, which the region's own
+#: margin keeps off the tracked box. On 8 tuning episodes (models 0-3, seeds 1 and 2) 8 px and 16 px gave
+#: the same model probabilities (to 1e-3) and filter positions (to 0.1 mm) frame for frame, and 8 px
+#: made the perception step 12 % faster (SIFT's cost grows with the crop's area).
+ROI_PAD_PX = 8
 
 
 @dataclass(frozen=True)
@@ -77,8 +81,12 @@ class StereoParams:
     parallel : bool
         Detect the right image's keypoints in a second thread while this one does the left's (OpenCV
         releases the GIL; each thread has its own detector). The features are the same either way.
-        Measured on a loaded 2-core machine it saved nothing (55 ms a pair either way); it is meant
-        for a free second core, where it has not been measured yet (``benchmarks/bench_identify_step.py``).
+        Measured on a quiet 2-core machine (the identification step while tracking, regions of
+        interest): 25.1 ms against 26.5 ms one after the other. The gain is small because each SIFT
+        call already spreads over both cores with OpenCV's own threads.
+    roi_pad_px : int [px]
+        With a region of interest, SIFT runs on each rectangle grown by this many pixels (clipped to
+        the image) and keeps the keypoints inside the rectangle (:data:`ROI_PAD_PX`).
     """
 
     ratio: float = 0.8
@@ -90,6 +98,7 @@ class StereoParams:
     n_features: int = 0
     contrast_threshold: float = 0.02
     parallel: bool = True
+    roi_pad_px: int = ROI_PAD_PX
 
     def __post_init__(self):
         if not 0 < self.ratio <= 1:
@@ -100,6 +109,8 @@ class StereoParams:
             )
         if self.max_dy < 0 or self.sigma_px <= 0 or self.sigma_disparity <= 0:
             raise ConfigError("max_dy must be >= 0 and sigma_px, sigma_disparity > 0")
+        if int(self.roi_pad_px) != self.roi_pad_px or self.roi_pad_px < 0:
+            raise ConfigError(f"roi_pad_px must be an integer >= 0 px, got {self.roi_pad_px}")
 
 
 @dataclass(frozen=True)
@@ -319,7 +330,7 @@ def stereo_features(
         Extract left keypoints only inside this rectangle, and right keypoints only in the band that can
         hold their partners (:meth:`~lab.vision.roi.RegionOfInterest.right_band`: the same rows, the
         disparities of the region, or ``params``' whole range for a plain rectangle); SIFT runs on
-        those rectangles alone, each grown by :data:`ROI_PAD_PX`. A region's features are matched
+        those rectangles alone, each grown by ``params.roi_pad_px``. A region's features are matched
         over ``params``' whole disparity range, then those outside the region's disparities (the
         background behind its object) dropped. None: the full images.
     t : float [s]
@@ -430,20 +441,21 @@ def _detect_pair(gl, gr, rect_l, rect_r, det: cv2.SIFT, params: StereoParams):
     """SIFT keypoints and descriptors of the left and the right grey image, each inside its rectangle
     (None: the whole image), ``((kp_l, des_l), (kp_r, des_r))``; with ``params.parallel`` the right
     image in a second thread with its own detector."""
+    pad = params.roi_pad_px
     if not params.parallel:
-        return detect_in(gl, rect_l, det), detect_in(gr, rect_r, det)
+        return detect_in(gl, rect_l, det, pad), detect_in(gr, rect_r, det, pad)
     right: dict = {}
 
     def detect_right():
         try:
-            right["kp_des"] = detect_in(gr, rect_r, sift(params.n_features, params.contrast_threshold))
+            right["kp_des"] = detect_in(gr, rect_r, sift(params.n_features, params.contrast_threshold), pad)
         except BaseException as e:  # re-raised in the caller's thread
             right["error"] = e
 
     worker = threading.Thread(target=detect_right, name="sift-right")
     worker.start()
     try:
-        left = detect_in(gl, rect_l, det)
+        left = detect_in(gl, rect_l, det, pad)
     finally:
         worker.join()
     if "error" in right:
