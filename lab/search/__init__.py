@@ -4,7 +4,8 @@ The data flow, one module per stage::
 
     probability_map  M_p: Eqs. (1)-(3), the detection model with alpha and beta, the growing beta
     global_search    pan-tilt scan -> colour back-projection -> N_hist clusters -> sparse stereo -> M_p
-    local_search     9 pan-tilt views -> SIFT + EKF (RANSAC start, ROI, gate) -> 6D pose or a miss
+    local_search     9 pan-tilt views -> SIFT + EKF (RANSAC start, ROI, gate) -> 6D pose, or a second
+                     look at the colour peaks near the cell on enlarged regions -> 6D pose or a miss
     agent            the closed loop (paper / lawnmower / frontier), navigation injected
     budget           the time budget: a Robot wrapper that stops the run at its deadline
     baselines        where the lawnmower and frontier baselines look next
@@ -26,7 +27,7 @@ from lab.search.agent import (
 )
 from lab.search.budget import BudgetedRobot, SearchBudgetExceeded
 from lab.search.global_search import ColourPeak, GlobalSearchConfig, GlobalSearchResult, global_search
-from lab.search.local_search import LocalSearchConfig, LocalSearchResult, local_search
+from lab.search.local_search import LocalSearchConfig, LocalSearchResult, SecondLookConfig, local_search
 from lab.search.probability_map import (
     DetectionModel,
     ProbabilityMap,
@@ -51,6 +52,7 @@ __all__ = [
     "GlobalSearchResult",
     "LocalSearchConfig",
     "LocalSearchResult",
+    "SecondLookConfig",
     "MapSnapshot",
     "NavigationResult",
     "ProbabilityMap",

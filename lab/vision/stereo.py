@@ -26,7 +26,7 @@ Pipeline for a rectified pair (rows are epipolar lines):
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -42,6 +42,7 @@ __all__ = [
     "triangulate",
     "triangulation_covariance",
     "sift",
+    "upsampled_pair",
 ]
 
 #: Pixels of image kept around a region of interest when SIFT runs on it alone (the default of
@@ -364,6 +365,65 @@ def stereo_features(
     pts = triangulate(uv_l, uv_r, camera)
     cov = triangulation_covariance(uv_l, disp, camera, params)
     return Features3D(pts, des_l[il].astype(np.float32), uv_l, disp, cov, t)
+
+
+def upsampled_pair(
+    left: np.ndarray, right: np.ndarray, camera, factor: int, params: StereoParams | None = None
+):
+    """A rectified pair enlarged ``factor`` times (bicubic), with the pinhole model and stereo settings
+    that go with it, so that :func:`stereo_features` on it gives 3D points in the same frame C and metres.
+
+    Scaling both images alike keeps the rows epipolar. Pixel ``u`` of the original is pixel
+    ``k (u + 1/2) - 1/2`` of the enlarged image (pixel centres), so
+
+    .. math:: f' = k f, \\qquad c' = k (c + 1/2) - 1/2,
+
+    and the disparity ``d' = k d`` gives the same depth ``Z = f' B / d'``. The pixel-noise settings
+    (``sigma_px``, ``sigma_disparity``) and the pixel ranges (``max_dy``, the disparities) grow by
+    ``k`` too: interpolation adds no information, so the features' covariances stay the original
+    image's. What the enlargement does give is SIFT's finest scales on a small object (the local
+    search's second look, :mod:`lab.search.local_search`).
+
+    Parameters
+    ----------
+    left, right : ndarray, shape (H, W, 3) or (H, W), uint8
+    camera : lab.robot.StereoCamera
+    factor : int
+        1 returns the inputs unchanged.
+    params : StereoParams, optional
+
+    Returns
+    -------
+    left, right : ndarray, shape (k H, k W, ...), uint8
+    camera : lab.robot.StereoCamera
+        ``k`` times the width, height and focal lengths; the same baseline and mounting.
+    params : StereoParams
+    """
+    params = params or StereoParams()
+    k = int(factor)
+    if k < 1:
+        raise ConfigError(f"the upsampling factor must be an integer >= 1, got {factor!r}")
+    if k == 1:
+        return left, right, camera, params
+    big = [cv2.resize(img, None, fx=k, fy=k, interpolation=cv2.INTER_CUBIC) for img in (left, right)]
+    cam = replace(
+        camera,
+        width=camera.width * k,
+        height=camera.height * k,
+        fx=camera.fx * k,
+        fy=camera.fy * k,
+        cx=k * (camera.cx + 0.5) - 0.5,
+        cy=k * (camera.cy + 0.5) - 0.5,
+    )
+    par = replace(
+        params,
+        max_dy=params.max_dy * k,
+        min_disparity=params.min_disparity * k,
+        max_disparity=params.max_disparity * k,
+        sigma_px=params.sigma_px * k,
+        sigma_disparity=params.sigma_disparity * k,
+    )
+    return big[0], big[1], cam, par
 
 
 def _check_pair(left: np.ndarray, right: np.ndarray, camera) -> None:
