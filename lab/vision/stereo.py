@@ -379,10 +379,10 @@ def upsampled_pair(
     .. math:: f' = k f, \\qquad c' = k (c + 1/2) - 1/2,
 
     and the disparity ``d' = k d`` gives the same depth ``Z = f' B / d'``. The pixel-noise settings
-    (``sigma_px``, ``sigma_disparity``) and the pixel ranges (``max_dy``, the disparities) grow by
-    ``k`` too: interpolation adds no information, so the features' covariances stay the original
-    image's. What the enlargement does give is SIFT's finest scales on a small object (the local
-    search's second look, :mod:`lab.search.local_search`).
+    (``sigma_px``, ``sigma_disparity``) and the pixel ranges (``max_dy``, the disparities, the region's
+    pad ``roi_pad_px``) grow by ``k`` too: interpolation adds no information, so the features'
+    covariances stay the original image's. What the enlargement does give is SIFT's finest scales on
+    a small object (the local search's second look, :mod:`lab.search.local_search`).
 
     Parameters
     ----------
@@ -422,6 +422,7 @@ def upsampled_pair(
         max_disparity=params.max_disparity * k,
         sigma_px=params.sigma_px * k,
         sigma_disparity=params.sigma_disparity * k,
+        roi_pad_px=params.roi_pad_px * k,
     )
     return big[0], big[1], cam, par
 
