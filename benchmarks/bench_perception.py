@@ -63,11 +63,11 @@ from lab.io import write_json_atomic  # noqa: E402
 from lab.vision import Features3D  # noqa: E402
 from lab.vision.stereo import (  # noqa: E402
     _check_pair,
+    _detect_uv,
     _epipolar_matches,
     _grey,
     _in_disparities,
     _roi_rects,
-    detect_in,
     sift,
     triangulate,
     triangulation_covariance,
@@ -147,15 +147,14 @@ def staged_perceive(agent: IdentificationAgent, frame, det) -> np.ndarray:
     _check_pair(frame.left, frame.right, frame.camera)
     gl, gr = _grey(frame.left), _grey(frame.right)
     rects = (None, None) if roi is None else _roi_rects(roi, frame.camera, params)
-    kp_l, des_l = detect_in(gl, rects[0], det, params.roi_pad_px)
+    pts_l, des_l = _detect_uv(gl, rects[0], det, params.roi_pad_px)
     marks.append(_now())
-    kp_r, des_r = detect_in(gr, rects[1], det, params.roi_pad_px)
+    pts_r, des_r = _detect_uv(gr, rects[1], det, params.roi_pad_px)
     marks.append(_now())
     f = Features3D.empty(frame.t)
     if des_l is not None and des_r is not None:
-        il, ir = _epipolar_matches(kp_l, des_l, kp_r, des_r, params)
-        uv_l = np.array([kp_l[i].pt for i in il], dtype=float).reshape(-1, 2)
-        uv_r = np.array([kp_r[i].pt for i in ir], dtype=float).reshape(-1, 2)
+        il, ir = _epipolar_matches(pts_l, des_l, pts_r, des_r, params)
+        uv_l, uv_r = pts_l[il], pts_r[ir]
         disp = uv_l[:, 0] - uv_r[:, 0]
         keep = _in_disparities(roi, disp)
         if keep is not None:

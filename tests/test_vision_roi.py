@@ -18,7 +18,15 @@ from lab.sim import SimRobot, SimWorld, load_box_models
 from lab.training import get_database
 from lab.vision import StereoParams, stereo_features
 from lab.vision.roi import RegionOfInterest, box_corners, object_roi, tracked_roi
-from lab.vision.stereo import _grey, detect_in, sift
+from lab.vision.stereo import (
+    _epipolar_matches,
+    _grey,
+    _in_disparities,
+    _roi_rects,
+    detect_in,
+    sift,
+    triangulate,
+)
 
 CAM = StereoCamera.from_fov(mount_R=(0.0, 0.0, 0.7))
 SIGMA_RV = np.diag([0.01**2] * 3 + [math.radians(3.0) ** 2] * 3)  # a tracked pose: 1 cm, 3 deg
@@ -118,6 +126,32 @@ def test_the_pad_is_the_context_sift_sees_around_a_region(scene):
     for bad in (-1, 2.5):
         with pytest.raises(ConfigError, match="roi_pad_px"):
             StereoParams(roi_pad_px=bad)
+
+
+def test_the_features_are_those_of_the_keypoints_moved_one_by_one(scene):
+    """The pipeline reads the keypoints' pixels as arrays (no loop over them): its features are, bit for
+    bit, those of :func:`detect_in`'s keypoints, each moved to the whole image's pixels, matched and
+    triangulated; with a region and without."""
+    frame, G_CO, _, extent, _ = scene
+    roi = tracked_roi([(G_CO, SIGMA_RV)], extent, frame.camera, 0.5, 96.0)
+    params = StereoParams()
+    det = sift()
+    for region in (roi, None):
+        rects = (None, None) if region is None else _roi_rects(region, frame.camera, params)
+        kl, dl = detect_in(_grey(frame.left), rects[0], det, params.roi_pad_px)
+        kr, dr = detect_in(_grey(frame.right), rects[1], det, params.roi_pad_px)
+        il, ir = _epipolar_matches(kl, dl, kr, dr, params)
+        uv_l = np.array([kl[i].pt for i in il])
+        uv_r = np.array([kr[i].pt for i in ir])
+        keep = _in_disparities(region, uv_l[:, 0] - uv_r[:, 0])
+        if keep is not None:
+            il, uv_l, uv_r = il[keep], uv_l[keep], uv_r[keep]
+        f = stereo_features(frame.left, frame.right, frame.camera, params, roi=region)
+        assert len(f) == len(il) > 20
+        assert np.array_equal(f.uv, uv_l)
+        assert np.array_equal(f.disparity, uv_l[:, 0] - uv_r[:, 0])
+        assert np.array_equal(f.points_C, triangulate(uv_l, uv_r, frame.camera))
+        assert np.array_equal(f.descriptors, dl[il])
 
 
 def test_the_regions_features_lie_where_the_depth_buffer_says(scene):

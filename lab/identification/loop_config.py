@@ -78,7 +78,12 @@ class AgentConfig:
         hold its features' partners; the full frame otherwise. False: always the full frame.
     roi_n_sigma : float
         Each box corner is widened by this many standard deviations of its pixel position and depth
-        under the predicted pose's covariance ...
+        under the predicted pose's covariance ... Chosen on 8 tuning episodes (models 0-3, seeds 1 and
+        2, realistic profile) replayed frame for frame: against 3, the value 2 left every final model
+        probability and the true filter's final position unchanged (within 1e-3 and 2 mm) and moved no
+        probability by more than 0.053 on the way; the step was 15 % faster (19.2 against 22.5 ms
+        median), SIFT's crops being smaller. A corner is predicted more than 2 standard deviations
+        out on one side about 2 % of the time, and then the region cuts a sliver of the box's border.
     roi_margin_px : float [px]
         ... and the region by this margin (a keypoint centred just off the box can still describe it;
         SIFT's own context around the region is :attr:`~lab.vision.stereo.StereoParams.roi_pad_px`).
@@ -108,7 +113,7 @@ class AgentConfig:
     retry_s: float = 2.0
     keep_direction: float = 0.5
     roi: bool = True
-    roi_n_sigma: float = 3.0
+    roi_n_sigma: float = 2.0
     roi_margin_px: float = 4.0
     roi_max_fraction: float = 0.6
 
