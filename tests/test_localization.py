@@ -115,15 +115,51 @@ def test_update_matches_filterpy():
 
 
 def test_gate_lockout_recovery_inflates_the_covariance():
-    """Observations rejected in a row make the filter doubt itself, not the landmarks."""
+    """Observations rejected in a row while driving make the filter doubt itself, not the landmarks."""
     lm = Landmark("p", (0.0, 3.94, 1.5), 0.0, (1.4, 0.02, 1.0), (0.0, -1.0))
     cfg = LocalizerConfig(max_rejected_in_a_row=3, reject_inflation=9.0)
     loc = Localizer([0.0, 0.0, math.pi / 2], config=cfg)
-    z = measurement_model(np.array([0.3, 0.0, math.pi / 2]), lm.planar)  # the robot is really 30 cm off
+    true = np.array([0.3, 0.0, math.pi / 2])  # the robot is really 30 cm off
     Q = np.diag([1e-4, 1e-4, 1e-5])
-    recs = [loc.update(z, Q, lm) for _ in range(12)]  # 1 cm -> 3 cm -> 9 cm: then it fits
+    recs = []
+    for _ in range(12):  # 6 cm ahead between frames; 1 cm -> 3 cm -> 9 cm: then it fits
+        loc.predict(np.array([0.06, 0.0, 0.0]))
+        true = true + [0.0, 0.06, 0.0]
+        recs.append(loc.update(measurement_model(true, lm.planar), Q, lm))
     assert [r.accepted for r in recs[:3]] == [False, False, False] and loc.n_inflations >= 1
     assert any(r.accepted for r in recs[3:]) and abs(loc.x[0] - 0.3) < 0.05
+
+
+def test_a_standing_robot_counts_a_landmarks_rejection_once():
+    """Standing still, the same wrong fit seen frame after frame (a local search's views) is one piece of
+    evidence: no inflation however often; three different landmarks rejected from one place do inflate;
+    after the robot has moved ``recount_m`` the same landmark counts again."""
+    cfg = LocalizerConfig(max_rejected_in_a_row=3, reject_inflation=9.0)
+    lms = [
+        Landmark(n, (x, 3.94, 1.5), 0.0, (1.4, 0.02, 1.0), (0.0, -1.0))
+        for n, x in (("a", -1.5), ("b", 0.0), ("c", 1.5))
+    ]
+    Q = np.diag([1e-4, 1e-4, 1e-5])
+    off = np.array([0.3, 0.0, math.pi / 2])  # where the fits put the robot: 30 cm from its estimate
+
+    loc = Localizer([0.0, 0.0, math.pi / 2], config=cfg)
+    recs = [loc.update(measurement_model(off, lms[0].planar), Q, lms[0]) for _ in range(12)]
+    assert not any(r.accepted for r in recs) and loc.n_inflations == 0
+    loc.predict(np.array([0.0, 0.0, math.radians(0.5)]))  # a turn too small to be a new place
+    loc.update(measurement_model(off + [0.0, 0.0, math.radians(0.5)], lms[0].planar), Q, lms[0])
+    assert loc.n_inflations == 0 and loc.rejected_in_a_row == 1
+
+    loc = Localizer([0.0, 0.0, math.pi / 2], config=cfg)
+    recs = [loc.update(measurement_model(off, lm.planar), Q, lm) for lm in lms * 3]  # 1 -> 3 -> 9 cm
+    assert loc.n_inflations == 2 and any(r.accepted for r in recs[6:]) and abs(loc.x[0] - 0.3) < 0.05
+
+    loc = Localizer([0.0, 0.0, math.pi / 2], config=cfg)
+    for k in range(3):
+        loc.update(measurement_model(off + [0.0, 0.06 * k, 0.0], lms[0].planar), Q, lms[0])
+        loc.predict(np.array([0.06, 0.0, 0.0]))  # 6 cm ahead (>= recount_m): a new place
+    assert loc.n_inflations == 1
+    with pytest.raises(ConfigError, match="recount_m"):
+        LocalizerConfig(recount_m=-1.0)
 
 
 def test_gate_rejects_an_outlier():

@@ -243,6 +243,15 @@ class LocalizerConfig:
         landmarks, is the likelier culprit (an odometry bias the noise model does not cover, such as
         wheel scrub in long turns), so the covariance is multiplied by ``reject_inflation`` and the
         next observation can correct it.
+    recount_m, recount_rad : float [m], [rad]
+        A rejection counts towards that lock-out once per landmark until the robot has driven
+        ``recount_m`` or turned ``recount_rad`` since: a robot standing still that sees the same wrong
+        fit frame after frame (a local search's dozen views, a poster in the background of each) holds
+        one piece of evidence against its estimate, not a dozen. Counted frame by frame, those views had
+        tripped the recovery up to four times in one local search (the covariance x 9^4), leaving the
+        found object's reported position tens of centimetres uncertain. Rejections of different
+        landmarks from one place still count each (and after an inflation every landmark counts
+        again: several landmarks that all disagree with the estimate do move it).
     min_inliers : int
         Fewest RANSAC inliers for a landmark observation.
     max_range_m, min_facing : float
@@ -278,6 +287,8 @@ class LocalizerConfig:
     gate_prob: float = 0.999
     max_rejected_in_a_row: int = 3
     reject_inflation: float = 9.0
+    recount_m: float = 0.05
+    recount_rad: float = math.radians(2.0)
     min_inliers: int = 10
     max_range_m: float = 6.5
     min_facing: float = 0.35
@@ -302,6 +313,8 @@ class LocalizerConfig:
             "obs_sigma_per_m",
             "obs_sigma_rel_across",
             "obs_sigma_rad",
+            "recount_m",
+            "recount_rad",
         ):
             v = getattr(self, k)
             if not (math.isfinite(v) and v >= 0):
@@ -450,6 +463,8 @@ class Localizer:
         self.history: list[UpdateRecord] = []
         self.rejected_in_a_row = 0
         self.n_inflations = 0
+        self._rejected_here: set[str] = set()  # landmarks whose rejection counted since the last move
+        self._moved = np.zeros(2)  # driven [m] and turned [rad] since then
 
     @property
     def n_updates(self) -> int:
@@ -464,6 +479,10 @@ class Localizer:
         self.x = motion_model(self.x, u)  # x_bar = f(x, u)
         Sigma = F @ self.Sigma @ F.T + V @ M @ V.T  # Sigma_bar = F Sigma F^T + V M V^T
         self.Sigma = 0.5 * (Sigma + Sigma.T)
+        self._moved += (math.hypot(u[0], u[1]), abs(u[2]))
+        if self._moved[0] >= self.config.recount_m or self._moved[1] >= self.config.recount_rad:
+            self._rejected_here.clear()  # a new place: every landmark's rejection counts again
+            self._moved[:] = 0.0
 
     def update(self, z, Q, landmark: Landmark, t: float = 0.0, n_inliers: int = 0) -> UpdateRecord:
         """Update from one landmark observation ``z`` (3,) with covariance ``Q`` (3, 3); gated.
@@ -490,12 +509,14 @@ class Localizer:
             Sigma = IKH @ Sigma_bar @ IKH.T + K @ Q @ K.T  # Joseph form
             self.x, self.Sigma = x, 0.5 * (Sigma + Sigma.T)
             self.rejected_in_a_row = 0
-        else:
+        elif landmark.name not in self._rejected_here:  # once per landmark per place (recount_m)
+            self._rejected_here.add(landmark.name)
             self.rejected_in_a_row += 1
             if self.rejected_in_a_row >= self.config.max_rejected_in_a_row:  # gate lock-out recovery
                 self.Sigma = self.config.reject_inflation * self.Sigma
                 self.rejected_in_a_row = 0
                 self.n_inflations += 1
+                self._rejected_here.clear()  # the doubted estimate is tried against them all again
         rec = UpdateRecord(
             t,
             landmark.name,
