@@ -82,8 +82,9 @@ class AgentConfig:
         2, realistic profile) replayed frame for frame: against 3, the value 2 left every final model
         probability and the true filter's final position unchanged (within 1e-3 and 2 mm) and moved no
         probability by more than 0.053 on the way; the step was 15 % faster (19.2 against 22.5 ms
-        median), SIFT's crops being smaller. A corner is predicted more than 2 standard deviations
-        out on one side about 2 % of the time, and then the region cuts a sliver of the box's border.
+        median), SIFT's crops being smaller. Under a Gaussian prediction error a corner lies more
+        than 2 standard deviations out on a given side 2.3 % of the time; the region then cuts a
+        sliver of the box's border.
     roi_margin_px : float [px]
         ... and the region by this margin (a keypoint centred just off the box can still describe it;
         SIFT's own context around the region is :attr:`~lab.vision.stereo.StereoParams.roi_pad_px`).
