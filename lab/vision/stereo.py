@@ -480,7 +480,7 @@ def detect_in(grey: np.ndarray, rect, det: cv2.SIFT, pad: int = ROI_PAD_PX):
     """
     if rect is None:
         return det.detectAndCompute(grey, None)
-    kp, des, (x0, y0), keep = _detect_crop(grey, rect, det, pad)
+    kp, des, (x0, y0), _, keep = _detect_crop(grey, rect, det, pad)
     if des is None:
         return (), None
     kept = [kp[i] for i in np.flatnonzero(keep)]
@@ -491,18 +491,18 @@ def detect_in(grey: np.ndarray, rect, det: cv2.SIFT, pad: int = ROI_PAD_PX):
 
 def _detect_crop(grey: np.ndarray, rect, det: cv2.SIFT, pad: int):
     """SIFT on ``rect`` grown by ``pad`` px: the crop's keypoints and descriptors (None: none at all),
-    the crop's corner ``(x0, y0)`` [px] and which keypoints lie inside ``rect`` (their whole-image
-    pixel ``pt + (x0, y0)`` in double precision, as :func:`detect_in` tests it)."""
+    the crop's corner ``(x0, y0)`` [px], the keypoints' whole-image pixels ``pt + (x0, y0)`` (n, 2) in
+    double precision, and which of them lie inside ``rect`` (as :func:`detect_in` tests it)."""
     x, y, w, h = rect
     H, W = grey.shape[:2]
     x0, y0 = max(0, x - pad), max(0, y - pad)
     x1, y1 = min(W, x + w + pad), min(H, y + h + pad)
     kp, des = det.detectAndCompute(np.ascontiguousarray(grey[y0:y1, x0:x1]), None)
     if des is None or len(kp) == 0:
-        return kp, None, (x0, y0), None
+        return kp, None, (x0, y0), None, None
     uv = cv2.KeyPoint_convert(kp).astype(np.float64) + (x0, y0)
     keep = (uv[:, 0] >= x) & (uv[:, 0] < x + w) & (uv[:, 1] >= y) & (uv[:, 1] < y + h)
-    return kp, des, (x0, y0), keep
+    return kp, des, (x0, y0), uv, keep
 
 
 def _detect_uv(grey: np.ndarray, rect, det: cv2.SIFT, pad: int = ROI_PAD_PX):
@@ -515,11 +515,10 @@ def _detect_uv(grey: np.ndarray, rect, det: cv2.SIFT, pad: int = ROI_PAD_PX):
         if des is None or len(kp) == 0:
             return np.zeros((0, 2)), None
         return cv2.KeyPoint_convert(kp).astype(np.float64), des
-    kp, des, (x0, y0), keep = _detect_crop(grey, rect, det, pad)
+    _, des, _, uv, keep = _detect_crop(grey, rect, det, pad)
     if des is None:
         return np.zeros((0, 2)), None
-    uv = cv2.KeyPoint_convert(kp).astype(np.float64)[keep] + (x0, y0)
-    return uv.astype(np.float32).astype(np.float64), des[keep]
+    return uv[keep].astype(np.float32).astype(np.float64), des[keep]
 
 
 def _uv(keypoints) -> np.ndarray:
