@@ -23,7 +23,14 @@ The filter never sees ground truth. Its equations, written as the code does::
               gate: nu^T S^-1 nu <= chi2_3(gate_prob), else the observation is rejected (an outlier)
               K = Sigma_bar H^T S^-1
               x = x_bar + K nu
+              iterated: x_i+1 = x_bar + K_i (z - h(x_i) - H_i (x_bar - x_i)),  H_i, K_i at x_i
+                        (from x_0 = x_bar, until it stops moving: Gauss-Newton to the posterior's mode)
               Sigma = (I - K H) Sigma_bar (I - K H)^T + K Q K^T      (Joseph form: stays symmetric PSD)
+
+The update is iterated (``LocalizerConfig.update_iterations``) because one EKF step is linearised at the
+prior: after a long drive on realistic odometry the heading can be 15 deg off, and one step then left
+the estimate 15 cm from where a precise poster sighting put the robot, with a covariance claiming 2 cm
+(measured in search trials); relinearising at the new mean converges to the posterior's mode instead.
 
 :class:`LocalizedRobot` puts the filter behind the :class:`~lab.robot.Robot` interface: its
 ``odometry()`` and every frame's ``odom`` are the filter's estimate, so the navigator's costmap and
@@ -274,6 +281,9 @@ class LocalizerConfig:
         A start pose measured by hand (:class:`Localizer` with ``first_sighting=True``): the first
         landmark sighting that disagrees with it beyond the gate replaces it when the pose it implies is
         within these of the start (farther: an outlier, rejected).
+    update_iterations : int
+        The landmark update's iterations (the iterated EKF: relinearise at the new mean until it stops
+        moving, at most this many); 1 is the plain EKF.
     """
 
     sigma_along_m_per_sqrt_m: float = 0.02
@@ -301,6 +311,7 @@ class LocalizerConfig:
     report_passes: int = 3
     first_sighting_max_offset_m: float = 1.0
     first_sighting_max_offset_rad: float = math.radians(30.0)
+    update_iterations: int = 10
     ransac: RansacConfig = field(default_factory=lambda: RansacConfig(min_matches=6, dist_max_m=0.25))
 
     def __post_init__(self):
@@ -322,6 +333,11 @@ class LocalizerConfig:
                 raise ConfigError(f"LocalizerConfig.{k} must be a finite number >= 0, got {v!r}")
         if not 0.0 < self.gate_prob < 1.0:
             raise ConfigError(f"LocalizerConfig.gate_prob must be in (0, 1), got {self.gate_prob}")
+        if not (isinstance(self.update_iterations, int) and self.update_iterations >= 1):
+            raise ConfigError(
+                f"LocalizerConfig.update_iterations must be an integer >= 1 (1: the plain EKF), "
+                f"got {self.update_iterations!r}"
+            )
         for k in ("relocalize_sigma_m", "report_sigma_m"):
             if not getattr(self, k) > 0:
                 raise ConfigError(f"LocalizerConfig.{k} must be > 0 m, got {getattr(self, k)}")
@@ -506,6 +522,21 @@ class Localizer:
             K = np.linalg.solve(S, H @ Sigma_bar).T  # K = Sigma_bar H^T S^-1 (S, Sigma_bar symmetric)
             x = x_bar + K @ nu
             x[2] = wrap_angle(x[2])
+            for _ in range(self.config.update_iterations - 1):  # the iterated EKF: relinearise at x
+                H = measurement_jacobian(x, l)
+                r = z - measurement_model(x, l)
+                r[2] = wrap_angle(r[2])
+                dx = x_bar - x
+                dx[2] = wrap_angle(dx[2])
+                S = H @ Sigma_bar @ H.T + Q
+                K = np.linalg.solve(S, H @ Sigma_bar).T
+                x_next = x_bar + K @ (r - H @ dx)
+                x_next[2] = wrap_angle(x_next[2])
+                step = x_next - x
+                step[2] = wrap_angle(step[2])
+                x = x_next
+                if np.max(np.abs(step)) < 1e-9:  # [m], [rad]: converged
+                    break
             IKH = np.eye(3) - K @ H
             Sigma = IKH @ Sigma_bar @ IKH.T + K @ Q @ K.T  # Joseph form
             self.x, self.Sigma = x, 0.5 * (Sigma + Sigma.T)
