@@ -156,9 +156,10 @@ def test_iterated_update_reaches_the_posteriors_mode(heading_err_deg):
         assert np.hypot(*(plain.x - true)[:2]) > 0.1  # what the plain EKF did in the search
 
 
-def test_update_iterations_must_be_a_positive_integer():
+@pytest.mark.parametrize("bad", [0, -1, 2.5, True, "3"])
+def test_update_iterations_must_be_a_positive_integer(bad):
     with pytest.raises(ConfigError, match="update_iterations must be an integer >= 1"):
-        LocalizerConfig(update_iterations=0)
+        LocalizerConfig(update_iterations=bad)
 
 
 def test_gate_lockout_recovery_inflates_the_covariance():

@@ -333,7 +333,8 @@ class LocalizerConfig:
                 raise ConfigError(f"LocalizerConfig.{k} must be a finite number >= 0, got {v!r}")
         if not 0.0 < self.gate_prob < 1.0:
             raise ConfigError(f"LocalizerConfig.gate_prob must be in (0, 1), got {self.gate_prob}")
-        if not (isinstance(self.update_iterations, int) and self.update_iterations >= 1):
+        it = self.update_iterations
+        if isinstance(it, bool) or not (isinstance(it, int) and it >= 1):
             raise ConfigError(
                 f"LocalizerConfig.update_iterations must be an integer >= 1 (1: the plain EKF), "
                 f"got {self.update_iterations!r}"
@@ -519,17 +520,18 @@ class Localizer:
         nis = float(nu @ np.linalg.solve(S, nu))
         accepted = nis <= chi2_quantile(self.config.gate_prob, 3)
         if accepted:
-            K = np.linalg.solve(S, H @ Sigma_bar).T  # K = Sigma_bar H^T S^-1 (S, Sigma_bar symmetric)
-            x = x_bar + K @ nu
-            x[2] = wrap_angle(x[2])
-            for _ in range(self.config.update_iterations - 1):  # the iterated EKF: relinearise at x
-                H = measurement_jacobian(x, l)
+            # the iterated EKF: from x_0 = x_bar (whose step is the plain EKF's, K nu, with the gate's H
+            # and S), relinearise at each new mean until it stops moving
+            x = x_bar.copy()
+            for i in range(self.config.update_iterations):
+                if i > 0:
+                    H = measurement_jacobian(x, l)
+                    S = H @ Sigma_bar @ H.T + Q
+                K = np.linalg.solve(S, H @ Sigma_bar).T  # K = Sigma_bar H^T S^-1 (S, Sigma_bar symmetric)
                 r = z - measurement_model(x, l)
                 r[2] = wrap_angle(r[2])
                 dx = x_bar - x
                 dx[2] = wrap_angle(dx[2])
-                S = H @ Sigma_bar @ H.T + Q
-                K = np.linalg.solve(S, H @ Sigma_bar).T
                 x_next = x_bar + K @ (r - H @ dx)
                 x_next[2] = wrap_angle(x_next[2])
                 step = x_next - x
