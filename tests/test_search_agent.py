@@ -137,6 +137,43 @@ def test_a_revisit_goes_round_the_other_way_when_one_side_is_out_of_reach(monkey
     assert any("another side (-120 deg)" in e.detail for e in out.events if e.kind == "navigate")
 
 
+def test_a_distractor_two_searches_answered_for_is_not_searched_again(monkeypatch):
+    """A thing of the object's colours that is not the object: a strong colour peak at every global
+    search, and nothing else points anywhere (the object is out of sight). After two failed searches of
+    it (the second from another side) its cells are excluded: the robot does not go back a third time,
+    however often the colour raises them. With the exclusion off it keeps returning."""
+    distractor = (1.5, 0.5)
+    dc = SPEC.world_to_cell(*distractor)
+
+    def run(config):
+        robot = BudgetedRobot(KinematicRobot(Pose2D(0.0, -3.0, math.pi / 2)), 400.0)
+        robot.enable()
+        script = Script(robot, (2.5, 3.5), [(distractor, 0.95)], visible=lambda pose: False)
+        monkeypatch.setattr(agent_mod, "global_search", script.global_search)
+        monkeypatch.setattr(agent_mod, "local_search", script.local_search)
+        monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)
+        nav = straight_navigator(robot)
+        agent = SearchAgent(robot, None, nav, ProbabilityMap(SPEC), config, rng=np.random.default_rng(0))
+        return agent.run(), script
+
+    out, script = run(AgentConfig())
+    assert not out.found and "budget" in out.reason and out.global_searches >= 3
+    assert script.local_cells.count(dc) == 2
+    ex = [e for e in out.events if e.kind == "exclude"]
+    assert ex and ex[0].detail.startswith("21 cells answered for by 2 failed local searches")  # r 0.45 m
+    assert out.local_searches > 2  # it went on searching elsewhere
+
+    out_off, script_off = run(AgentConfig(max_local_misses=0))
+    assert script_off.local_cells.count(dc) > 2 and not any(e.kind == "exclude" for e in out_off.events)
+    print(f"\nlocal searches: {script.local_cells}; with the exclusion off: {script_off.local_cells}")
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5, True, "2"])
+def test_max_local_misses_must_be_a_whole_number(bad):
+    with pytest.raises(ConfigError, match="max_local_misses must be a whole number >= 0"):
+        AgentConfig(max_local_misses=bad)
+
+
 def test_unreachable_peak_is_skipped_with_a_reason(monkeypatch):
     distractor, obj = (1.5, 0.5), (-1.5, 1.9)
     out, script, _ = scripted_run(monkeypatch, obj, [(distractor, 0.9), (obj, 0.6)], refuse=[distractor])
