@@ -3,6 +3,7 @@ end to end in the simulator with the ground-truth stand-in navigator, scored aga
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ from lab.scene import load_scene
 from lab.search.agent import AgentConfig, NavigationResult, SearchAgent, Strategy
 from lab.search.baselines import frontier_cells, lawnmower_targets
 from lab.search.budget import BudgetedRobot
-from lab.search.local_search import LocalSearchResult
+from lab.search.local_search import LocalSearchConfig, LocalSearchResult, ViewRecord
 from lab.search.probability_map import ProbabilityMap
 
 SPEC = GridSpec.from_bounds(-3, -4, 3, 4, 0.2)
@@ -53,7 +54,8 @@ class Script:
         found = math.hypot(ox - p.x, oy - p.y) <= 1.2 and off <= math.radians(95) and self.visible(p)
         G = np.eye(4)
         G[:3, 3] = (*self.object_xy, 0.1)
-        return LocalSearchResult(found, "scripted", G if found else None)
+        miss = () if found else (ViewRecord(0.0, 0.0, robot.now(), 200, 40, 3, "scripted"),)
+        return LocalSearchResult(found, "scripted", G if found else None, views=miss)
 
 
 def straight_navigator(robot, refuse=()):
@@ -84,7 +86,7 @@ def scripted_run(
     monkeypatch.setattr(agent_mod, "local_search", script.local_search)
     monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)
     nav = navigate(robot) if navigate else straight_navigator(robot, refuse)
-    db = type("DB", (), {})()
+    db = [None] * 823  # a stand-in with the book's size (the reason of a miss reads it); nothing else
     agent = SearchAgent(
         robot, db, nav, ProbabilityMap(SPEC), AgentConfig(strategy=strategy), rng=np.random.default_rng(0)
     )
@@ -145,7 +147,7 @@ def test_a_distractor_two_searches_answered_for_is_not_searched_again(monkeypatc
     distractor = (1.5, 0.5)
     dc = SPEC.world_to_cell(*distractor)
 
-    def run(config):
+    def run(config, n_features=823):
         robot = BudgetedRobot(KinematicRobot(Pose2D(0.0, -3.0, math.pi / 2)), 400.0)
         robot.enable()
         script = Script(robot, (2.5, 3.5), [(distractor, 0.95)], visible=lambda pose: False)
@@ -153,15 +155,28 @@ def test_a_distractor_two_searches_answered_for_is_not_searched_again(monkeypatc
         monkeypatch.setattr(agent_mod, "local_search", script.local_search)
         monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)
         nav = straight_navigator(robot)
-        agent = SearchAgent(robot, None, nav, ProbabilityMap(SPEC), config, rng=np.random.default_rng(0))
+        db = [None] * n_features  # as in scripted_run
+        agent = SearchAgent(robot, db, nav, ProbabilityMap(SPEC), config, rng=np.random.default_rng(0))
         return agent.run(), script
 
     out, script = run(AgentConfig())
     assert not out.found and "budget" in out.reason and out.global_searches >= 3
+    # the reason says what the local searches saw; a rich database is not blamed
+    assert (
+        "local searches never confirmed the object: the best of their views had 3 inliers among 40"
+        in (out.reason)
+        and "SIFT features" not in out.reason
+    ), out.reason
     assert script.local_cells.count(dc) == 2
     ex = [e for e in out.events if e.kind == "exclude"]
     assert ex and ex[0].detail.startswith("21 cells answered for by 2 failed local searches")  # r 0.45 m
     assert out.local_searches > 2  # it went on searching elsewhere
+
+    thin, _ = run(AgentConfig(), n_features=11)  # the glossy cup's database
+    assert thin.reason.endswith(
+        "its database holds only 11 SIFT features (a glossy, featureless object, like the paper's "
+        "penguin cup): too few to give a pose from one view"
+    ), thin.reason
 
     out_off, script_off = run(AgentConfig(max_local_misses=0))
     assert script_off.local_cells.count(dc) > 2 and not any(e.kind == "exclude" for e in out_off.events)
@@ -284,6 +299,11 @@ def test_closed_loop_finds_the_toy_block():
 def test_glossy_cup_ends_not_found_at_its_budget_and_the_mass_moves_on():
     res = run_search("glossy_cup", seed=1, max_time=100.0, navigate=truth_navigator)
     assert not res.found and "budget" in res.reason
+    # ... and says why: the paper's reason (too few features on a glossy cup), with what was seen
+    assert "never confirmed the object" in res.reason and "penguin cup" in res.reason, res.reason
+    best = int(re.search(r"best of their views had (\d+) inliers", res.reason).group(1))
+    assert best < LocalSearchConfig().min_inliers  # a pose needs more than any view gave
+    assert res.to_json()["reason"] == res.reason
     assert 100.0 <= res.sim_time_s <= 100.5 and res.collisions == 0
     check_contract(res.to_json())
     snaps = res.trace.agent.snapshots

@@ -35,6 +35,11 @@ time. (Not :class:`lab.navigation.NavOutcome`, the navigator's enum of how a req
 deadline, the next ``step`` raises :class:`~lab.search.budget.SearchBudgetExceeded` -- inside the
 navigator, a pan-tilt wait or a drive -- and the agent ends the run there ("time budget").
 
+**A run that ends without the object** says why in its reason: how it ended ("time budget of 300 s used
+up"), then what its local searches saw at best (inliers among database matches, against what a pose
+needs), and, for an object whose database is too thin for a pose from one view (the glossy cup, the
+paper's penguin cup), that this is the cause.
+
 The baselines' target choice (:func:`~lab.search.baselines.lawnmower_targets`,
 :func:`~lab.search.baselines.frontier_cells`) is in :mod:`lab.search.baselines`.
 """
@@ -65,7 +70,13 @@ from lab.robot import Robot
 from lab.search.baselines import frontier_cells, lawnmower_targets
 from lab.search.budget import SearchBudgetExceeded
 from lab.search.global_search import GlobalSearchConfig, GlobalSearchResult, global_search
-from lab.search.local_search import LocalSearchConfig, LocalSearchResult, local_search, make_matcher
+from lab.search.local_search import (
+    LocalSearchConfig,
+    LocalSearchResult,
+    ViewRecord,
+    local_search,
+    make_matcher,
+)
 from lab.search.probability_map import ProbabilityMap
 from lab.vision.database import FeatureDatabase
 
@@ -85,6 +96,11 @@ __all__ = [
 #: The reason of a run ended by Ctrl-C (SIGINT, a notebook's "interrupt kernel"): the robot is stopped and
 #: the record so far returned, as for any other end.
 INTERRUPTED = "interrupted"
+
+#: A view sees roughly a third of an object's features (one to three faces of a box, half of a cup), so
+#: a database with fewer than this many times ``min_matches`` features cannot give a pose from one view:
+#: a not-found run says so in its reason.
+THIN_DATABASE_VIEWS = 3
 
 #: Errors from the robot that end a run with their reason instead of raising out of it.
 _DEVICE_FAULTS = (
@@ -342,6 +358,7 @@ class SearchAgent:
         self._excluded = np.zeros(shape, bool)
         self._nav_failures = np.zeros(shape, int)
         self._misses = np.zeros(shape, int)  # failed local searches that answered for each cell
+        self._best_view: ViewRecord | None = None  # the view with most inliers (then matches) so far
         self._searched = np.zeros(shape, bool)
         self._events: list[SearchEvent] = []
         self._snapshots: list[MapSnapshot] = []
@@ -405,6 +422,8 @@ class SearchAgent:
                 self.robot.stop()
             except LabError:
                 pass
+        if found is None and reason != INTERRUPTED:
+            reason += self._why_not_found()
         self._event("end", detail=reason)
         return AgentResult(
             found is not None,
@@ -574,6 +593,12 @@ class SearchAgent:
         self._stood_at[tuple(cell)] = (p.x, p.y)
         res = local_search(self.robot, self.db, xy, self.rng, lc, self.matcher)
         self.last_local = res
+        for v in res.views:
+            if self._best_view is None or (v.n_inliers, v.n_matched) > (
+                self._best_view.n_inliers,
+                self._best_view.n_matched,
+            ):
+                self._best_view = v
         self.local_searches += 1
         self._local_since_global += 1
         self._mark_searched(xy)
@@ -587,6 +612,25 @@ class SearchAgent:
         self._snapshot("local search failed", cell)
         self._exclude_missed()
         return res
+
+    def _why_not_found(self) -> str:
+        """What the failed local searches saw, in words, appended to a not-found run's reason: the best
+        view's RANSAC inliers and database matches against what a pose needs, and, for a database too
+        thin to give a pose (a glossy, featureless object: the paper's penguin cup), that this is why."""
+        if self._best_view is None:
+            return ""
+        lc, n_db, best = self.config.local_search, len(self.db), self._best_view
+        out = (
+            f"; {self.local_searches} local searches never confirmed the object: the best of their "
+            f"views had {best.n_inliers} inliers among {best.n_matched} database matches "
+            f"(a pose needs {lc.min_inliers} inliers)"
+        )
+        if n_db < THIN_DATABASE_VIEWS * lc.min_matches:
+            out += (
+                f"; its database holds only {n_db} SIFT features (a glossy, featureless object, like "
+                f"the paper's penguin cup): too few to give a pose from one view"
+            )
+        return out
 
     def _exclude_missed(self) -> None:
         """The paper's strategy gives up the cells ``max_local_misses`` failed searches answered for."""
