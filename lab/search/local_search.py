@@ -310,7 +310,7 @@ ALIAS_RADIUS_M = 0.015
 
 def make_matcher(db: FeatureDatabase) -> Matcher:
     """The database's matcher: FLANN, or exact search for a tiny database (OpenCV's KD-tree asserts
-    when asked for about as many neighbours as the database holds: the glossy cup has 7 features);
+    when asked for about as many neighbours as the database holds: the glossy cup has 11 features);
     with spatial aliases (:data:`ALIAS_RADIUS_M`)."""
     return Matcher(db, method="flann" if len(db) >= 64 else "brute", alias_radius=ALIAS_RADIUS_M)
 
