@@ -45,6 +45,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import statistics
 import sys
 from pathlib import Path
@@ -144,6 +145,57 @@ def summary_line(label: str, rows) -> str:
     )
 
 
+_FOUND_STD = re.compile(r"std ([0-9.]+) cm, ([0-9.]+) deg")
+
+
+def claimed_std(d: dict) -> tuple[float, float] | None:
+    """The filter's standard deviations ``(cm, deg)`` the found trial's last local-search event claims."""
+    for e in reversed(d.get("events") or []):
+        if e["kind"] == "local":
+            m = _FOUND_STD.search(e["detail"])
+            return (float(m.group(1)), float(m.group(2))) if m else None
+    return None
+
+
+def confidently_wrong(d: dict, limit_deg: float = 10.0, claimed_deg: float = 5.0) -> bool:
+    """Found with an orientation more than ``limit_deg`` off while the filter claims under ``claimed_deg``
+    (the search issue's "confidently wrong pose")."""
+    if not d.get("found") or d.get("orientation_error_deg") is None:
+        return False
+    std = claimed_std(d)
+    return d["orientation_error_deg"] > limit_deg and std is not None and std[1] < claimed_deg
+
+
+def medians_line(rows) -> str:
+    """Median simulated time and path length over the successes (the search issue's <= 90 s, <= 20 m)."""
+    ok = [d for d in rows if d.get("success")]
+    if not ok:
+        return "    no success: no medians"
+    t = statistics.median(d["sim_time_s"] for d in ok)
+    m = statistics.median(d["path_length_m"] for d in ok)
+    wrong = sum(confidently_wrong(d) for d in rows)
+    return (
+        f"    over the {len(ok)} successes: median time {t:.1f} s, median path {m:.1f} m; "
+        f"confidently wrong poses (> 10 deg, filter < 5 deg): {wrong}"
+    )
+
+
+def local_searches_at_object(d: dict) -> tuple[int, int]:
+    """``(k, n)``: of the trial's ``n`` local searches, ``k`` answered for the object's true cell (a cell
+    within ``LocalSearchConfig.neighbour_radius_m`` of the searched one, as the map update counts it):
+    k > 0 on a miss means the local search looked at the object and did not find it."""
+    from lab.runs.search import map_spec
+    from lab.scene import load_scene
+    from lab.search.local_search import LocalSearchConfig
+
+    spec = map_spec(load_scene("lab_room"))
+    r = LocalSearchConfig().neighbour_radius_m
+    ox, oy = spec.cell_to_world(*spec.world_to_cell(*d["place"][:2]))
+    cells = [e["cell"] for e in d.get("events") or [] if e["kind"] == "local" and e["cell"]]
+    near = [c for c in cells if math.dist(spec.cell_to_world(*c), (ox, oy)) <= r + 1e-9]
+    return len(near), len(cells)
+
+
 def cmd_report(args) -> int:
     rows = []
     for p in args.files:
@@ -161,6 +213,7 @@ def cmd_report(args) -> int:
     for s in strategies:
         rs = [d for d in rows if d["strategy"] == s]
         print(summary_line(f"{s}", rs))
+        print(medians_line(rs))
         for ob in (False, True):
             sub = [d for d in rs if bool(d["obstacles"]) == ob]
             if sub:
@@ -208,11 +261,14 @@ def cmd_report(args) -> int:
             )
     fails = [d for d in rows if not d.get("success")]
     if fails:
-        print("failures:")
+        print("failures (not found: k/n of its local searches answered for the object's cell):")
         for d in sorted(fails, key=key):
+            at = ""
+            if not d.get("found") and "error" not in d:
+                at = "{}/{} at the object; ".format(*local_searches_at_object(d))
             print(
                 f"  {label(d)} place {d.get('place')}: found {d.get('found')} pe {d.get('position_error_m')} "
-                f"oe {d.get('orientation_error_deg')}: {d.get('reason', d.get('error'))}"
+                f"oe {d.get('orientation_error_deg')}: {at}{d.get('reason', d.get('error'))}"
             )
     return 0
 
