@@ -91,3 +91,42 @@ def test_bad_search_sweeps_are_refused_in_one_line_before_anything_starts(tmp_pa
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and msg in err[0], (argv, err)
         assert not out.exists()
+
+
+def _eval_search_script():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "eval_search.py"
+    spec = importlib.util.spec_from_file_location("eval_search_script", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_the_report_counts_confidently_wrong_poses_and_misses_at_the_object():
+    """benchmarks/eval_search.py report: a found pose > 10 deg off while its found event claims < 5 deg is
+    confidently wrong (the search issue's count); a not-found trial says how many of its local searches
+    answered for the object's true cell (the searched cell within neighbour_radius_m of it)."""
+    es = _eval_search_script()
+    found = "found: 4 confirming updates, std 0.51 cm, {} deg; the pose explains 17 of 180"
+
+    def trial(err_deg, std_deg):
+        events = [{"kind": "local", "cell": [3, 4], "detail": found.format(std_deg)}]
+        return {"found": True, "orientation_error_deg": err_deg, "events": events}
+
+    assert es.claimed_std(trial(12.8, 2.3)) == (0.51, 2.3)
+    assert es.confidently_wrong(trial(12.8, 2.3))
+    assert not es.confidently_wrong(trial(12.8, 6.0))  # wrong, but the filter said it was unsure
+    assert not es.confidently_wrong(trial(8.0, 2.3))  # within the success limit
+    assert not es.confidently_wrong({"found": False, "orientation_error_deg": None, "events": []})
+
+    from lab.runs.search import map_spec
+
+    spec = map_spec(load_scene("lab_room"))
+    place = (1.93, 1.16, 0.0, 148.0)
+    i, j = spec.world_to_cell(*place[:2])
+    cells = [(i + 2, j), (i, j), (i + 3, j), (i - 10, j - 10)]  # 0.4 m: answered for; 0.6 m: not
+    events = [{"kind": "local", "cell": list(c), "detail": "not found"} for c in cells]
+    events.append({"kind": "global", "cell": None, "detail": "scan"})
+    assert es.local_searches_at_object({"place": list(place), "events": events}) == (2, 4)
