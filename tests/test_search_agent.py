@@ -32,6 +32,7 @@ class Script:
 
     def __init__(self, robot, object_xy, peaks, local_time=8.0, global_time=12.0, visible=None):
         self.robot, self.object_xy, self.peaks = robot, object_xy, peaks
+        self.per_scan = bool(peaks) and isinstance(peaks[0], list)
         self.visible = visible or (lambda pose: True)  # from where the object's texture can be seen
         self.local_time, self.global_time = local_time, global_time
         self.local_cells, self.globals = [], 0
@@ -39,7 +40,9 @@ class Script:
     def global_search(self, robot, db, pmap, config):
         self.globals += 1
         robot.step(self.global_time)
-        for xy, strength in self.peaks:
+        # peaks: one list for every scan, or a list per scan (the last one repeats)
+        peaks = self.peaks[min(self.globals, len(self.peaks)) - 1] if self.per_scan else self.peaks
+        for xy, strength in peaks:
             pmap.update_global(pmap.cell_of(*xy), strength, config.alpha, config.growth_m, config.beta_min)
         return type("G", (), {"used_peaks": self.peaks, "peaks": self.peaks})()
 
@@ -115,6 +118,23 @@ def test_a_cell_searched_again_is_approached_from_another_side(monkeypatch):
     out, script, _ = scripted_run(monkeypatch, obj, [(obj, 0.9)], visible=lambda pose: pose.y > obj[1])
     assert out.found and script.local_cells == [SPEC.world_to_cell(*obj)] * 2
     assert any("another side" in e.detail for e in out.events if e.kind == "navigate")
+
+
+def test_a_neighbour_of_a_searched_cell_is_approached_from_another_side(monkeypatch):
+    """The first scan points at a cell 0.4 m south of the object, whose texture faces east; the search
+    from the south misses and counts for the cells round it. The next scan's peak lies between the two,
+    in a cell not searched itself but answered for: the robot goes round to another side (from where
+    it stood, a search would see what the last one saw and give those cells a second miss) and finds
+    it at once. (With only the searched cell itself remembered, it took five local searches.)"""
+    near, obj = (0.5, 0.5), (0.5, 0.9)
+    out, script, _ = scripted_run(
+        monkeypatch, obj, [[(near, 0.9)], [(obj, 0.9)]], visible=lambda pose: pose.x > obj[0] + 0.3
+    )
+    second = script.local_cells[1]
+    assert out.found and script.local_cells == [SPEC.world_to_cell(*near), second]
+    assert second != script.local_cells[0] and out.global_searches == 2
+    nav = [e for e in out.events if e.kind == "navigate"]
+    assert nav[1].cell == second and nav[1].detail.startswith("from another side (+120 deg)")
 
 
 def test_a_revisit_goes_round_the_other_way_when_one_side_is_out_of_reach(monkeypatch):

@@ -10,8 +10,9 @@ The paper's strategy (:attr:`Strategy.PAPER`)::
             global search from where the robot stands                  (global_search.py)
         cell = the most probable cell (ties: the one nearest the robot)
         navigate(cell centre, local-search range)                     (injected: costmap + A*)
-                                 (a cell searched before: from another side, revisit_turn_deg round
-                                  one way or, when that side is out of reach, the other)
+                                 (a cell a search answered for before: from another side,
+                                  revisit_turn_deg round from where the robot stood for that
+                                  search, one way or, when that side is out of reach, the other)
         if it did not arrive: exclude the cell (until the next global search; for good after
                               max_nav_failures failures) and go on -- no observation, no Bayes update
         local search facing the cell                                   (local_search.py)
@@ -183,8 +184,10 @@ class AgentConfig:
     vantage_margin_m, vantage_reach_m : float [m]
     revisit_turn_deg : float [deg]
         A cell searched again (the Bayes update may leave a cell with strong colour evidence the most
-        probable after one miss) is approached from this much further round it: the first view may
-        have shown the object's narrow side, or a face at a grazing angle.
+        probable after one miss), or a neighbour's search answered for (within the local search's
+        ``neighbour_radius_m``), is approached from this much further round it than the robot stood
+        for that search: the first view may have shown the object's narrow side, or a face at a
+        grazing angle, and the same view again adds no evidence.
     wide_band_m : float [m]
         A cell whose local-search band the navigator cannot reach is approached once more, the band's
         far edge this much further out (a cell against a wall or a shelf's back: the band lies almost
@@ -370,7 +373,7 @@ class SearchAgent:
         self._lawnmower: list[tuple[float, float]] | None = None
         self._scan_points: list[tuple[float, float]] = []
         self._relocating = False
-        self._stood_at: dict[tuple[int, int], tuple[float, float]] = {}
+        self._stands: list[tuple[tuple[float, float], tuple[float, float]]] = []  # (searched xy, stood at)
 
     # -- bookkeeping -------------------------------------------------------------------------------
     def _event(self, kind: str, cell=None, detail: str = "") -> None:
@@ -541,14 +544,25 @@ class SearchAgent:
                 "navigate", target.cell, f"to a new vantage point for the global search: {nav.reason}"
             )
 
+    def _last_stand(self, xy) -> tuple[float, float] | None:
+        """Where the robot stood for the last local search that answered for the point ``xy`` [m] (its
+        target within ``neighbour_radius_m``, as the map update counts it), or None."""
+        r = self.config.local_search.neighbour_radius_m
+        for searched, stood in reversed(self._stands):
+            if math.dist(searched, xy) <= r + 1e-9:
+                return stood
+        return None
+
     def _approach(self, cell, xy):
-        """Navigate to local-search range of the cell. A cell searched before is approached from
-        another side: ``revisit_turn_deg`` further round it from where the robot stood last time, or
-        as far round the other way when that side cannot be reached (a table or shelf against a wall
-        is open on its ends: one of the two turns is often behind the wall), by asking for a spot near
-        that side's point; when both fail, from wherever the navigator can."""
+        """Navigate to local-search range of the cell. A cell a local search answered for before (it,
+        or a neighbour within ``neighbour_radius_m``: the map counted that search's miss for it) is
+        approached from another side: ``revisit_turn_deg`` further round it from where the robot stood
+        for the last such search, or as far round the other way when that side cannot be reached (a
+        table or shelf against a wall is open on its ends: one of the two turns is often behind the
+        wall), by asking for a spot near that side's point; when both fail, from wherever the navigator
+        can. (From the same side, a neighbour's search would see what the last one saw.)"""
         lc = self.config.local_search
-        last = self._stood_at.get(tuple(cell))
+        last = self._last_stand(xy)
         if last is not None:
             a0 = math.atan2(last[1] - xy[1], last[0] - xy[0])
             tol = 0.5 * (lc.max_distance_m - lc.min_distance_m)
@@ -590,7 +604,7 @@ class SearchAgent:
             return None
         self._event("navigate", cell, how_arrived)
         p = self.robot.odometry()
-        self._stood_at[tuple(cell)] = (p.x, p.y)
+        self._stands.append(((float(xy[0]), float(xy[1])), (p.x, p.y)))
         res = local_search(self.robot, self.db, xy, self.rng, lc, self.matcher)
         self.last_local = res
         for v in res.views:
