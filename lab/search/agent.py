@@ -37,9 +37,9 @@ deadline, the next ``step`` raises :class:`~lab.search.budget.SearchBudgetExceed
 navigator, a pan-tilt wait or a drive -- and the agent ends the run there ("time budget").
 
 **A run that ends without the object** says why in its reason: how it ended ("time budget of 300 s used
-up"), then what its local searches saw at best (inliers among database matches, against what a pose
-needs), and, for an object whose database is too thin for a pose from one view (the glossy cup, the
-paper's penguin cup), that this is the cause.
+up"), then what its local searches saw at best (database matches, a RANSAC start's inliers or a track
+that was not confirmed, against what a pose needs), and, for an object whose database is too thin
+for a pose from one view (the glossy cup, the paper's penguin cup), that this is the cause.
 
 The baselines' target choice (:func:`~lab.search.baselines.lawnmower_targets`,
 :func:`~lab.search.baselines.frontier_cells`) is in :mod:`lab.search.baselines`.
@@ -361,7 +361,7 @@ class SearchAgent:
         self._excluded = np.zeros(shape, bool)
         self._nav_failures = np.zeros(shape, int)
         self._misses = np.zeros(shape, int)  # failed local searches that answered for each cell
-        self._best_view: ViewRecord | None = None  # the view with most inliers (then matches) so far
+        self._best_view: ViewRecord | None = None  # the failed searches' view closest to a pose
         self._searched = np.zeros(shape, bool)
         self._events: list[SearchEvent] = []
         self._snapshots: list[MapSnapshot] = []
@@ -608,10 +608,7 @@ class SearchAgent:
         res = local_search(self.robot, self.db, xy, self.rng, lc, self.matcher)
         self.last_local = res
         for v in res.views:
-            if self._best_view is None or (v.n_inliers, v.n_matched) > (
-                self._best_view.n_inliers,
-                self._best_view.n_matched,
-            ):
+            if self._best_view is None or self._rank(v) > self._rank(self._best_view):
                 self._best_view = v
         self.local_searches += 1
         self._local_since_global += 1
@@ -628,23 +625,34 @@ class SearchAgent:
         return res
 
     def _why_not_found(self) -> str:
-        """What the failed local searches saw, in words, appended to a not-found run's reason: the best
-        view's RANSAC inliers and database matches against what a pose needs, and, for a database too
-        thin to give a pose (a glossy, featureless object: the paper's penguin cup), that this is why."""
-        if self._best_view is None:
+        """What the failed local searches saw, in words, appended to a not-found run's reason: their best
+        view (a track beats a RANSAC start, then more inliers, then more matches) against what a pose
+        needs, and, for a database too thin to give a pose from one view (a glossy, featureless object:
+        the paper's penguin cup), that this is why."""
+        v = self._best_view
+        if v is None:
             return ""
-        lc, n_db, best = self.config.local_search, len(self.db), self._best_view
-        out = (
-            f"; {self.local_searches} local searches never confirmed the object: the best of their "
-            f"views had {best.n_inliers} inliers among {best.n_matched} database matches "
-            f"(a pose needs {lc.min_inliers} inliers)"
-        )
+        lc, n_db = self.config.local_search, len(self.db)
+        if v.n_matched < lc.min_matches:
+            best = f"{v.n_matched} database matches in a view (a pose needs {lc.min_matches})"
+        elif v.n_inliers < lc.min_inliers:
+            best = (
+                f"a RANSAC start with {v.n_inliers} inliers from {v.n_matched} database matches "
+                f"(a pose needs {lc.min_inliers})"
+            )
+        else:
+            best = f"a track from a RANSAC start with {v.n_inliers} inliers, {v.outcome}"
+        out = f"; {self.local_searches} local searches never confirmed the object: at best {best}"
         if n_db < THIN_DATABASE_VIEWS * lc.min_matches:
             out += (
                 f"; its database holds only {n_db} SIFT features (a glossy, featureless object, like "
                 f"the paper's penguin cup): too few to give a pose from one view"
             )
         return out
+
+    def _rank(self, v: ViewRecord) -> tuple:
+        """How close a view came to a pose (as the local search ranks its own views)."""
+        return (v.n_inliers >= self.config.local_search.min_inliers, v.n_inliers, v.n_matched)
 
     def _exclude_missed(self) -> None:
         """The paper's strategy gives up the cells ``max_local_misses`` failed searches answered for."""
