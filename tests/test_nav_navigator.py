@@ -72,3 +72,35 @@ def test_ground_plane_jumps_are_refused_until_they_persist(nav):
         assert not refit and p is plane
     p, refit = nav._ground_plane(floor(0.12), G_WC)  # the third time in a row it is the floor
     assert refit and abs(p.z_at(1.0, 1.0) - 0.12) < 0.01
+
+
+def test_marks_under_the_robot_are_cleared_so_it_can_escape(nav):
+    """A landmark update moved the pose estimate onto obstacle marks made before it (a search robot at
+    a vantage point): its own cell is lethal, every plan from it is START_IN_OBSTACLE and the escape's
+    straight line starts in a lethal cell. Clearing the footprint (where the robot stands there is no
+    obstacle) lets the escape drive out of the grown band; marks outside the footprint stay."""
+    from lab.navigation.astar import PathStatus, astar
+    from lab.navigation.paths import Replanner
+
+    spec = nav.spec
+    occ = np.zeros(spec.shape, dtype=bool)
+    occ[3:8, 20:23] = True  # a band x [0.3, 0.8), y [2.0, 2.3): the robot at (0.5, 2.05) stands in it
+    nav.costmap = Costmap.from_occupancy(spec, occ)
+    nav._grid = None
+    goal = (3.0, 1.0)
+    rp = Replanner(lambda g, s: astar(g, s, goal))
+    assert astar(nav.planning_grid(), (0.5, 2.05), goal).status is PathStatus.START_IN_OBSTACLE
+    assert not rp.update(nav.planning_grid(), (0.5, 2.05)).path.found  # no escape either
+
+    before = nav.costmap.obstacle
+    n = nav.clear_under_robot()
+    after = nav.costmap.obstacle
+    X, Y = spec.cell_centers()
+    under = np.hypot(X - 0.5, Y - 2.05) <= nav.robot.base_limits.radius
+    assert n == int((before & under).sum()) > 0
+    assert not (after & under).any() and np.array_equal(after, before & ~under)  # the rest is kept
+    d = Replanner(lambda g, s: astar(g, s, goal)).update(nav.planning_grid(), (0.5, 2.05))
+    assert d.path.found and d.reason == "escape"
+    # nothing left under it: a second call changes nothing
+    ev = nav.costmap.evidence
+    assert nav.clear_under_robot() == 0 and np.array_equal(nav.costmap.evidence, ev)

@@ -394,6 +394,20 @@ class Costmap:
             cleared=np.argwhere(before & ~after),
         )
 
+    def clear_disc(self, xy, radius: float) -> int:
+        """Mark the cells whose centres lie within ``radius`` [m] of ``xy`` [m] free (full free
+        evidence): where the robot stands there is no obstacle. Returns how many OBSTACLE cells this
+        cleared (stale marks, or marks a pose correction moved under the robot)."""
+        x, y = check_finite_xy("xy", xy)
+        if not (math.isfinite(radius) and radius >= 0):
+            raise ConfigError(f"radius must be a finite number >= 0 m, got {radius!r}")
+        X, Y = self.spec.cell_centers()
+        disc = np.hypot(X - x, Y - y) <= radius
+        n = int((disc & self.obstacle).sum())
+        self._evidence[disc] = -self.config.free_floor
+        self._seen |= disc
+        return n
+
     # -- planning grid ---------------------------------------------------------------------------
     def inflated(
         self,

@@ -433,6 +433,23 @@ class Navigator:
             )
         return self._grid
 
+    def clear_under_robot(self) -> int:
+        """Clear the costmap under the robot's footprint when its own cell is blocked on the planning
+        grid, and return how many OBSTACLE cells that cleared (0: nothing was blocked by marks under it).
+
+        Where the robot stands there is no obstacle: a mark there is stale, or a landmark update moved
+        the pose estimate onto marks made before it. Left alone, every path from there was
+        START_IN_OBSTACLE (the escape's straight line starts in a lethal cell), and a search tried each
+        of its cells in turn without moving. Obstacles merely near the footprint are kept: the
+        escape (:class:`~lab.navigation.paths.Replanner`) drives out of their grown band."""
+        p = self.robot.odometry()
+        if not self.spec.contains_xy(p.x, p.y) or math.isfinite(self.planning_grid().cost_at(p.x, p.y)):
+            return 0
+        n = self.costmap.clear_disc((p.x, p.y), self.robot.base_limits.radius)
+        if n:
+            self._grid = None
+        return n
+
     # -- driving -----------------------------------------------------------------------------------
     def go_to(
         self,
@@ -473,6 +490,7 @@ class Navigator:
         gx, gy = check_finite_xy("goal_xy", goal_xy)
         heading = _final_heading(goal_xy, final_heading, face_xy)
         check_timeout(timeout)
+        self.clear_under_robot()
         return DriveLoop(self, ToGoal(self, (gx, gy), heading), timeout).run()
 
     def go_near(
@@ -500,6 +518,7 @@ class Navigator:
                 f"need 0 <= min_distance <= max_distance < inf, got {min_distance!r}, {max_distance!r}"
             )
         check_timeout(timeout)
+        self.clear_under_robot()
         return DriveLoop(self, NearTarget((tx, ty), min_distance, max_distance), timeout).run()
 
     def footprint_clear(self, a_xy, b_xy, step: float = 0.02) -> bool:
