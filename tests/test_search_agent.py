@@ -240,6 +240,21 @@ def test_a_cell_whose_band_is_blocked_is_approached_from_farther_out(monkeypatch
         AgentConfig(wide_band_m=-0.1)
 
 
+def test_a_robot_that_cannot_leave_its_cell_ends_the_run_as_stuck(monkeypatch):
+    """Every request finds the robot's own cell blocked (the navigator could not drive out): after
+    MAX_STUCK such failures in a row the run ends, saying so, instead of skipping every cell of the map
+    in no time until the action limit (493 skips at one instant in a tuning trial)."""
+
+    def walled_in(robot):
+        return lambda target_xy, lo, hi: NavigationResult(False, "START_IN_OBSTACLE", robot.odometry())
+
+    out, script, robot = scripted_run(monkeypatch, (2.5, 3.5), [((1.5, 0.5), 0.9), ((-1.0, 2.0), 0.8)],
+                                      navigate=walled_in)  # fmt: skip
+    assert not out.found and out.reason.startswith("stuck: 3 navigation requests in a row found the robot")
+    assert sum(e.kind == "skip" for e in out.events) == agent_mod.MAX_STUCK - 1 and not script.local_cells
+    assert robot.now() < 20.0  # one global search, no driving
+
+
 def test_all_peaks_failed_triggers_a_new_global_search(monkeypatch):
     out, script, _ = scripted_run(monkeypatch, (2.5, 3.5), [((1.5, 0.5), 0.9)], max_time=200.0)
     assert out.global_searches >= 2  # the map went flat after the one peak failed

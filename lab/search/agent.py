@@ -103,6 +103,16 @@ INTERRUPTED = "interrupted"
 #: a not-found run says so in its reason.
 THIN_DATABASE_VIEWS = 3
 
+#: How many navigation requests in a row may fail with the robot's own cell blocked (START_IN_OBSTACLE:
+#: the navigator cleared its footprint and could not drive out of the grown obstacles round it) before
+#: the run ends as stuck; each tries another cell, and none can be reached from where it stands.
+MAX_STUCK = 3
+
+
+class _Stuck(Exception):
+    """The robot cannot leave where it stands (raised by the agent, ends the run with its reason)."""
+
+
 #: Errors from the robot that end a run with their reason instead of raising out of it.
 _DEVICE_FAULTS = (
     DeviceTimeout,
@@ -361,6 +371,7 @@ class SearchAgent:
         self._excluded = np.zeros(shape, bool)
         self._nav_failures = np.zeros(shape, int)
         self._misses = np.zeros(shape, int)  # failed local searches that answered for each cell
+        self._stuck = 0  # navigation requests in a row that found the robot's own cell blocked
         self._best_view: ViewRecord | None = None  # the failed searches' view closest to a pose
         self._searched = np.zeros(shape, bool)
         self._events: list[SearchEvent] = []
@@ -414,7 +425,7 @@ class SearchAgent:
                     found = res
                     reason = "found"
                     break
-        except SearchBudgetExceeded as e:
+        except (SearchBudgetExceeded, _Stuck) as e:
             reason = str(e)
         except _DEVICE_FAULTS as e:  # a pan-tilt that never arrives, a safety stop, a lost link: end cleanly
             reason = f"stopped by a fault: {type(e).__name__}: {e}"
@@ -592,6 +603,12 @@ class SearchAgent:
         lc = self.config.local_search
         nav, how_arrived = self._approach(cell, xy)
         self._nav_paths.append((xy, getattr(nav, "path_xy", None)))
+        self._stuck = self._stuck + 1 if "START_IN_OBSTACLE" in str(nav.reason) else 0
+        if self._stuck >= MAX_STUCK:
+            raise _Stuck(
+                f"stuck: {self._stuck} navigation requests in a row found the robot's own cell blocked in "
+                "its costmap (START_IN_OBSTACLE) and could not drive out"
+            )
         if not nav.arrived:
             self._nav_failures[cell] += 1
             if self._nav_failures[cell] >= self.config.max_nav_failures:
