@@ -255,6 +255,29 @@ def test_a_robot_that_cannot_leave_its_cell_ends_the_run_as_stuck(monkeypatch):
     assert robot.now() < 20.0  # one global search, no driving
 
 
+def test_the_budget_holds_when_relocalization_looks_round_before_each_drive(monkeypatch):
+    """run_search's active re-localization looks round (20 s of views) on the robot beneath the budget
+    wrapper before every drive; with every drive failing at once (each cell unreachable) the run went
+    on to 768 s of a 300 s budget. The budget is now checked round it: the run ends within one look."""
+    from lab.runs.search import _relocalizing
+
+    class LooksRound:  # the localized robot beneath the budget: its views step the base directly
+        def __init__(self, base):
+            self.base = base
+
+        def relocalize(self):
+            self.base.step(20.0)
+
+    def unreachable(robot):
+        nav = lambda target_xy, lo, hi: NavigationResult(False, "UNREACHABLE", robot.odometry())  # noqa: E731
+        return _relocalizing(nav, LooksRound(robot.base), robot)
+
+    peaks = [((x, y), 0.9) for x in (-2.0, -1.0, 1.0, 2.0) for y in (-1.0, 1.0, 2.5)]
+    out, _, robot = scripted_run(monkeypatch, (2.5, 3.5), peaks, max_time=100.0, navigate=unreachable)
+    assert not out.found and out.reason.startswith("time budget of 100 s used up")
+    assert 100.0 <= robot.now() <= 120.0 + 1e-6, robot.now()
+
+
 def test_all_peaks_failed_triggers_a_new_global_search(monkeypatch):
     out, script, _ = scripted_run(monkeypatch, (2.5, 3.5), [((1.5, 0.5), 0.9)], max_time=200.0)
     assert out.global_searches >= 2  # the map went flat after the one peak failed

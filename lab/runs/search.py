@@ -579,7 +579,7 @@ def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, 
     robot.enable()
     tracked = TrackedRobot(robot, truth_of.robot_pose)
     budget = BudgetedRobot(tracked, *budgets)
-    nav = _relocalizing(navigate(budget, spec), tracked)
+    nav = _relocalizing(navigate(budget, spec), tracked, budget)
     agent = SearchAgent(budget, db, nav, ProbabilityMap(spec), cfg, rng=np.random.default_rng([seed, 1]))
     if recorder is not None:
         from lab.viz.live import LiveView
@@ -602,11 +602,16 @@ def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, 
     return out, truth, budget, robot.base.odometry(), tracked.track(), report_reloc
 
 
-def _relocalizing(navigate, robot: LocalizedRobot | TrackedRobot):
-    """Active re-localization before every drive: when the pose is uncertain, look for a landmark first."""
+def _relocalizing(navigate, robot: LocalizedRobot | TrackedRobot, budget: BudgetedRobot):
+    """Active re-localization before every drive: when the pose is uncertain, look for a landmark first.
+    Its views step the robot under the ``budget`` wrapper, so the budget is checked before and after:
+    a run whose drives all failed at once (an unreachable cell each) looked round for 20 s before each
+    and ran on to 768 s of a 300 s budget."""
 
     def go(*args, **kwargs):
+        budget.check()
         robot.relocalize()
+        budget.check()
         return navigate(*args, **kwargs)
 
     for k, v in vars(navigate).items():  # keep what the callable carries (its navigator, for figures)

@@ -52,11 +52,16 @@ class BudgetedRobot(RobotWrapper):
         self._record_every = record_every_s
 
     # budget and bookkeeping
-    def step(self, dt: float) -> None:
+    def check(self) -> None:
+        """Raise :class:`SearchBudgetExceeded` once a budget is used up (what :meth:`step` does first):
+        for work done on the robot underneath, which time passes on without this wrapper's step."""
         if self.base.now() >= self.deadline:
             raise SearchBudgetExceeded(f"time budget of {self.deadline - self.t_start:g} s used up")
         if self.wall_deadline is not None and time.perf_counter() >= self.wall_deadline:
             raise SearchBudgetExceeded("wall-clock budget used up")
+
+    def step(self, dt: float) -> None:
+        self.check()
         self.base.step(dt)
         w = self.base.wheel_odometry()
         self.path_length_m += math.hypot(w.x - self._wheels.x, w.y - self._wheels.y)
