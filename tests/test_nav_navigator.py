@@ -104,3 +104,7 @@ def test_marks_under_the_robot_are_cleared_so_it_can_escape(nav):
     # nothing left under it: a second call changes nothing
     ev = nav.costmap.evidence
     assert nav.clear_under_robot() == 0 and np.array_equal(nav.costmap.evidence, ev)
+    with pytest.raises(ConfigError, match="radius must be a finite number >= 0 m"):
+        nav.costmap.clear_disc((0.5, 2.05), -0.1)
+    with pytest.raises(ValueError, match="xy"):
+        nav.costmap.clear_disc((math.nan, 2.05), 0.2)
