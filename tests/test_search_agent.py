@@ -4,6 +4,7 @@ end to end in the simulator with the ground-truth stand-in navigator, scored aga
 import json
 import math
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -30,8 +31,9 @@ SPEC = GridSpec.from_bounds(-3, -4, 3, 4, 0.2)
 class Script:
     """Stand-ins for the global and local searches: colour peaks at given places, the object at one."""
 
-    def __init__(self, robot, object_xy, peaks, local_time=8.0, global_time=12.0, visible=None):
+    def __init__(self, robot, object_xy, peaks, local_time=8.0, global_time=12.0, visible=None, colour=False):
         self.robot, self.object_xy, self.peaks = robot, object_xy, peaks
+        self.colour = colour  # a miss in front of the object saw its colours (the second look's peaks)
         self.per_scan = bool(peaks) and isinstance(peaks[0], list)
         self.visible = visible or (lambda pose: True)  # from where the object's texture can be seen
         self.local_time, self.global_time = local_time, global_time
@@ -54,11 +56,13 @@ class Script:
         ox, oy = self.object_xy
         bearing = math.atan2(target_xy[1] - p.y, target_xy[0] - p.x)
         off = abs(math.remainder(math.atan2(oy - p.y, ox - p.x) - bearing, 2 * math.pi))
-        found = math.hypot(ox - p.x, oy - p.y) <= 1.2 and off <= math.radians(95) and self.visible(p)
+        in_view = math.hypot(ox - p.x, oy - p.y) <= 1.2 and off <= math.radians(95)
+        found = in_view and self.visible(p)
         G = np.eye(4)
         G[:3, 3] = (*self.object_xy, 0.1)
         miss = () if found else (ViewRecord(0.0, 0.0, robot.now(), 200, 40, 3, "scripted"),)
-        return LocalSearchResult(found, "scripted", G if found else None, views=miss)
+        peaks = (G[:3, 3].copy(),) if self.colour and in_view and not found else ()
+        return LocalSearchResult(found, "scripted", G if found else None, views=miss, colour_peaks=peaks)
 
 
 def straight_navigator(robot, refuse=()):
@@ -80,19 +84,27 @@ def straight_navigator(robot, refuse=()):
 
 
 def scripted_run(
-    monkeypatch, object_xy, peaks, strategy="paper", max_time=300.0, refuse=(), navigate=None, visible=None
+    monkeypatch,
+    object_xy,
+    peaks,
+    strategy="paper",
+    max_time=300.0,
+    refuse=(),
+    navigate=None,
+    visible=None,
+    colour=False,
+    config=None,
 ):
     robot = BudgetedRobot(KinematicRobot(Pose2D(0.0, -3.0, math.pi / 2)), max_time)
     robot.enable()
-    script = Script(robot, object_xy, peaks, visible=visible)
+    script = Script(robot, object_xy, peaks, visible=visible, colour=colour)
     monkeypatch.setattr(agent_mod, "global_search", script.global_search)
     monkeypatch.setattr(agent_mod, "local_search", script.local_search)
     monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)
     nav = navigate(robot) if navigate else straight_navigator(robot, refuse)
     db = [None] * 823  # a stand-in with the book's size (the reason of a miss reads it); nothing else
-    agent = SearchAgent(
-        robot, db, nav, ProbabilityMap(SPEC), AgentConfig(strategy=strategy), rng=np.random.default_rng(0)
-    )
+    config = replace(config or AgentConfig(), strategy=Strategy.parse(strategy))
+    agent = SearchAgent(robot, db, nav, ProbabilityMap(SPEC), config, rng=np.random.default_rng(0))
     return agent.run(), script, robot
 
 
@@ -157,6 +169,52 @@ def test_a_revisit_goes_round_the_other_way_when_one_side_is_out_of_reach(monkey
     )
     assert out.found and script.local_cells == [SPEC.world_to_cell(*obj)] * 2
     assert any("another side (-120 deg)" in e.detail for e in out.events if e.kind == "navigate")
+
+
+def test_a_miss_that_saw_the_colours_looks_at_once_from_a_side_within_reach(monkeypatch):
+    """A thin object against a wall (north of it, out of reach), its colours seen from the south but its
+    texture only from the east: the miss is followed at once by a search from another side. Both
+    120 degree turns lie behind the wall; the 60 degree one is within reach and finds it. With the
+    120 degree turns alone, the second search fell back to the nearest spot, the first side, and
+    missed again."""
+    obj = (0.0, 0.5)
+
+    def wall_north(robot):
+        inner = straight_navigator(robot)
+
+        def navigate(target_xy, min_distance, max_distance):
+            if target_xy[1] > obj[1] + 0.3:
+                return NavigationResult(False, "no path: UNREACHABLE", robot.odometry())
+            return inner(target_xy, min_distance, max_distance)
+
+        return navigate
+
+    def run(config):
+        return scripted_run(
+            monkeypatch,
+            obj,
+            [(obj, 0.9)],
+            navigate=wall_north,
+            visible=lambda pose: pose.x > obj[0] + 0.3,
+            colour=True,
+            config=config,
+        )
+
+    out, script, _ = run(AgentConfig())
+    assert out.found and script.local_cells == [SPEC.world_to_cell(*obj)] * 2 and out.global_searches == 1
+    nav = [e for e in out.events if e.kind == "navigate"]
+    assert nav[1].detail.startswith("second side, from another side (+60 deg)"), nav[1]
+
+    old, script, _ = run(AgentConfig(revisit_turns_deg=(120.0,)))
+    assert script.local_cells[:2] == [SPEC.world_to_cell(*obj)] * 2
+    assert [e.detail for e in old.events if e.kind == "local"][:2] == ["scripted", "scripted"]  # two misses
+    assert "another side" not in [e for e in old.events if e.kind == "navigate"][1].detail
+
+    off, _, _ = run(AgentConfig(second_side=False))  # off: the map alone decides where to look next
+    assert not any(e.detail.startswith("second side") for e in off.events if e.kind == "navigate")
+
+    with pytest.raises(ConfigError, match="revisit_turns_deg must be one or more turns in"):
+        AgentConfig(revisit_turns_deg=(0.0,))
 
 
 def test_a_distractor_two_searches_answered_for_is_not_searched_again(monkeypatch):
@@ -378,10 +436,12 @@ def test_glossy_cup_ends_not_found_at_its_budget_and_the_mass_moves_on():
         others = np.ones(after.shape, bool)
         others[c] = False
         assert after[others].sum() > before[others].sum()  # ... to the rest of the map
-    # the peak moves on: a cell that held several colour peaks may take two misses before another
-    # cell overtakes it, but the search goes from place to place
+    # the peak moves on: a miss that saw the cup's colours is followed at once by a search from another
+    # side (AgentConfig.second_side), and then the search goes on to another place
     cells = [snaps[k].cell for k in failed]
-    assert len(set(cells)) >= 3, cells
+    assert len(set(cells)) >= 2 and cells[0] == cells[1] != cells[2], cells
+    nav = [e for e in res.events if e.kind == "navigate"]
+    assert nav[1].cell == cells[0] and nav[1].detail.startswith("second side, from another side"), nav[1]
 
 
 def test_bad_inputs_are_clear_errors():

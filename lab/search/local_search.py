@@ -257,6 +257,9 @@ class LocalSearchResult:
     position_std_m, rotation_std_deg : float or None
     views : tuple of ViewRecord
     t_start, t_end : float [s]
+    colour_peaks : tuple of ndarray, shape (3,) [m]
+        The world points of the object's colour near the searched cell that the second look aimed at
+        (odometry frame): on a miss, the object's colours were there but no pose came of them.
     """
 
     found: bool
@@ -270,6 +273,7 @@ class LocalSearchResult:
     views: tuple[ViewRecord, ...] = field(default=(), repr=False)
     t_start: float = 0.0
     t_end: float = 0.0
+    colour_peaks: tuple[np.ndarray, ...] = field(default=(), repr=False)
 
 
 def local_views(config: LocalSearchConfig, bearing: float = 0.0, limits=None) -> list[tuple[float, float]]:
@@ -383,8 +387,10 @@ class _LocalSearch:
             track = self._search_view(pan, tilt)
             if track is not None and track.found:
                 return self._found(track, t_start)
+        peaks = []
         if self.cfg.second_look is not None:
-            for p_W in self._colour_peaks(target_xy, self.cfg.second_look):
+            peaks = self._colour_peaks(target_xy, self.cfg.second_look)
+            for p_W in peaks:
                 track = self._second_look(p_W, self.cfg.second_look)
                 if track is not None and track.found:
                     return self._found(track, t_start)
@@ -394,6 +400,7 @@ class _LocalSearch:
             views=tuple(self.records),
             t_start=t_start,
             t_end=robot.now(),
+            colour_peaks=tuple(peaks),
         )
 
     def _search_view(self, pan: float, tilt: float) -> _Track | None:
