@@ -173,7 +173,8 @@ def test_a_revisit_goes_round_the_other_way_when_one_side_is_out_of_reach(monkey
 
 def test_a_miss_that_saw_the_colours_looks_at_once_from_a_side_within_reach(monkeypatch):
     """A thin object against a wall (north of it, out of reach), its colours seen from the south but its
-    texture only from the east: the miss is followed at once by a search from another side. Both
+    texture only from the east: with ``second_side`` on, the miss is followed at once by a search from
+    another side. Both
     120 degree turns lie behind the wall; the 60 degree one is within reach and finds it. With the
     120 degree turns alone, the second search fell back to the nearest spot, the first side, and
     missed again."""
@@ -200,17 +201,17 @@ def test_a_miss_that_saw_the_colours_looks_at_once_from_a_side_within_reach(monk
             config=config,
         )
 
-    out, script, _ = run(AgentConfig())
+    out, script, _ = run(AgentConfig(second_side=True))
     assert out.found and script.local_cells == [SPEC.world_to_cell(*obj)] * 2 and out.global_searches == 1
     nav = [e for e in out.events if e.kind == "navigate"]
     assert nav[1].detail.startswith("second side, from another side (+60 deg)"), nav[1]
 
-    old, script, _ = run(AgentConfig(revisit_turns_deg=(120.0,)))
+    old, script, _ = run(AgentConfig(second_side=True, revisit_turns_deg=(120.0,)))
     assert script.local_cells[:2] == [SPEC.world_to_cell(*obj)] * 2
     assert [e.detail for e in old.events if e.kind == "local"][:2] == ["scripted", "scripted"]  # two misses
     assert "another side" not in [e for e in old.events if e.kind == "navigate"][1].detail
 
-    off, _, _ = run(AgentConfig(second_side=False))  # off: the map alone decides where to look next
+    off, _, _ = run(AgentConfig())  # off by default: the map alone decides where to look next
     assert not any(e.detail.startswith("second side") for e in off.events if e.kind == "navigate")
 
     with pytest.raises(ConfigError, match="revisit_turns_deg must be one or more turns in"):
@@ -436,12 +437,10 @@ def test_glossy_cup_ends_not_found_at_its_budget_and_the_mass_moves_on():
         others = np.ones(after.shape, bool)
         others[c] = False
         assert after[others].sum() > before[others].sum()  # ... to the rest of the map
-    # the peak moves on: a miss that saw the cup's colours is followed at once by a search from another
-    # side (AgentConfig.second_side), and then the search goes on to another place
+    # the peak moves on: a cell that held several colour peaks may take two misses before another
+    # cell overtakes it, but the search goes from place to place
     cells = [snaps[k].cell for k in failed]
-    assert len(set(cells)) >= 2 and cells[0] == cells[1] != cells[2], cells
-    nav = [e for e in res.events if e.kind == "navigate"]
-    assert nav[1].cell == cells[0] and nav[1].detail.startswith("second side, from another side"), nav[1]
+    assert len(set(cells)) >= 3, cells
 
 
 def test_bad_inputs_are_clear_errors():
