@@ -411,8 +411,13 @@ class Robot(ABC):
         self.close()
         return False
 
-    def wait_pan_tilt(self, timeout: float = 5.0, dt: float = 0.05) -> PanTiltState:
-        """Step until the head reaches its targets; raises DeviceTimeout after ``timeout`` [s]."""
+    def wait_pan_tilt(self, timeout: float = 10.0, dt: float = 0.05) -> PanTiltState:
+        """Step until the head reaches its targets; raises DeviceTimeout after ``timeout`` [s].
+
+        The default covers a swing across the whole pan range at the unit's default slew speed (318
+        deg at 60 deg/s: 5.3 s, with the realistic profile's backlash on top): with 5 s, a search trial
+        whose head stood at one end of the range when the global scan began at the other ended
+        "stopped by a fault: DeviceTimeout"."""
         from lab.errors import DeviceTimeout
 
         t_end = self.now() + timeout

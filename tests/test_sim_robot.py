@@ -117,6 +117,26 @@ def test_pan_tilt_moves_at_its_speed():
         assert s.pan == pytest.approx(math.radians(90)) and not s.moving
 
 
+def test_a_swing_across_the_whole_pan_range_is_waited_for():
+    """From one end of the pan range to the other at the default speed (5.3 s): the default wait covers
+    it; a wait shorter than the swing is a DeviceTimeout, as on a stuck unit."""
+    from lab.errors import DeviceTimeout
+
+    with SimWorld("arena") as w:
+        r = SimRobot(w)
+        r.enable()
+        lim = r.pan_tilt_limits
+        r.command_pan_tilt(lim.pan_min, 0.0)
+        r.wait_pan_tilt()
+        r.command_pan_tilt(lim.pan_max, 0.0)
+        t0 = r.now()
+        s = r.wait_pan_tilt()
+        assert s.pan == pytest.approx(lim.pan_max, abs=1e-3) and r.now() - t0 > 5.0
+        r.command_pan_tilt(lim.pan_min, 0.0)
+        with pytest.raises(DeviceTimeout, match="pan-tilt did not reach its target within 2.0 s"):
+            r.wait_pan_tilt(timeout=2.0)
+
+
 def test_collision_stops_the_base_and_is_counted():
     with SimWorld("lab_room") as w:
         crate = w.scene.body("crate")
