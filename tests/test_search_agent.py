@@ -174,10 +174,9 @@ def test_a_revisit_goes_round_the_other_way_when_one_side_is_out_of_reach(monkey
 def test_a_miss_that_saw_the_colours_looks_at_once_from_a_side_within_reach(monkeypatch):
     """A thin object against a wall (north of it, out of reach), its colours seen from the south but its
     texture only from the east: with ``second_side`` on, the miss is followed at once by a search from
-    another side. Both
-    120 degree turns lie behind the wall; the 60 degree one is within reach and finds it. With the
-    120 degree turns alone, the second search fell back to the nearest spot, the first side, and
-    missed again."""
+    another side. Both 120 degree turns lie behind the wall; with a 60 degree turn in the schedule it
+    is within reach and finds it. With the 120 degree turns alone (the default), the second search
+    falls back to the nearest spot, the first side, and misses again."""
     obj = (0.0, 0.5)
 
     def wall_north(robot):
@@ -201,7 +200,7 @@ def test_a_miss_that_saw_the_colours_looks_at_once_from_a_side_within_reach(monk
             config=config,
         )
 
-    out, script, _ = run(AgentConfig(second_side=True))
+    out, script, _ = run(AgentConfig(second_side=True, revisit_turns_deg=(120.0, 60.0, 30.0)))
     assert out.found and script.local_cells == [SPEC.world_to_cell(*obj)] * 2 and out.global_searches == 1
     nav = [e for e in out.events if e.kind == "navigate"]
     assert nav[1].detail.startswith("second side, from another side (+60 deg)"), nav[1]
