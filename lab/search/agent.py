@@ -262,7 +262,9 @@ class AgentConfig:
             raise ConfigError(f"wide_band_m must be >= 0 m, got {self.wide_band_m}")
         turns = tuple(self.revisit_turns_deg)
         if not turns or not all(0 < t <= 180 for t in turns):
-            raise ConfigError(f"revisit_turns_deg must be one or more turns in (0, 180] degrees, got {turns!r}")
+            raise ConfigError(
+                f"revisit_turns_deg must be one or more turns in (0, 180] degrees, got {turns!r}"
+            )
         object.__setattr__(self, "revisit_turns_deg", turns)
         if not self.lawnmower_spacing_m > 0 or not self.coverage_radius_m > 0:
             raise ConfigError("lawnmower_spacing_m and coverage_radius_m must be > 0")
@@ -603,7 +605,7 @@ class SearchAgent:
         if last is not None:
             a0 = math.atan2(last[1] - xy[1], last[0] - xy[0])
             tol = 0.5 * (lc.max_distance_m - lc.min_distance_m)
-            for turn in (t for turn in self.config.revisit_turns_deg for t in (turn, -turn)):
+            for turn in (s * t for t in self.config.revisit_turns_deg for s in (1, -1)):
                 a = a0 + math.radians(turn)
                 # the middle of the band, then its far edge: beside a table's end, the middle may lie in
                 # the table's grown footprint while a spot a little farther out is free
