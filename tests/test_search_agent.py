@@ -65,13 +65,15 @@ class Script:
         return LocalSearchResult(found, "scripted", G if found else None, views=miss, colour_peaks=peaks)
 
 
-def straight_navigator(robot, refuse=()):
-    """Drive in a straight line to the near side of the distance band (the kinematic robot has no walls)."""
+def straight_navigator(robot, refuse=(), blocked=None):
+    """Drive in a straight line to the near side of the distance band (the kinematic robot has no walls);
+    targets near a ``refuse`` point, or where ``blocked(target_xy)`` holds (a wall), are unreachable."""
 
     def navigate(target_xy, min_distance, max_distance):
         p = robot.odometry()
         d = math.hypot(target_xy[0] - p.x, target_xy[1] - p.y)
-        if any(math.hypot(target_xy[0] - x, target_xy[1] - y) < 0.15 for x, y in refuse):
+        near = any(math.hypot(target_xy[0] - x, target_xy[1] - y) < 0.15 for x, y in refuse)
+        if near or (blocked is not None and blocked(target_xy)):
             return NavigationResult(False, "no path: UNREACHABLE", p)
         r = 0.5 * (min_distance + max_distance)
         k = max(0.0, (d - r) / d) if d > 1e-9 else 0.0
@@ -155,14 +157,7 @@ def test_a_revisit_goes_round_the_other_way_when_one_side_is_out_of_reach(monkey
     obj = (0.5, 0.5)
 
     def east_blocked(robot):
-        inner = straight_navigator(robot)
-
-        def navigate(target_xy, min_distance, max_distance):
-            if target_xy[0] > obj[0] + 0.3:
-                return NavigationResult(False, "no path: UNREACHABLE", robot.odometry())
-            return inner(target_xy, min_distance, max_distance)
-
-        return navigate
+        return straight_navigator(robot, blocked=lambda xy: xy[0] > obj[0] + 0.3)
 
     out, script, _ = scripted_run(
         monkeypatch, obj, [(obj, 0.9)], navigate=east_blocked, visible=lambda pose: pose.x < obj[0] - 0.3
@@ -180,14 +175,7 @@ def test_a_miss_that_saw_the_colours_looks_at_once_from_a_side_within_reach(monk
     obj = (0.0, 0.5)
 
     def wall_north(robot):
-        inner = straight_navigator(robot)
-
-        def navigate(target_xy, min_distance, max_distance):
-            if target_xy[1] > obj[1] + 0.3:
-                return NavigationResult(False, "no path: UNREACHABLE", robot.odometry())
-            return inner(target_xy, min_distance, max_distance)
-
-        return navigate
+        return straight_navigator(robot, blocked=lambda xy: xy[1] > obj[1] + 0.3)
 
     def run(config):
         return scripted_run(
