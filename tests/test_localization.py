@@ -15,15 +15,17 @@ from scipy.optimize import least_squares
 from scipy.stats import chi2
 
 from lab.errors import ConfigError
-from lab.geometry import Pose2D, Rz, pan_tilt_G_RC, relative_pose2d, se3, wrap_angle
+from lab.geometry import Pose2D, Rz, pan_tilt_G_RC, relative_pose2d, se3, se3_inv, wrap_angle
 from lab.navigation.landmarks import Landmark
 from lab.navigation.localization import (
     LandmarkObservation,
+    LandmarkObserver,
     LocalizationMode,
     LocalizedRobot,
     Localizer,
     LocalizerConfig,
     PoseEstimate,
+    face_share_in_image,
     measurement_jacobian,
     measurement_model,
     motion_jacobians,
@@ -338,6 +340,72 @@ def test_hardware_landmark_file_is_valid():
 
 
 # --- the closed loop ----------------------------------------------------------------------------------
+
+
+# --- how much of a landmark's face is in view ---------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "size, yaw, normal", [((1.4, 0.02, 1.0), 0.0, (0.0, -1.0)), ((0.02, 1.2, 0.7), 0.3, None)]
+)
+def test_face_points_span_the_printed_side(size, yaw, normal):
+    """The grid lies on the panel's side that looks along its normal, edge to edge."""
+    if normal is None:  # a panel turned by yaw whose thin axis is x: the face looks along -x of L
+        normal = tuple(-Rz(yaw)[:2, 0])
+    lm = Landmark("p", (0.5, 1.0, 1.5), yaw, size, normal)
+    P_W = (lm.G_WL[:3, :3] @ lm.face_points_L(5).T).T + lm.centre_W
+    offset = (P_W[:, :2] - lm.centre_W[:2]) @ np.asarray(normal)
+    assert np.allclose(offset, 0.5 * min(size[:2]))  # on the printed side, at half the thickness
+    assert np.isclose(np.ptp(P_W[:, 2]), size[2])
+    assert np.isclose(np.ptp((P_W[:, :2] - lm.centre_W[:2]) @ [-normal[1], normal[0]]), max(size[:2]))
+
+
+def test_face_share_is_the_part_of_the_face_inside_the_image():
+    """Straight ahead: all of it; the face's centre on the image's right edge: half (give or take the
+    grid's middle column, on the edge); behind the camera: none."""
+    from lab.robot import SIM_CAMERA
+
+    cam = SIM_CAMERA.camera()
+    lm = Landmark("p", (0.0, 0.0, 0.0), 0.0, (1.4, 0.02, 1.0), (0.0, -1.0))
+    # L in C: the face (normal -y of L) towards the camera, 3 m down the optical axis (C: z forward)
+    R_CL = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    assert face_share_in_image(lm, se3(R_CL, [0.0, 0.0, 3.0]), cam) == 1.0
+    x_edge = (cam.width - cam.cx) * 3.0 / cam.fx  # the image's right edge at 3 m
+    assert face_share_in_image(lm, se3(R_CL, [x_edge, 0.0, 3.0]), cam, n=15) == pytest.approx(0.5, abs=1 / 15)
+    assert face_share_in_image(lm, se3(R_CL, [0.0, 0.0, -3.0]), cam) == 0.0
+
+
+def test_a_fit_of_a_poster_mostly_outside_the_image_is_dropped():
+    """Rendered: poster_east 1.3 m ahead. With the head turned 39 deg, under a third of it is in the
+    image; its fit has inliers enough (the observer keeps it when any share will do) but is dropped
+    below ``min_face_in_image`` and counted; straight ahead the same poster is kept. The share at the
+    fitted pose is the share at the true pose."""
+    from lab.sim import SimRobot, SimWorld
+    from lab.training.landmarks import trained_landmark_map
+
+    room = trained_landmark_map("lab_room", progress=False)
+    lm = room.get("poster_east")
+    start = Pose2D(1.6, 1.6, 0.0)
+    with SimWorld("lab_room") as w:
+        robot = SimRobot(w, start=start, seed=0)
+        robot.enable()
+        frames = {}
+        for pan in (0.0, 39.0):
+            robot.command_pan_tilt(math.radians(pan), 0.0)
+            robot.wait_pan_tilt()
+            frames[pan] = robot.capture_stereo()
+
+    def observer(share):
+        return LandmarkObserver(room, LocalizerConfig(min_face_in_image=share), np.random.default_rng(0))
+
+    side = frames[39.0]
+    true_share = face_share_in_image(lm, se3_inv(start.G() @ side.G_RC) @ lm.G_WL, side.camera)
+    assert 0.2 < true_share < 0.4
+    (kept,) = observer(0.0).observe(side, [lm])
+    assert face_share_in_image(lm, kept.G_CL, side.camera) == pytest.approx(true_share, abs=0.05)
+    strict = observer(0.5)
+    assert strict.observe(side, [lm]) == [] and strict.n_partial == 1
+    assert len(strict.observe(frames[0.0], [lm])) == 1 and strict.n_partial == 1
 
 
 @pytest.mark.slow

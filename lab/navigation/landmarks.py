@@ -64,6 +64,24 @@ class Landmark:
         """The printed face's width (the larger of its horizontal extents)."""
         return max(self.size[0], self.size[1])
 
+    def face_points_L(self, n: int = 15) -> np.ndarray:
+        """An ``n`` x ``n`` grid of points (n*n, 3) [m] spanning the printed face, in L.
+
+        The face is the panel's side across its thin axis (x or y of L, whichever is smaller) that
+        looks along ``normal_W``; the grid runs edge to edge over its width and height.
+        """
+        thin = 0 if self.size[0] <= self.size[1] else 1
+        wide = 1 - thin
+        n_L = Rz(self.yaw)[:2, thin]
+        sign = 1.0 if float(np.dot(n_L, self.normal_W)) >= 0.0 else -1.0
+        s = np.linspace(-0.5, 0.5, int(n))
+        a, b = np.meshgrid(s, s, indexing="ij")
+        P = np.zeros((a.size, 3))
+        P[:, thin] = sign * 0.5 * self.size[thin]
+        P[:, wide] = a.ravel() * self.size[wide]
+        P[:, 2] = b.ravel() * self.size[2]
+        return P
+
     def facing(self, xy) -> float:
         """Cosine of the angle between the face's normal and the direction from it to ``xy``."""
         d = np.asarray(xy, float)[:2] - np.asarray(self.centre_W[:2])
