@@ -287,6 +287,12 @@ class LocalizerConfig:
         view up to ``report_passes`` times (a second look at a poster brings fresh image noise, not a
         fresh calibration: more passes would make the filter trust the shared error more than it should;
         a later pass looks again only where the one before saw a landmark the filter accepted).
+    report_detour_m : float [m]
+        When the re-localization before a report cannot get the found object's point within
+        ``report_sigma_m`` (no landmark seen well from where the robot found it), the robot keeps that
+        pose in the filter (:meth:`Localizer.start_clone`), drives at most this far (straight-line) to a
+        place where a landmark is in view (:meth:`LocalizedRobot.landmark_vantage_points`), re-localizes
+        there, and reports the object from the corrected kept pose. 0: no detour.
     first_sighting_max_offset_m, first_sighting_max_offset_rad : float [m], [rad]
         A start pose measured by hand (:class:`Localizer` with ``first_sighting=True``): the first
         landmark sighting that disagrees with it beyond the gate replaces it when the pose it implies is
@@ -320,6 +326,7 @@ class LocalizerConfig:
     report_sigma_rad: float = math.radians(0.5)
     report_max_views: int = 12
     report_passes: int = 3
+    report_detour_m: float = 1.5
     first_sighting_max_offset_m: float = 1.0
     first_sighting_max_offset_rad: float = math.radians(30.0)
     update_iterations: int = 10
@@ -338,6 +345,7 @@ class LocalizerConfig:
             "obs_sigma_rad",
             "recount_m",
             "recount_rad",
+            "report_detour_m",
         ):
             v = getattr(self, k)
             if not (math.isfinite(v) and v >= 0):
@@ -470,6 +478,30 @@ class UpdateRecord:
     kind: str = "update"
 
 
+@dataclass
+class _Clone:
+    """A past pose kept in the localizer's state: its mean ``x``, covariance ``Sigma`` and its
+    cross-covariance ``cross`` = Cov(x_now, x_clone) (3, 3) with the moving pose."""
+
+    x: np.ndarray
+    Sigma: np.ndarray
+    cross: np.ndarray
+
+    def update(self, Sigma_bar, H, S, Q, v) -> None:
+        """The clone's part of an accepted update (:meth:`Localizer.start_clone`): the joint state
+        ``[x, x_c]`` with prior covariance ``P = [[Sigma_bar, cross], [cross^T, Sigma]]`` and
+        ``H_joint = [H, 0]``; ``K_joint = P H_joint^T S^-1``, ``x_c += K_c v``, Joseph form."""
+        P = np.block([[Sigma_bar, self.cross], [self.cross.T, self.Sigma]])
+        Hj = np.hstack([H, np.zeros((3, 3))])
+        Kj = np.linalg.solve(S, Hj @ P).T  # (6, 3)
+        self.x = self.x + Kj[3:] @ v
+        self.x[2] = wrap_angle(self.x[2])
+        IKH = np.eye(6) - Kj @ Hj
+        P = IKH @ P @ IKH.T + Kj @ Q @ Kj.T
+        P = 0.5 * (P + P.T)
+        self.Sigma, self.cross = P[3:, 3:], P[:3, 3:]
+
+
 class Localizer:
     """The EKF over ``x = [x, y, theta]`` (see the module docstring for its equations).
 
@@ -484,6 +516,10 @@ class Localizer:
         The start was measured by hand (a real robot stood at a taped mark): the first landmark
         observation goes through :meth:`first_sighting` instead of the EKF update, so that a start that
         is off by more than ``Sigma0`` says is corrected, not locked out by the gate.
+
+    A past pose can be kept in the state (stochastic cloning, :meth:`start_clone`): the robot found an
+    object where no landmark was in view, drives to one, and the landmark corrects the pose it found
+    the object from too (:meth:`cloned_estimate`).
     """
 
     def __init__(self, x0, Sigma0=None, config: LocalizerConfig | None = None, first_sighting: bool = False):
@@ -498,6 +534,7 @@ class Localizer:
         self.n_inflations = 0
         self._rejected_here: set[str] = set()  # landmarks whose rejection counted since the last move
         self._moved = np.zeros(2)  # driven [m] and turned [rad] since then
+        self._clone: _Clone | None = None  # a past pose kept in the state (start_clone)
 
     @property
     def n_updates(self) -> int:
@@ -512,6 +549,8 @@ class Localizer:
         self.x = motion_model(self.x, u)  # x_bar = f(x, u)
         Sigma = F @ self.Sigma @ F.T + V @ M @ V.T  # Sigma_bar = F Sigma F^T + V M V^T
         self.Sigma = 0.5 * (Sigma + Sigma.T)
+        if self._clone is not None:  # the clone stays where it was: Cov(x_bar, x_c) = F Cov(x, x_c)
+            self._clone.cross = F @ self._clone.cross
         self._moved += (math.hypot(u[0], u[1]), abs(u[2]))
         if self._moved[0] >= self.config.recount_m or self._moved[1] >= self.config.recount_rad:
             self._rejected_here.clear()  # a new place: every landmark's rejection counts again
@@ -547,7 +586,8 @@ class Localizer:
                 r[2] = wrap_angle(r[2])
                 dx = x_bar - x
                 dx[2] = wrap_angle(dx[2])
-                x_next = x_bar + K @ (r - H @ dx)
+                v = r - H @ dx  # the iterated EKF's innovation at x_i
+                x_next = x_bar + K @ v
                 x_next[2] = wrap_angle(x_next[2])
                 step = x_next - x
                 step[2] = wrap_angle(step[2])
@@ -556,6 +596,8 @@ class Localizer:
                     break
             IKH = np.eye(3) - K @ H
             Sigma = IKH @ Sigma_bar @ IKH.T + K @ Q @ K.T  # Joseph form
+            if self._clone is not None:
+                self._clone.update(Sigma_bar, H, S, Q, v)
             self.x, self.Sigma = x, 0.5 * (Sigma + Sigma.T)
             self.rejected_in_a_row = 0
         elif landmark.name not in self._rejected_here:  # once per landmark per place (recount_m)
@@ -581,6 +623,48 @@ class Localizer:
         )
         self.history.append(rec)
         return rec
+
+    # stochastic cloning: a past pose kept in the state
+
+    def start_clone(self) -> None:
+        r"""Keep the pose now, :math:`x_c = x`, in the state beside the moving pose (stochastic cloning).
+
+        The joint covariance starts as :math:`\begin{bmatrix} \Sigma & \Sigma \\ \Sigma & \Sigma
+        \end{bmatrix}` (both are the same pose). A prediction moves :math:`x` only, so the
+        cross-covariance becomes :math:`F\, \Sigma_{xc}`; an update corrects both through the joint
+        Kalman gain, the measurement seeing :math:`x` alone (:math:`H_{joint} = [H, 0]`):
+
+        .. math:: K_c = \Sigma_{xc}^T H^T S^{-1}, \qquad x_c \leftarrow x_c + K_c\, \nu
+
+        with :math:`\nu` the update's innovation (the iterated EKF's, at its last iterate), and the
+        joint covariance in Joseph form. A landmark seen after a short drive thus corrects the pose the
+        drive began from, as far as the odometry between the two ties them.
+
+        Raises
+        ------
+        ValueError
+            While the first sighting of a hand-measured start is pending (it may replace the pose
+            outright, which no cross-covariance describes).
+        """
+        if self.first_sighting_pending:
+            raise ValueError("cannot clone the pose before the first landmark sighting of a measured start")
+        self._clone = _Clone(self.x.copy(), self.Sigma.copy(), self.Sigma.copy())
+
+    @property
+    def cloning(self) -> bool:
+        return self._clone is not None
+
+    def cloned_estimate(self) -> tuple[np.ndarray, np.ndarray]:
+        """The kept pose ``x_c`` (3,) and its covariance (3, 3), as corrected since :meth:`start_clone`."""
+        if self._clone is None:
+            raise ValueError("no pose is cloned (start_clone)")
+        return self._clone.x.copy(), self._clone.Sigma.copy()
+
+    def end_clone(self) -> tuple[np.ndarray, np.ndarray]:
+        """Drop the kept pose; returns it and its covariance (:meth:`cloned_estimate`)."""
+        out = self.cloned_estimate()
+        self._clone = None
+        return out
 
     def first_sighting(self, z, Q, landmark: Landmark, t: float = 0.0, n_inliers: int = 0) -> UpdateRecord:
         r"""The first landmark observation of a start measured by hand: fuse it with the start, or let it
@@ -892,6 +976,54 @@ class LocalizedRobot(RobotWrapper):
             order.append((-lm.facing(x[:2]) * lm.width_m / max(r, 0.5), pan, tilt, lm.name))
         order.sort()
         return [(pan, tilt, name) for _, pan, tilt, name in order]
+
+    def landmark_vantage_points(
+        self,
+        free,
+        radii_m=None,
+        n_directions: int = 16,
+        min_facing: float = 0.7,
+        range_m: tuple[float, float] = (1.0, 3.5),
+        tilt_max: float = math.radians(25.0),
+    ) -> list[tuple[float, float, str]]:
+        """Places near the robot from which a landmark would be seen well: for a detour before a report
+        (``LocalizerConfig.report_detour_m``).
+
+        The candidates lie on rings around the estimated position (radii ``radii_m``, default 0.5 m
+        steps up to ``report_detour_m``; ``n_directions`` on each); ``free(x, y)`` says whether the robot
+        may stand there (its costmap). A landmark is seen well from a place when it is ``range_m`` away,
+        at most ``acos(min_facing)`` off its face's normal, and its centre within ``tilt_max`` of the
+        camera's height: the whole face in a frame, head-on enough for a precise fit (the robot turns
+        and pans to it there). Returns ``(x, y, landmark name)``, nearest first; of places equally near,
+        the better view first (facing x width / range, as :meth:`landmark_views`).
+        """
+        if self.mode is LocalizationMode.ODOMETRY:
+            return []
+        reach = self.config.report_detour_m
+        radii = radii_m if radii_m is not None else np.arange(0.5, reach + 1e-9, 0.5)
+        x0, y0 = float(self.localizer.x[0]), float(self.localizer.x[1])
+        h = self.base.camera.mount_R[2]
+        out = []
+        for r in radii:
+            for a in np.arange(n_directions) * (2.0 * math.pi / n_directions):
+                x, y = x0 + r * math.cos(a), y0 + r * math.sin(a)
+                if not free(x, y):
+                    continue
+                best = None
+                for lm in self.observer.map:
+                    d = math.hypot(lm.centre_W[0] - x, lm.centre_W[1] - y)
+                    facing = lm.facing((x, y))
+                    if not (range_m[0] <= d <= range_m[1] and facing >= min_facing):
+                        continue
+                    if abs(math.atan2(lm.centre_W[2] - h, d)) > tilt_max:
+                        continue
+                    score = facing * lm.width_m / d
+                    if best is None or score > best[0]:
+                        best = (score, lm.name)
+                if best is not None:
+                    out.append((round(float(r), 6), -best[0], x, y, best[1]))
+        out.sort()
+        return [(x, y, name) for _, _, x, y, name in out]
 
     def relocalize(
         self,

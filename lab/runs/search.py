@@ -38,11 +38,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from lab.errors import ConfigError, SafetyStop
-from lab.geometry import R_to_euler_zyx, Rz, se3, se3_inv
+from lab.geometry import Pose2D, R_to_euler_zyx, Rz, se3, se3_inv
 from lab.navigation.astar import astar_to_region
 from lab.navigation.drive_loop import NavOutcome
 from lab.navigation.grid import GridSpec
-from lab.navigation.localization import LocalizationMode, LocalizedRobot
+from lab.navigation.localization import LocalizationMode, LocalizedRobot, PoseEstimate
 from lab.navigation.navigator import Navigator
 from lab.robot import Robot
 from lab.runs.placement import (
@@ -68,7 +68,7 @@ from lab.search.agent import (
     SearchEvent,
     Strategy,
 )
-from lab.search.budget import BudgetedRobot
+from lab.search.budget import BudgetedRobot, SearchBudgetExceeded
 from lab.search.probability_map import ProbabilityMap
 from lab.training.search import search_database
 from lab.vision.database import FeatureDatabase
@@ -579,7 +579,8 @@ def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, 
     robot.enable()
     tracked = TrackedRobot(robot, truth_of.robot_pose)
     budget = BudgetedRobot(tracked, *budgets)
-    nav = _relocalizing(navigate(budget, spec), tracked, budget)
+    drive = navigate(budget, spec)
+    nav = _relocalizing(drive, tracked, budget)
     agent = SearchAgent(budget, db, nav, ProbabilityMap(spec), cfg, rng=np.random.default_rng([seed, 1]))
     if recorder is not None:
         from lab.viz.live import LiveView
@@ -589,12 +590,13 @@ def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, 
         attach(agent)
     out = agent.run()  # the robot stopped on its way out (also after Ctrl-C: then reason "interrupted")
     report_reloc = None
+    G_WC = truth_of.G_WC()  # the camera of a found track's last frame (before a report moves the robot)
     if out.reason != INTERRUPTED:
-        out, report_reloc = _relocalized_find(out, tracked)
+        out, report_reloc = _relocalized_find(out, tracked, drive)
     tracked.record(force=True)  # where the run ended
     truth = _TrialTruth(
         G_WO=truth_of.G_WO(),
-        G_WC=truth_of.G_WC(),  # the head has not moved since the last frame of a found track
+        G_WC=G_WC,
         robot_pose=truth_of.robot_pose(),
         collisions=truth_of.collisions(),
         robot_time_s=robot.now(),
@@ -620,30 +622,90 @@ def _relocalizing(navigate, robot: LocalizedRobot | TrackedRobot, budget: Budget
 
 
 def _relocalized_find(
-    out: AgentResult, robot: LocalizedRobot | TrackedRobot
+    out: AgentResult, robot: LocalizedRobot | TrackedRobot, navigate=None
 ) -> tuple[AgentResult, dict | None]:
     """Active re-localization before reporting a found object, to the report's tighter thresholds
     at the object (:meth:`LocalizedRobot.relocalize_to_report`): the object's pose relative to the robot
     stays; its world pose follows the corrected robot pose ``G_WO' = G_WR' G_WR^-1 G_WO``.
 
+    When no landmark from where the robot stands gets the object's point within ``report_sigma_m`` and
+    ``navigate`` (the search's ``navigate(target_xy, min_distance, max_distance)``) is given, a detour
+    (:func:`_report_detour`): the pose the object was found from is kept in the filter while the robot
+    drives to a landmark, and ``G_WR'`` is that kept pose as the landmark corrected it.
+
     Also returns what it did, for the JSON's ``report_relocalization`` (None when nothing was reported):
-    the landmark updates it made, the object point's position standard deviation before and after, and
-    how far the reported object moved."""
+    the landmark updates it made, the object point's position standard deviation before and after, how
+    far the reported object moved, and the detour (None: none was needed or possible)."""
     if not out.found or out.G_WO is None or robot.mode is not LocalizationMode.LANDMARKS:
         return out, None
     p_W = out.G_WO[:2, 3].copy()
     est0 = robot.pose_estimate()
     robot.relocalize_to_report(at_W=p_W)
     est1 = robot.pose_estimate()
-    G_WO = est1.pose.G() @ se3_inv(est0.pose.G()) @ out.G_WO
+    G_WR, sigma, detour = est1.pose.G(), est1.point_sigma_m(p_W), None
+    if sigma > robot.config.report_sigma_m and navigate is not None and robot.config.report_detour_m > 0:
+        kept, detour = _report_detour(robot, navigate)
+        if kept is not None:
+            G_WR, sigma = kept.pose.G(), kept.point_sigma_m(p_W)
+    G_WO = G_WR @ se3_inv(est0.pose.G()) @ out.G_WO
     info = {
-        "updates": int(est1.n_updates - est0.n_updates),
+        "updates": int(robot.pose_estimate().n_updates - est0.n_updates),
         "point_sigma_before_m": round(est0.point_sigma_m(p_W), 4),
-        "point_sigma_after_m": round(est1.point_sigma_m(p_W), 4),
-        "within_report_sigma": bool(est1.point_sigma_m(p_W) <= robot.config.report_sigma_m),
+        "point_sigma_after_m": round(sigma, 4),
+        "within_report_sigma": bool(sigma <= robot.config.report_sigma_m),
         "shift_m": round(float(np.linalg.norm(G_WO[:3, 3] - out.G_WO[:3, 3])), 4),
+        "detour": detour,
     }
     return replace(out, G_WO=G_WO), info
+
+
+def _report_detour(robot: LocalizedRobot | TrackedRobot, navigate) -> tuple[PoseEstimate | None, dict | None]:
+    """Keep the robot's pose in the filter (:meth:`Localizer.start_clone`), drive to the nearest place
+    from which a landmark is seen well (:meth:`LocalizedRobot.landmark_vantage_points`, on the
+    navigator's costmap; the next one if a drive fails, two tries), re-localize there to the report's
+    thresholds, and return the kept pose as corrected (None when it could not be kept) and what was
+    done, for the JSON: the place, its landmark, whether the robot got there and the updates there.
+
+    The time budget holds: a drive that runs it out ends the detour with what the filter has then."""
+    loc = robot.localizer
+    nav = getattr(navigate, "navigator", None)
+    if nav is None or loc.first_sighting_pending:
+        return None, None
+    grid = nav.planning_grid()
+    spec = grid.spec
+
+    def free(x, y):
+        if not spec.contains_xy(x, y):
+            return False
+        i, j = spec.world_to_cell(x, y)
+        return not grid.blocked[i, j]
+
+    spots = robot.landmark_vantage_points(free)
+    info = {"to": None, "landmark": None, "arrived": False, "updates": 0, "stopped": None}
+    if not spots:
+        return None, {**info, "stopped": "no place within reach sees a landmark well"}
+    est = robot.pose_estimate()
+    n0 = est.n_updates
+    loc.start_clone()
+    try:
+        for x, y, name in spots[:2]:
+            info.update(to=[round(float(x), 3), round(float(y), 3)], landmark=name)
+            robot.log(
+                f"localization: no landmark seen well where the object was found; a detour of "
+                f"{math.hypot(x - est.pose.x, y - est.pose.y):.1f} m to see {name}"
+            )
+            if navigate((x, y), 0.0, 0.2).arrived:
+                info["arrived"] = True
+                robot.relocalize_to_report()
+                break
+    except (SearchBudgetExceeded, SafetyStop) as e:
+        robot.stop()
+        info["stopped"] = str(e)
+    finally:
+        x_c, S_c = loc.end_clone()
+    info["updates"] = int(robot.pose_estimate().n_updates - n0)
+    kept = PoseEstimate(Pose2D(*(float(v) for v in x_c)), S_c, robot.now(), LocalizationMode.LANDMARKS)
+    return kept, info
 
 
 def _scored(object: str, out: AgentResult, truth: _TrialTruth, odom) -> dict:
