@@ -856,3 +856,17 @@ def test_no_detour_without_a_place_to_go_and_the_find_is_reported_as_it_was():
     robot.config = replace(robot.config, report_detour_m=0.0)
     res, info = _relocalized_find(found, robot, navigate)
     assert info["detour"] is None and navigate.goals == []
+
+
+def test_a_find_known_to_a_few_centimetres_makes_no_detour():
+    """The point's sigma is above the report's 1.5 cm but below ``report_detour_above_m`` (a detour's own
+    odometry would leave about as much): no detour, the robot stays."""
+    from lab.runs.search import _relocalized_find
+
+    robot, base, found, _ = _found_far_from_landmarks(0, offset=(0.01, -0.01, 0.002))
+    robot.localizer.Sigma = np.diag([0.02**2, 0.02**2, math.radians(0.5) ** 2])
+    navigate = _driving_navigate(robot, base)
+    res, info = _relocalized_find(found, robot, navigate)
+    assert robot.config.report_sigma_m < info["point_sigma_after_m"] < robot.config.report_detour_above_m
+    assert info["detour"] is None and navigate.goals == []
+    np.testing.assert_allclose(res.G_WO, found.G_WO)

@@ -628,8 +628,9 @@ def _relocalized_find(
     at the object (:meth:`LocalizedRobot.relocalize_to_report`): the object's pose relative to the robot
     stays; its world pose follows the corrected robot pose ``G_WO' = G_WR' G_WR^-1 G_WO``.
 
-    When no landmark from where the robot stands gets the object's point within ``report_sigma_m`` and
-    ``navigate`` (the search's ``navigate(target_xy, min_distance, max_distance)``) is given, a detour
+    When no landmark from where the robot stands gets the object's point within ``report_sigma_m`` (and
+    ``report_detour_above_m``) and ``navigate`` (the search's ``navigate(target_xy, min_distance,
+    max_distance)``) is given, a detour
     (:func:`_report_detour`): the pose the object was found from is kept in the filter while the robot
     drives to a landmark, and ``G_WR'`` is that kept pose as the landmark corrected it.
 
@@ -643,7 +644,9 @@ def _relocalized_find(
     robot.relocalize_to_report(at_W=p_W)
     est1 = robot.pose_estimate()
     G_WR, sigma, detour = est1.pose.G(), est1.point_sigma_m(p_W), None
-    if sigma > robot.config.report_sigma_m and navigate is not None and robot.config.report_detour_m > 0:
+    cfg = robot.config
+    wanted = sigma > max(cfg.report_sigma_m, cfg.report_detour_above_m)
+    if wanted and navigate is not None and cfg.report_detour_m > 0:
         kept, detour = _report_detour(robot, navigate)
         if kept is not None:
             G_WR, sigma = kept.pose.G(), kept.point_sigma_m(p_W)
@@ -652,7 +655,7 @@ def _relocalized_find(
         "updates": int(robot.pose_estimate().n_updates - est0.n_updates),
         "point_sigma_before_m": round(est0.point_sigma_m(p_W), 4),
         "point_sigma_after_m": round(sigma, 4),
-        "within_report_sigma": bool(sigma <= robot.config.report_sigma_m),
+        "within_report_sigma": bool(sigma <= cfg.report_sigma_m),
         "shift_m": round(float(np.linalg.norm(G_WO[:3, 3] - out.G_WO[:3, 3])), 4),
         "detour": detour,
     }
