@@ -630,9 +630,9 @@ def _relocalized_find(
 
     When no landmark from where the robot stands gets the object's point within ``report_sigma_m`` (and
     ``report_detour_above_m``) and ``navigate`` (the search's ``navigate(target_xy, min_distance,
-    max_distance)``) is given, a detour
-    (:func:`_report_detour`): the pose the object was found from is kept in the filter while the robot
-    drives to a landmark, and ``G_WR'`` is that kept pose as the landmark corrected it.
+    max_distance)``) is given, a detour (:func:`_report_detour`): the pose the object was found from is
+    kept in the filter while the robot drives to a landmark, and ``G_WR'`` is that kept pose as the
+    landmark corrected it.
 
     Also returns what it did, for the JSON's ``report_relocalization`` (None when nothing was reported):
     the landmark updates it made, the object point's position standard deviation before and after, how
