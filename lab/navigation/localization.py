@@ -294,10 +294,10 @@ class LocalizerConfig:
         place where a landmark is in view (:meth:`LocalizedRobot.landmark_vantage_points`), re-localizes
         there, and reports the object from the corrected kept pose. 0: no detour.
     report_detour_above_m : float [m]
-        ... made only when the point's standard deviation is above this after the re-localization where
-        the robot stands: the odometry of a detour itself leaves about 3 cm at 1.5 m (the tests' drive),
-        so a point known better than this gains nothing from one. On the tuning split (table, seeds 1-2)
-        a find left at 1.54 cm set off a detour whose two drives both failed.
+        The detour is made only when the point's standard deviation is above this after the
+        re-localization where the robot stands: the odometry of a detour itself leaves about 3 cm at
+        1.5 m (the tests' drive), so a point known better than this gains nothing from one. On the tuning
+        split (table, seeds 1-2) a find left at 1.54 cm set off a detour whose two drives both failed.
     first_sighting_max_offset_m, first_sighting_max_offset_rad : float [m], [rad]
         A start pose measured by hand (:class:`Localizer` with ``first_sighting=True``): the first
         landmark sighting that disagrees with it beyond the gate replaces it when the pose it implies is
