@@ -37,7 +37,7 @@ class Script:
         self.per_scan = bool(peaks) and isinstance(peaks[0], list)
         self.visible = visible or (lambda pose: True)  # from where the object's texture can be seen
         self.local_time, self.global_time = local_time, global_time
-        self.local_cells, self.globals = [], 0
+        self.local_cells, self.globals, self.looks = [], 0, []
 
     def global_search(self, robot, db, pmap, config):
         self.globals += 1
@@ -63,6 +63,20 @@ class Script:
         miss = () if found else (ViewRecord(0.0, 0.0, robot.now(), 200, 40, 3, "scripted"),)
         peaks = (G[:3, 3].copy(),) if self.colour and in_view and not found else ()
         return LocalSearchResult(found, "scripted", G if found else None, views=miss, colour_peaks=peaks)
+
+    def look_at_points(self, robot, db, points, rng, config, matcher):
+        """The side look's second look at ``points``: finds the object when one of them is the object
+        and it is close enough and shows its texture from here."""
+        self.looks.append((robot.odometry(), [tuple(np.round(q[:2], 3)) for q in points]))
+        robot.step(self.local_time / 4)
+        p = robot.odometry()
+        ox, oy = self.object_xy
+        at = any(math.hypot(q[0] - ox, q[1] - oy) < 0.1 for q in points)
+        found = at and math.hypot(ox - p.x, oy - p.y) <= 1.2 and self.visible(p)
+        G = np.eye(4)
+        G[:3, 3] = (*self.object_xy, 0.1)
+        miss = () if found else (ViewRecord(0.0, 0.0, robot.now(), 100, 20, 2, "scripted look"),)
+        return LocalSearchResult(found, "scripted look", G if found else None, views=miss)
 
 
 def straight_navigator(robot, refuse=(), blocked=None):
@@ -102,6 +116,7 @@ def scripted_run(
     script = Script(robot, object_xy, peaks, visible=visible, colour=colour)
     monkeypatch.setattr(agent_mod, "global_search", script.global_search)
     monkeypatch.setattr(agent_mod, "local_search", script.local_search)
+    monkeypatch.setattr(agent_mod, "look_at_points", script.look_at_points)
     monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)
     nav = navigate(robot) if navigate else straight_navigator(robot, refuse)
     db = [None] * 823  # a stand-in with the book's size (the reason of a miss reads it); nothing else
@@ -188,21 +203,82 @@ def test_a_miss_that_saw_the_colours_looks_at_once_from_a_side_within_reach(monk
             config=config,
         )
 
-    out, script, _ = run(AgentConfig(second_side=True, revisit_turns_deg=(120.0, 60.0, 30.0)))
+    # (the side look, on by default, would find it first: the second local search is tested alone)
+    out, script, _ = run(
+        AgentConfig(second_side=True, revisit_turns_deg=(120.0, 60.0, 30.0), side_look_deg=0)
+    )
     assert out.found and script.local_cells == [SPEC.world_to_cell(*obj)] * 2 and out.global_searches == 1
     nav = [e for e in out.events if e.kind == "navigate"]
     assert nav[1].detail.startswith("second side, from another side (+60 deg)"), nav[1]
 
-    old, script, _ = run(AgentConfig(second_side=True, revisit_turns_deg=(120.0,)))
+    old, script, _ = run(AgentConfig(second_side=True, revisit_turns_deg=(120.0,), side_look_deg=0))
     assert script.local_cells[:2] == [SPEC.world_to_cell(*obj)] * 2
     assert [e.detail for e in old.events if e.kind == "local"][:2] == ["scripted", "scripted"]  # two misses
     assert "another side" not in [e for e in old.events if e.kind == "navigate"][1].detail
 
-    off, _, _ = run(AgentConfig())  # off by default: the map alone decides where to look next
+    off, _, _ = run(AgentConfig(side_look_deg=0))  # off by default: the map alone decides where to look next
     assert not any(e.detail.startswith("second side") for e in off.events if e.kind == "navigate")
 
     with pytest.raises(ConfigError, match="revisit_turns_deg must be one or more turns in"):
         AgentConfig(revisit_turns_deg=(0.0,))
+
+
+def test_a_miss_that_saw_the_colours_steps_round_the_peak_and_looks_again(monkeypatch):
+    """A book on a shelf against a wall (north of it), its spine to the south: from the south the local
+    search sees its colours but no pose. The side look steps 35 degrees round the colour peak, first one
+    way (east), then the other (west), and looks at the peak from there, within the local search's band
+    of it, before the map update sends the robot anywhere else."""
+    obj = (0.0, 0.5)
+
+    def wall_north(robot):
+        return straight_navigator(robot, blocked=lambda xy: xy[1] > obj[1] + 0.3)
+
+    def run(visible, config=None):
+        return scripted_run(
+            monkeypatch, obj, [(obj, 0.9)], navigate=wall_north, visible=visible, colour=True, config=config
+        )
+
+    lc = LocalSearchConfig()
+    for side, visible in (("+35", lambda p: p.x > obj[0] + 0.2), ("-35", lambda p: p.x < obj[0] - 0.2)):
+        out, script, _ = run(visible)
+        assert out.found and out.global_searches == 1, side
+        assert script.local_cells == [SPEC.world_to_cell(*obj)], side  # one local search, then side looks
+        assert script.looks[-1][1] == [obj]  # looked at the colour peak
+        stood = script.looks[-1][0]
+        d = math.hypot(stood.x - obj[0], stood.y - obj[1])
+        assert lc.min_distance_m - 0.05 <= d <= lc.max_distance_m + 0.05
+        bearing = math.degrees(math.atan2(stood.y - obj[1], stood.x - obj[0]))
+        # 35 deg round from the south, that way (the test's navigator stops up to 0.2 m short)
+        assert 20 <= math.copysign(1, float(side)) * (bearing + 90) <= 40, (side, bearing)
+        nav = [e.detail for e in out.events if e.kind == "navigate"]
+        assert nav[-1].startswith(f"side look, {side} deg round the colour peak"), nav
+        assert len(script.looks) == (1 if side == "+35" else 2)
+
+    # seen from nowhere near: both side looks miss and the search goes on from the map as before
+    out, script, _ = run(lambda p: False)
+    assert not out.found and len(script.looks) >= 2
+    assert [e.detail for e in out.events if e.kind == "local"][1:3] == ["side look: scripted look"] * 2
+    # off: no side look
+    out, script, _ = run(lambda p: p.x > obj[0] + 0.3, AgentConfig(side_look_deg=0))
+    assert script.looks == [] and len(script.local_cells) >= 2
+    with pytest.raises(ConfigError, match="side_look_deg must be in"):
+        AgentConfig(side_look_deg=90)
+
+
+def test_a_side_look_out_of_reach_is_skipped_and_said(monkeypatch):
+    """A corner: walls north and east of the object. The east side look cannot be reached; the west one
+    is tried and finds the object; the skip is in the events."""
+    obj = (0.0, 0.5)
+
+    def corner(robot):
+        return straight_navigator(robot, blocked=lambda xy: xy[1] > obj[1] + 0.3 or xy[0] > obj[0] + 0.2)
+
+    out, script, _ = scripted_run(
+        monkeypatch, obj, [(obj, 0.9)], navigate=corner, visible=lambda p: p.x < obj[0] - 0.2, colour=True
+    )
+    assert out.found and len(script.looks) == 1
+    skips = [e.detail for e in out.events if e.kind == "skip"]
+    assert skips and skips[0].startswith("side look (+35 deg) not reached (no path: UNREACHABLE)")
 
 
 def test_a_distractor_two_searches_answered_for_is_not_searched_again(monkeypatch):
@@ -219,6 +295,7 @@ def test_a_distractor_two_searches_answered_for_is_not_searched_again(monkeypatc
         script = Script(robot, (2.5, 3.5), [(distractor, 0.95)], visible=lambda pose: False)
         monkeypatch.setattr(agent_mod, "global_search", script.global_search)
         monkeypatch.setattr(agent_mod, "local_search", script.local_search)
+        monkeypatch.setattr(agent_mod, "look_at_points", script.look_at_points)
         monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)
         nav = straight_navigator(robot)
         db = [None] * n_features  # as in scripted_run

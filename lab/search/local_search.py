@@ -85,6 +85,7 @@ __all__ = [
     "aim_at",
     "local_search",
     "local_views",
+    "look_at_points",
     "make_matcher",
     "object_roi",
 ]
@@ -358,6 +359,43 @@ def local_search(
     return _LocalSearch(robot, db, rng, cfg, matcher or make_matcher(db)).run(target_xy)
 
 
+def look_at_points(
+    robot: Robot,
+    db: FeatureDatabase,
+    points_W,
+    rng: np.random.Generator,
+    config: LocalSearchConfig | None = None,
+    matcher: Matcher | None = None,
+) -> LocalSearchResult:
+    """The second look alone: aim the head at each world point of ``points_W`` [m] in turn (the colour
+    peaks an earlier local search found near its cell) and start and track on the enlarged region around
+    it, as :class:`SecondLookConfig` says, until one finds the object. The search agent's side look
+    calls it after stepping round the peak (``AgentConfig.side_look_deg``).
+
+    Parameters
+    ----------
+    robot : Robot
+        Enabled and standing still; only the head moves.
+    db : FeatureDatabase
+    points_W : sequence of array-like, shape (3,) [m]
+        World (odometry-frame) points, looked at in the order given.
+    rng : numpy.random.Generator
+    config : LocalSearchConfig, optional
+        Its ``second_look`` (the default :class:`SecondLookConfig` when None), refinement and "found".
+    matcher : Matcher, optional
+
+    Returns
+    -------
+    LocalSearchResult
+        ``colour_peaks`` holds the points looked at.
+    """
+    cfg = config or LocalSearchConfig()
+    points = [np.asarray(p, float).reshape(3) for p in points_W]
+    if not points:
+        raise ConfigError("look_at_points needs at least one point to look at")
+    return _LocalSearch(robot, db, rng, cfg, matcher or make_matcher(db)).look(points)
+
+
 class _LocalSearch:
     """One :func:`local_search`: the views in turn, each matched, started by RANSAC and tracked, until
     one finds the object; it keeps a record of every view and the reason of the one that came closest
@@ -401,6 +439,23 @@ class _LocalSearch:
             t_start=t_start,
             t_end=robot.now(),
             colour_peaks=tuple(peaks),
+        )
+
+    def look(self, points_W: list[np.ndarray]) -> LocalSearchResult:
+        """The second look at each of ``points_W`` [m] (world) in turn (:func:`look_at_points`)."""
+        t_start = self.robot.now()
+        sl = self.cfg.second_look or SecondLookConfig()
+        for p_W in points_W:
+            track = self._second_look(p_W, sl)
+            if track is not None and track.found:
+                return self._found(track, t_start)
+        return LocalSearchResult(
+            False,
+            f"not found in {len(self.records)} looks at colour peaks: {self.best_reason}",
+            views=tuple(self.records),
+            t_start=t_start,
+            t_end=self.robot.now(),
+            colour_peaks=tuple(points_W),
         )
 
     def _search_view(self, pan: float, tilt: float) -> _Track | None:
