@@ -2,16 +2,19 @@
 in front of an object (test set-up from the truth), scored against the simulator's true pose."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from search_standin import stand_in_front
 
+from lab.errors import ConfigError
 from lab.geometry import Pose2D
 from lab.robot import PanTiltLimits, StereoCamera
 from lab.runs.search import pose_errors
 from lab.scene import load_scene
 from lab.search.local_search import LocalSearchConfig, aim_at, local_search, local_views, object_roi
+from lab.search.pose_check import rest_tilt_deg
 from lab.sim import RenderSettings, SimRobot, SimWorld
 from lab.training.search import search_database
 
@@ -42,13 +45,13 @@ def set_up(name: str, surface: str):
     return (xy[0], xy[1], z, yaw), Pose2D(pose.x, pose.y + (0.1 if surface == "shelf" else 0.0), pose.theta)
 
 
-def run_local(name: str, surface: str, db_name: str | None = None):
+def run_local(name: str, surface: str, db_name: str | None = None, config: LocalSearchConfig | None = None):
     place, pose = set_up(name, surface)
     db = search_database(db_name or name)
     with SimWorld(SCENE.with_pose(name, place), RenderSettings(supersample=2)) as w:
         robot = SimRobot(w, start=pose, seed=0)
         robot.enable()
-        res = local_search(robot, db, place[:2], np.random.default_rng(0))
+        res = local_search(robot, db, place[:2], np.random.default_rng(0), config)
         G_true = w.truth.G_W(name)
     return res, G_true
 
@@ -74,6 +77,28 @@ def test_textured_objects_found_with_their_6d_pose_at_three_heights(results):
         if pe > 0.05 or oe > 10.0:
             bad.append((name, surface, pe, oe))
     assert not bad, bad
+
+
+def test_a_found_pose_rests_on_a_face_and_a_tilted_one_is_not_found(results):
+    """Every found pose's tilt from resting on a face is at most its orientation error (the bound that
+    makes the check safe) and within the default 10 degrees; with the check made impossibly strict,
+    the same set-up's track is refused for its tilt and nothing is found."""
+    for (name, surface), (res, G_true) in results.items():
+        if res.found:
+            _, oe = pose_errors(res.G_WO, G_true)
+            tilt = rest_tilt_deg(res.G_WO[:3, :3])
+            assert tilt <= oe + 1e-6 and tilt <= LocalSearchConfig().max_rest_tilt_deg, (
+                name,
+                surface,
+                tilt,
+                oe,
+            )
+    strict = replace(LocalSearchConfig(), max_rest_tilt_deg=1e-3)
+    res, _ = run_local("toy_block", "table", config=strict)
+    assert not res.found
+    assert any("from resting on a face (at most 0.001)" in v.outcome for v in res.views), res.views
+    with pytest.raises(ConfigError, match="max_rest_tilt_deg must be in"):
+        LocalSearchConfig(max_rest_tilt_deg=0.0)
 
 
 def test_glossy_cup_is_not_found():

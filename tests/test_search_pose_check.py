@@ -10,7 +10,7 @@ from test_search_local import SCENE, set_up
 from lab.errors import ConfigError
 from lab.geometry import Rz, se3, se3_inv, transform_points
 from lab.search.local_search import aim_at, make_matcher, object_roi
-from lab.search.pose_check import PoseCheckConfig, check_pose, predicted_visible
+from lab.search.pose_check import PoseCheckConfig, check_pose, predicted_visible, rest_tilt_deg
 from lab.sim import RenderSettings, SimRobot, SimWorld
 from lab.training.search import search_database
 from lab.vision.stereo import stereo_features
@@ -71,3 +71,26 @@ def test_visible_features_are_the_ones_in_front_and_in_the_image(views):
 def test_bad_pose_check_config_is_one_clear_error():
     with pytest.raises(ConfigError, match="dist_m"):
         PoseCheckConfig(dist_m=0.0)
+
+
+def test_rest_tilt_against_scipy_and_the_bound_by_the_orientation_error():
+    """The tilt is the smallest angle between an object axis, turned into the world by SciPy's
+    rotation, and the vertical; an upright box turned by an error rotation is tilted by at most the
+    error's angle (so a tilt above the success criterion's 10 degrees means an error above it)."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        r = Rotation.random(random_state=rng)
+        axes_W = r.apply(np.eye(3))  # the object's x, y, z axes in the world
+        peer = min(math.degrees(math.acos(min(1.0, abs(a[2])))) for a in axes_W)
+        assert rest_tilt_deg(r.as_matrix()) == pytest.approx(peer, abs=1e-5)
+        # upright on one of its faces, any yaw, then an error of up to 40 degrees
+        face = Rotation.from_euler(
+            "ZYX", [rng.uniform(-180, 180), 90 * rng.integers(4), 90 * rng.integers(4)], degrees=True
+        )
+        err = Rotation.from_rotvec(rng.normal(size=3) * 0.3)
+        assert rest_tilt_deg(face.as_matrix()) < 1e-6
+        assert rest_tilt_deg((err * face).as_matrix()) <= math.degrees(err.magnitude()) + 1e-6
+    with pytest.raises(ConfigError, match="3x3 rotation"):
+        rest_tilt_deg(np.eye(4))

@@ -69,7 +69,7 @@ from lab.search.global_search import (
     strongest_clusters,
     window_mean,
 )
-from lab.search.pose_check import PoseCheckConfig, check_pose
+from lab.search.pose_check import PoseCheckConfig, check_pose, rest_tilt_deg
 from lab.vision.colour import back_project, colour_histogram
 from lab.vision.database import FeatureDatabase
 from lab.vision.dense import disparity_map
@@ -187,6 +187,10 @@ class LocalSearchConfig:
     second_look : SecondLookConfig or None
         Before the cell is declared empty, look again at the colour peaks near it, on enlarged
         regions (module docstring; ours). None: the paper's local search, the 9 views alone.
+    max_rest_tilt_deg : float or None [deg]
+        "Found" needs the pose in the world to rest on one of the object's faces within this angle
+        (:func:`lab.search.pose_check.rest_tilt_deg`): the success criterion's 10 degrees, which no
+        pose that counts as correct exceeds. None skips it (an object that leans or hangs).
     """
 
     pans_deg: tuple[float, ...] = (0.0, 60.0, -60.0)
@@ -210,8 +214,14 @@ class LocalSearchConfig:
     )
     pose_check: PoseCheckConfig | None = field(default_factory=PoseCheckConfig)
     second_look: SecondLookConfig | None = field(default_factory=SecondLookConfig)
+    max_rest_tilt_deg: float | None = 10.0
 
     def __post_init__(self):
+        if self.max_rest_tilt_deg is not None and not 0 < self.max_rest_tilt_deg <= 90:
+            raise ConfigError(
+                "max_rest_tilt_deg must be in (0, 90] degrees or None (no check), "
+                f"got {self.max_rest_tilt_deg}"
+            )
         if len(self.pans_deg) * len(self.tilts_deg) < 1:
             raise ConfigError("the local search needs at least one view")
         if not 0 < self.min_distance_m <= self.max_distance_m:
@@ -638,6 +648,14 @@ def _refine(
         )
     if pos_std > cfg.max_position_std_m or rot_std > cfg.max_rotation_std_deg:
         return _Track(False, f"pose too uncertain: std {pos_std * 100:.1f} cm, {rot_std:.1f} deg", **base)
+    tilt = rest_tilt_deg(G_WO[:3, :3])
+    if cfg.max_rest_tilt_deg is not None and tilt > cfg.max_rest_tilt_deg:
+        return _Track(
+            False,
+            f"pose not confirmed: tilted {tilt:.0f} deg from resting on a face "
+            f"(at most {cfg.max_rest_tilt_deg:g})",
+            **base,
+        )
     check = ""
     if cfg.pose_check is not None:  # does the pose explain the last frame? (lab.search.pose_check)
         pc = check_pose(f, corr, db, ekf.estimate.G_CO, camera, cfg.pose_check, roi)
