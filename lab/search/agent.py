@@ -626,15 +626,9 @@ class SearchAgent:
             a0 = math.atan2(last[1] - xy[1], last[0] - xy[0])
             tol = 0.5 * (lc.max_distance_m - lc.min_distance_m)
             for turn in (s * t for t in self.config.revisit_turns_deg for s in (1, -1)):
-                a = a0 + math.radians(turn)
-                # the middle of the band, then its far edge: beside a table's end, the middle may lie in
-                # the table's grown footprint while a spot a little farther out is free
-                for r in (0.5 * (lc.min_distance_m + lc.max_distance_m), lc.max_distance_m):
-                    side = (xy[0] + r * math.cos(a), xy[1] + r * math.sin(a))
-                    nav = self._navigate(side, 0.0, tol)
-                    p = nav.pose
-                    if nav.arrived and lc.min_distance_m - 0.05 <= math.hypot(p.x - xy[0], p.y - xy[1]):
-                        return nav, f"from another side ({turn:+.0f} deg): {nav.reason}"
+                nav = self._stand_round(xy, a0 + math.radians(turn), tol)
+                if nav.arrived:
+                    return nav, f"from another side ({turn:+.0f} deg): {nav.reason}"
         nav = self._navigate(xy, lc.min_distance_m, lc.max_distance_m)
         if nav.arrived or self.config.wide_band_m <= 0:
             return nav, nav.reason
@@ -645,6 +639,29 @@ class SearchAgent:
         if wide.arrived:
             return wide, f"from {far:.1f} m ({nav.reason}): {wide.reason}"
         return wide, f"{nav.reason}; {wide.reason} with the band widened"
+
+    def _stand_round(self, xy, angle: float, tol: float):
+        """Navigate to within ``tol`` [m] of the spot in the direction ``angle`` [rad] from ``xy`` [m] at
+        the middle of the local-search band, or else at its far edge (beside a table's end the middle
+        may lie in the table's grown footprint while a spot a little farther out is free). The last
+        navigation's result; ``arrived`` is False unless the robot stands within the band (give or take
+        5 cm, up to the wide band's far edge) of ``xy``."""
+        lc = self.config.local_search
+        far = lc.max_distance_m + self.config.wide_band_m
+        for r in (0.5 * (lc.min_distance_m + lc.max_distance_m), lc.max_distance_m):
+            nav = self._navigate((xy[0] + r * math.cos(angle), xy[1] + r * math.sin(angle)), 0.0, tol)
+            d = math.hypot(nav.pose.x - xy[0], nav.pose.y - xy[1])
+            if nav.arrived and lc.min_distance_m - 0.05 <= d <= far:
+                return nav
+        if nav.arrived:
+            return NavigationResult(False, f"arrived {d:.2f} m from it, outside the band", nav.pose)
+        return nav
+
+    def _note_views(self, res: LocalSearchResult) -> None:
+        """Keep the failed searches' view that came closest to a pose (for a not-found run's reason)."""
+        for v in res.views:
+            if self._best_view is None or self._rank(v) > self._rank(self._best_view):
+                self._best_view = v
 
     def _visit(self, cell, xy, second_side: bool = False) -> LocalSearchResult | None:
         """Navigate to local-search range of the cell, search, and update the map on a miss; a miss
@@ -674,9 +691,7 @@ class SearchAgent:
         self._stands.append(((float(xy[0]), float(xy[1])), (p.x, p.y)))
         res = local_search(self.robot, self.db, xy, self.rng, lc, self.matcher)
         self.last_local = res
-        for v in res.views:
-            if self._best_view is None or self._rank(v) > self._rank(self._best_view):
-                self._best_view = v
+        self._note_views(res)
         self.local_searches += 1
         self._local_since_global += 1
         self._mark_searched(xy)
@@ -703,28 +718,19 @@ class SearchAgent:
         stood, one way and then the other, and look at the ``peaks`` from each spot that the navigator
         reaches (:attr:`AgentConfig.side_look_deg`). The found search's result, or None."""
         lc = self.config.local_search
-        p = peaks[0]
+        p = (float(peaks[0][0]), float(peaks[0][1]))
         here = self.robot.odometry()
         a0 = math.atan2(here.y - p[1], here.x - p[0])
-        tol = SIDE_LOOK_TOLERANCE_M
-        far = lc.max_distance_m + self.config.wide_band_m
         for turn in (self.config.side_look_deg, -self.config.side_look_deg):
-            a = a0 + math.radians(turn)
-            for r in (0.5 * (lc.min_distance_m + lc.max_distance_m), lc.max_distance_m):
-                nav = self._navigate((p[0] + r * math.cos(a), p[1] + r * math.sin(a)), 0.0, tol)
-                d = math.hypot(nav.pose.x - p[0], nav.pose.y - p[1])
-                if nav.arrived and lc.min_distance_m - 0.05 <= d <= far:
-                    break
-            else:
+            nav = self._stand_round(p, a0 + math.radians(turn), SIDE_LOOK_TOLERANCE_M)
+            self._nav_paths.append((p, getattr(nav, "path_xy", None)))
+            if not nav.arrived:
                 self._event("skip", cell, f"side look ({turn:+.0f} deg) not reached ({nav.reason})")
                 continue
-            self._nav_paths.append(((float(p[0]), float(p[1])), getattr(nav, "path_xy", None)))
             self._event("navigate", cell, f"side look, {turn:+.0f} deg round the colour peak: {nav.reason}")
             res = look_at_points(self.robot, self.db, peaks, self.rng, lc, self.matcher)
             self.last_local = res
-            for v in res.views:
-                if self._best_view is None or self._rank(v) > self._rank(self._best_view):
-                    self._best_view = v
+            self._note_views(res)
             self._event("local", cell, f"side look: {res.reason}")
             if res.found:
                 return res
