@@ -235,7 +235,12 @@ class AgentConfig:
         (:func:`lab.search.local_search.look_at_points`: no 9 views, only the second look). A book
         standing on the shelf with its spine to the room shows a 5 cm strip of blue and no pose:
         stood round it, one of its covers turns towards the camera. Not for a database too thin to give
-        a pose from one view (``THIN_DATABASE_VIEWS``: the glossy cup). 0 turns this off.
+        a pose from one view (``THIN_DATABASE_VIEWS``: the glossy cup). 0 turns this off. Measured on
+        the tuning split: the book upright on the shelf at yaw 65, 90 and 115 degrees, 0.75 and 0.9 m
+        away (12 stands placed by hand): from in front the whole local search missed 11; 35 degrees
+        round, one of the two sides found it in all 12 (45 degrees the same, but closer to the shelf).
+        In the closed loop (the book on the shelf, seeds 1-12, 24 trials paired with it off): 21/24
+        successes against 17/24; 5 of its 66 side looks found the book.
     wide_band_m : float [m]
         A cell whose local-search band the navigator cannot reach is approached once more, the band's
         far edge this much further out (a cell against a wall or a shelf's back: the band lies almost
