@@ -5,8 +5,11 @@ The data flow, one module per stage::
     probability_map  M_p: Eqs. (1)-(3), the detection model with alpha and beta, the growing beta
     global_search    pan-tilt scan -> colour back-projection -> N_hist clusters -> sparse stereo -> M_p
     local_search     9 pan-tilt views -> SIFT + EKF (RANSAC start, ROI, gate) -> 6D pose, or a second
-                     look at the colour peaks near the cell on enlarged regions -> 6D pose or a miss
-    agent            the closed loop (paper / lawnmower / frontier), navigation injected
+                     look at the colour peaks near the cell on enlarged regions -> 6D pose or a miss;
+                     "found" only for a pose that explains the image and rests on a face (pose_check)
+    agent            the closed loop (paper / lawnmower / frontier), navigation injected; after a miss
+                     that saw the object's colours, the side look: 35 deg round the colour peak, each
+                     way, the second look again (local_search.look_at_points)
     budget           the time budget: a Robot wrapper that stops the run at its deadline
     baselines        where the lawnmower and frontier baselines look next
 
@@ -27,7 +30,13 @@ from lab.search.agent import (
 )
 from lab.search.budget import BudgetedRobot, SearchBudgetExceeded
 from lab.search.global_search import ColourPeak, GlobalSearchConfig, GlobalSearchResult, global_search
-from lab.search.local_search import LocalSearchConfig, LocalSearchResult, SecondLookConfig, local_search
+from lab.search.local_search import (
+    LocalSearchConfig,
+    LocalSearchResult,
+    SecondLookConfig,
+    local_search,
+    look_at_points,
+)
 from lab.search.probability_map import (
     DetectionModel,
     ProbabilityMap,
@@ -66,6 +75,7 @@ __all__ = [
     "global_search",
     "growing_beta_field",
     "local_search",
+    "look_at_points",
     "map_peaks",
     "region_prior",
     "uniform_prior",
