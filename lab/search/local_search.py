@@ -20,7 +20,9 @@ object pose"): a RANSAC start with at least ``min_inliers`` inliers, then over t
 ``confirm_updates`` EKF updates that each kept ``confirm_matches`` matches through the gate, a healthy
 (not diverged) filter, and a small pose covariance: the largest position standard deviation at most
 ``max_position_std_m`` and the largest rotation standard deviation (over a small rotation vector) at
-most ``max_rotation_std_deg``. Otherwise the next view is tried.
+most ``max_rotation_std_deg``; ours besides: the pose in the world rests on one of the box's faces
+within ``max_rest_tilt_deg`` and explains the frame (:mod:`lab.search.pose_check`). Otherwise the next
+view is tried.
 
 The object's world pose is the odometry pose composed with the camera on the head and the estimate,
 
@@ -397,7 +399,7 @@ def look_at_points(
     Returns
     -------
     LocalSearchResult
-        ``colour_peaks`` holds the points looked at.
+        On a miss, ``colour_peaks`` holds the points looked at.
     """
     cfg = config or LocalSearchConfig()
     points = [np.asarray(p, float).reshape(3) for p in points_W]
