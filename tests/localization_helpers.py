@@ -7,8 +7,10 @@ import numpy as np
 
 from lab.geometry import wrap_angle
 
-#: ``LocalizerConfig(**NO_FLOOR)``: every term of ``LocalizerConfig.observation_floor`` zero.
+#: ``LocalizerConfig(**NO_FLOOR)``: every term of ``LocalizerConfig.observation_floor`` zero, and the
+#: filter over the pose alone (no odometry calibration in the state): filterpy's 3-state peer.
 NO_FLOOR = {
+    "odometry_calibration": False,
     "obs_sigma_m": 0.0,
     "obs_sigma_rel": 0.0,
     "obs_sigma_per_m": 0.0,
@@ -18,14 +20,14 @@ NO_FLOOR = {
 
 
 def num_jac(f, x, eps=1e-6):
-    """``df/dx`` by central differences; a 3-vector's third entry (a heading) is wrapped."""
+    """``df/dx`` by central differences; the third entry of a 3-vector or longer (a heading) is wrapped."""
     x = np.asarray(x, float)
     cols = []
     for i in range(len(x)):
         d = np.zeros_like(x)
         d[i] = eps
         diff = f(x + d) - f(x - d)
-        if len(diff) == 3:
+        if len(diff) >= 3:
             diff[2] = wrap_angle(diff[2])
         cols.append(diff / (2 * eps))
     return np.stack(cols, axis=1)

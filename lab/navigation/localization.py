@@ -66,6 +66,8 @@ __all__ = [
     "LocalizerConfig",
     "PoseEstimate",
     "UpdateRecord",
+    "calibrated_motion_jacobians",
+    "calibrated_motion_model",
     "face_share_in_image",
     "measurement_jacobian",
     "measurement_model",
@@ -133,6 +135,51 @@ def motion_jacobians(x, u) -> tuple[np.ndarray, np.ndarray]:
     c, s = math.cos(float(x[2])), math.sin(float(x[2]))
     F = np.array([[1.0, 0.0, -s * dx - c * dy], [0.0, 1.0, c * dx - s * dy], [0.0, 0.0, 1.0]])
     V = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return F, V
+
+
+def calibrated_motion_model(s, u) -> np.ndarray:
+    r"""``f(s, u)`` of the filter that calibrates its odometry: the state ``s = [x, y, theta, k, c]``
+    adds the odometry's turn scale ``k`` and curvature bias ``c`` [rad/m] to the pose, constants of
+    the base that the landmark updates estimate as they go (the augmented-state odometry calibration).
+
+    A real base measures its turns with a systematic error (the wheels slip in a spin, the effective
+    track is not the nominal one: ``k``) and curves a straight drive (unequal wheels: ``c``); both add
+    up turn after turn and metre after metre, which a noise that grows like a random walk cannot
+    describe. The pose is :func:`motion_model`'s with the heading change corrected:
+
+    .. math:: f(s, u) = [x + \Delta x \cos\theta - \Delta y \sin\theta,\;
+                         y + \Delta x \sin\theta + \Delta y \cos\theta,\;
+                         \theta + k\, \Delta\theta + c\, \Delta x,\; k,\; c]^T
+
+    (``Delta x``, the increment's forward component, is the signed distance: a reversing base curves the
+    other way).
+    """
+    s = np.asarray(s, float)
+    dx, dy, dth = np.asarray(u, float)
+    x = motion_model(s[:3], (dx, dy, s[3] * dth + s[4] * dx))
+    return np.concatenate([x, s[3:5]])
+
+
+def calibrated_motion_jacobians(s, u) -> tuple[np.ndarray, np.ndarray]:
+    r"""``F = df/ds`` (5, 5) and ``V = df/du`` (5, 3) of :func:`calibrated_motion_model`.
+
+    .. math:: F = \begin{bmatrix} 1 & 0 & -\Delta x \sin\theta - \Delta y \cos\theta & 0 & 0 \\
+                                  0 & 1 & \Delta x \cos\theta - \Delta y \sin\theta & 0 & 0 \\
+                                  0 & 0 & 1 & \Delta\theta & \Delta x \\
+                                  0 & 0 & 0 & 1 & 0 \\ 0 & 0 & 0 & 0 & 1 \end{bmatrix}, \qquad
+              V = \begin{bmatrix} \cos\theta & -\sin\theta & 0 \\ \sin\theta & \cos\theta & 0 \\
+                                  c & 0 & k \\ 0 & 0 & 0 \\ 0 & 0 & 0 \end{bmatrix}
+    """
+    s = np.asarray(s, float)
+    dx, dy, dth = np.asarray(u, float)
+    F3, V3 = motion_jacobians(s[:3], u)
+    F = np.eye(5)
+    F[:3, :3] = F3
+    F[2, 3], F[2, 4] = dth, dx
+    V = np.zeros((5, 3))
+    V[:3] = V3
+    V[2] = (s[4], 0.0, s[3])
     return F, V
 
 
@@ -305,6 +352,21 @@ class LocalizerConfig:
     update_iterations : int
         The landmark update's iterations (the iterated EKF: relinearise at the new mean until it stops
         moving, at most this many); 1 is the plain EKF.
+    odometry_calibration : bool
+        Estimate the odometry's turn scale ``k`` and curvature bias ``c`` in the state
+        (:func:`calibrated_motion_model`); False: the pose alone, with the systematic errors left to the
+        motion noise's random walk.
+    turn_scale_sigma, curvature_sigma_rad_per_m : float [-], [rad/m]
+        The calibration's prior: ``k ~ N(1, turn_scale_sigma^2)``, ``c ~ N(0, curvature_sigma^2)``
+        (a Create 2's spin over-count and track error are a few per cent; unequal wheels of 0.5 % curve
+        it by 0.02 rad/m).
+    turn_scale_walk_per_sqrt_rad : float [1 / sqrt(rad)]
+        ``k`` is not quite a constant (the slip depends on how much of a motion is a spin): its variance
+        grows by this squared per radian turned.
+    calibrated_heading_rad_per_sqrt_m, calibrated_heading_rad_per_sqrt_rad : float
+        With the calibration on, the heading noise per distance and per angle turned that is left once
+        the systematic part is in the state: these replace ``sigma_heading_rad_per_sqrt_m`` and
+        ``sigma_heading_rad_per_sqrt_rad`` in :meth:`motion_noise`.
     """
 
     sigma_along_m_per_sqrt_m: float = 0.02
@@ -336,6 +398,12 @@ class LocalizerConfig:
     first_sighting_max_offset_m: float = 1.0
     first_sighting_max_offset_rad: float = math.radians(30.0)
     update_iterations: int = 10
+    odometry_calibration: bool = True
+    turn_scale_sigma: float = 0.04
+    curvature_sigma_rad_per_m: float = 0.03
+    turn_scale_walk_per_sqrt_rad: float = 0.002
+    calibrated_heading_rad_per_sqrt_m: float = 0.02
+    calibrated_heading_rad_per_sqrt_rad: float = 0.03
     ransac: RansacConfig = field(default_factory=lambda: RansacConfig(min_matches=6, dist_max_m=0.25))
 
     def __post_init__(self):
@@ -353,6 +421,11 @@ class LocalizerConfig:
             "recount_rad",
             "report_detour_m",
             "report_detour_above_m",
+            "turn_scale_sigma",
+            "curvature_sigma_rad_per_m",
+            "turn_scale_walk_per_sqrt_rad",
+            "calibrated_heading_rad_per_sqrt_m",
+            "calibrated_heading_rad_per_sqrt_rad",
         ):
             v = getattr(self, k)
             if not (math.isfinite(v) and v >= 0):
@@ -369,6 +442,11 @@ class LocalizerConfig:
                 f"LocalizerConfig.update_iterations must be an integer >= 1 (1: the plain EKF), "
                 f"got {self.update_iterations!r}"
             )
+        if not isinstance(self.odometry_calibration, bool):
+            raise ConfigError(
+                "LocalizerConfig.odometry_calibration must be True or False, "
+                f"got {self.odometry_calibration!r}"
+            )
         for k in ("relocalize_sigma_m", "report_sigma_m"):
             if not getattr(self, k) > 0:
                 raise ConfigError(f"LocalizerConfig.{k} must be > 0 m, got {getattr(self, k)}")
@@ -379,14 +457,20 @@ class LocalizerConfig:
         .. math:: M = \mathrm{diag}(\sigma_a^2 d,\; \sigma_c^2 d,\;
                   \sigma_{\theta d}^2 d + \sigma_{\theta\theta}^2 |\Delta\theta|),
                   \quad d = \|[\Delta x, \Delta y]\|
+
+        With ``odometry_calibration`` the heading's two terms are the ``calibrated_heading_*`` ones.
         """
         d = math.hypot(float(u[0]), float(u[1]))
         turn = abs(float(u[2]))
+        if self.odometry_calibration:
+            s_hd, s_ht = self.calibrated_heading_rad_per_sqrt_m, self.calibrated_heading_rad_per_sqrt_rad
+        else:
+            s_hd, s_ht = self.sigma_heading_rad_per_sqrt_m, self.sigma_heading_rad_per_sqrt_rad
         return np.diag(
             [
                 self.sigma_along_m_per_sqrt_m**2 * d,
                 self.sigma_cross_m_per_sqrt_m**2 * d,
-                self.sigma_heading_rad_per_sqrt_m**2 * d + self.sigma_heading_rad_per_sqrt_rad**2 * turn,
+                s_hd**2 * d + s_ht**2 * turn,
             ]
         )
 
@@ -488,29 +572,38 @@ class UpdateRecord:
 @dataclass
 class _Clone:
     """A past pose kept in the localizer's state: its mean ``x``, covariance ``Sigma`` and its
-    cross-covariance ``cross`` = Cov(x_now, x_clone) (3, 3) with the moving pose."""
+    cross-covariance ``cross`` = Cov(s_now, x_clone) (n, 3) with the moving state (the pose, and the
+    odometry's calibration when it is estimated)."""
 
     x: np.ndarray
     Sigma: np.ndarray
     cross: np.ndarray
 
-    def update(self, Sigma_bar, H, S, Q, v) -> None:
+    def update(self, P_bar, H, S, Q, v) -> None:
         """The clone's part of an accepted update (:meth:`Localizer.start_clone`): the joint state
-        ``[x, x_c]`` with prior covariance ``P = [[Sigma_bar, cross], [cross^T, Sigma]]`` and
-        ``H_joint = [H, 0]``; ``K_joint = P H_joint^T S^-1``, ``x_c += K_c v``, Joseph form."""
-        P = np.block([[Sigma_bar, self.cross], [self.cross.T, self.Sigma]])
+        ``[s, x_c]`` with prior covariance ``P = [[P_bar, cross], [cross^T, Sigma]]`` and
+        ``H_joint = [H, 0]`` (``H`` is (3, n)); ``K_joint = P H_joint^T S^-1``, ``x_c += K_c v``,
+        Joseph form."""
+        n = P_bar.shape[0]
+        P = np.block([[P_bar, self.cross], [self.cross.T, self.Sigma]])
         Hj = np.hstack([H, np.zeros((3, 3))])
-        Kj = np.linalg.solve(S, Hj @ P).T  # (6, 3)
-        self.x = self.x + Kj[3:] @ v
+        Kj = np.linalg.solve(S, Hj @ P).T  # (n + 3, 3)
+        self.x = self.x + Kj[n:] @ v
         self.x[2] = wrap_angle(self.x[2])
-        IKH = np.eye(6) - Kj @ Hj
+        IKH = np.eye(n + 3) - Kj @ Hj
         P = IKH @ P @ IKH.T + Kj @ Q @ Kj.T
         P = 0.5 * (P + P.T)
-        self.Sigma, self.cross = P[3:, 3:], P[:3, 3:]
+        self.Sigma, self.cross = P[n:, n:], P[:n, n:]
 
 
 class Localizer:
-    """The EKF over ``x = [x, y, theta]`` (see the module docstring for its equations).
+    """The EKF over ``x = [x, y, theta]`` (see the module docstring for its equations), and with
+    ``config.odometry_calibration`` over ``s = [x, y, theta, k, c]``: the pose and the odometry's turn
+    scale and curvature bias (:func:`calibrated_motion_model`), which the landmark updates estimate
+    through their correlation with the heading (a landmark sees the pose only: ``H = [H_x, 0]``).
+
+    ``x`` and ``Sigma`` are the pose's mean and covariance (the first three of ``s`` and ``P``);
+    :attr:`calibration` the odometry's.
 
     Parameters
     ----------
@@ -530,18 +623,54 @@ class Localizer:
     """
 
     def __init__(self, x0, Sigma0=None, config: LocalizerConfig | None = None, first_sighting: bool = False):
-        self.config = config or LocalizerConfig()
+        self.config = c = config or LocalizerConfig()
         self.first_sighting_pending = bool(first_sighting)
-        self.x = np.array(x0, dtype=float).reshape(3)
+        n = 5 if c.odometry_calibration else 3
+        self.s = np.zeros(n)
+        self.P = np.zeros((n, n))
+        self.x = x0
         self.Sigma = (
             np.diag([0.01**2, 0.01**2, math.radians(0.5) ** 2]) if Sigma0 is None else np.array(Sigma0, float)
         )
+        if n == 5:  # the calibration's prior: nominal odometry, give or take its sigmas
+            self.s[3:] = (1.0, 0.0)
+            self.P[3, 3], self.P[4, 4] = c.turn_scale_sigma**2, c.curvature_sigma_rad_per_m**2
         self.history: list[UpdateRecord] = []
         self.rejected_in_a_row = 0
         self.n_inflations = 0
         self._rejected_here: set[str] = set()  # landmarks whose rejection counted since the last move
         self._moved = np.zeros(2)  # driven [m] and turned [rad] since then
         self._clone: _Clone | None = None  # a past pose kept in the state (start_clone)
+
+    # the pose: the first three of the state
+    @property
+    def x(self) -> np.ndarray:
+        """The pose's mean ``[x, y, theta]`` (a copy; assign to set it)."""
+        return self.s[:3].copy()
+
+    @x.setter
+    def x(self, value) -> None:
+        self.s[:3] = np.asarray(value, float).reshape(3)
+
+    @property
+    def Sigma(self) -> np.ndarray:
+        """The pose's covariance (3, 3) (a copy; assigning it sets the pose's block and forgets its
+        correlation with the calibration)."""
+        return self.P[:3, :3].copy()
+
+    @Sigma.setter
+    def Sigma(self, value) -> None:
+        self.P[:3, :3] = np.asarray(value, float).reshape(3, 3)
+        self.P[:3, 3:] = 0.0
+        self.P[3:, :3] = 0.0
+
+    @property
+    def calibration(self) -> tuple[float, float, float, float] | None:
+        """The odometry's turn scale ``k``, curvature bias ``c`` [rad/m] and their standard deviations,
+        or None without ``odometry_calibration``."""
+        if len(self.s) == 3:
+            return None
+        return (float(self.s[3]), float(self.s[4]), math.sqrt(self.P[3, 3]), math.sqrt(self.P[4, 4]))
 
     @property
     def n_updates(self) -> int:
@@ -550,13 +679,20 @@ class Localizer:
     def predict(self, u) -> None:
         """Prediction from an odometry increment ``u`` (3,).
 
-        ``x_bar = f(x, u)``, ``Sigma_bar = F Sigma F^T + V M V^T``."""
-        F, V = motion_jacobians(self.x, u)
-        M = self.config.motion_noise(u)
-        self.x = motion_model(self.x, u)  # x_bar = f(x, u)
-        Sigma = F @ self.Sigma @ F.T + V @ M @ V.T  # Sigma_bar = F Sigma F^T + V M V^T
-        self.Sigma = 0.5 * (Sigma + Sigma.T)
-        if self._clone is not None:  # the clone stays where it was: Cov(x_bar, x_c) = F Cov(x, x_c)
+        ``s_bar = f(s, u)``, ``P_bar = F P F^T + V M V^T`` (+ the turn scale's walk when calibrating)."""
+        c = self.config
+        if len(self.s) == 3:
+            F, V = motion_jacobians(self.s, u)
+            s_bar = motion_model(self.s, u)
+        else:
+            F, V = calibrated_motion_jacobians(self.s, u)
+            s_bar = calibrated_motion_model(self.s, u)
+        M = c.motion_noise(u)
+        P = F @ self.P @ F.T + V @ M @ V.T  # P_bar = F P F^T + V M V^T
+        if len(self.s) == 5:
+            P[3, 3] += c.turn_scale_walk_per_sqrt_rad**2 * abs(float(u[2]))
+        self.s, self.P = s_bar, 0.5 * (P + P.T)
+        if self._clone is not None:  # the clone stays where it was: Cov(s_bar, x_c) = F Cov(s, x_c)
             self._clone.cross = F @ self._clone.cross
         self._moved += (math.hypot(u[0], u[1]), abs(u[2]))
         if self._moved[0] >= self.config.recount_m or self._moved[1] >= self.config.recount_rad:
@@ -573,45 +709,56 @@ class Localizer:
         z = np.asarray(z, float)
         Q = np.asarray(Q, float) + self.config.observation_floor(z)
         l = landmark.planar
-        x_bar, Sigma_bar = self.x.copy(), self.Sigma.copy()
-        H = measurement_jacobian(x_bar, l)
+        x_bar, Sigma_bar = self.x, self.Sigma
+        s_bar, P_bar = self.s.copy(), self.P.copy()
+        n = len(s_bar)
+
+        def jacobian(s):  # H = [dh/dx, 0]: a landmark sees the pose, not the calibration
+            H = np.zeros((3, n))
+            H[:, :3] = measurement_jacobian(s[:3], l)
+            return H
+
+        H = jacobian(s_bar)
         nu = z - measurement_model(x_bar, l)  # innovation
         nu[2] = wrap_angle(nu[2])
-        S = H @ Sigma_bar @ H.T + Q  # innovation covariance
+        S = H @ P_bar @ H.T + Q  # innovation covariance
         nis = float(nu @ np.linalg.solve(S, nu))
         accepted = nis <= chi2_quantile(self.config.gate_prob, 3)
         if accepted:
-            # the iterated EKF: from x_0 = x_bar (whose step is the plain EKF's, K nu, with the gate's H
+            # the iterated EKF: from s_0 = s_bar (whose step is the plain EKF's, K nu, with the gate's H
             # and S), relinearise at each new mean until it stops moving
-            x = x_bar.copy()
+            s_i = s_bar.copy()
             for i in range(self.config.update_iterations):
                 if i > 0:
-                    H = measurement_jacobian(x, l)
-                    S = H @ Sigma_bar @ H.T + Q
-                K = np.linalg.solve(S, H @ Sigma_bar).T  # K = Sigma_bar H^T S^-1 (S, Sigma_bar symmetric)
-                r = z - measurement_model(x, l)
+                    H = jacobian(s_i)
+                    S = H @ P_bar @ H.T + Q
+                K = np.linalg.solve(S, H @ P_bar).T  # K = P_bar H^T S^-1 (S, P_bar symmetric)
+                r = z - measurement_model(s_i[:3], l)
                 r[2] = wrap_angle(r[2])
-                dx = x_bar - x
-                dx[2] = wrap_angle(dx[2])
-                v = r - H @ dx  # the iterated EKF's innovation at x_i
-                x_next = x_bar + K @ v
-                x_next[2] = wrap_angle(x_next[2])
-                step = x_next - x
+                ds = s_bar - s_i
+                ds[2] = wrap_angle(ds[2])
+                v = r - H @ ds  # the iterated EKF's innovation at s_i
+                s_next = s_bar + K @ v
+                s_next[2] = wrap_angle(s_next[2])
+                step = s_next - s_i
                 step[2] = wrap_angle(step[2])
-                x = x_next
+                s_i = s_next
                 if np.max(np.abs(step)) < 1e-9:  # [m], [rad]: converged
                     break
-            IKH = np.eye(3) - K @ H
-            Sigma = IKH @ Sigma_bar @ IKH.T + K @ Q @ K.T  # Joseph form
+            IKH = np.eye(n) - K @ H
+            P = IKH @ P_bar @ IKH.T + K @ Q @ K.T  # Joseph form
             if self._clone is not None:
-                self._clone.update(Sigma_bar, H, S, Q, v)
-            self.x, self.Sigma = x, 0.5 * (Sigma + Sigma.T)
+                self._clone.update(P_bar, H, S, Q, v)
+            self.s, self.P = s_i, 0.5 * (P + P.T)
             self.rejected_in_a_row = 0
         elif landmark.name not in self._rejected_here:  # once per landmark per place (recount_m)
             self._rejected_here.add(landmark.name)
             self.rejected_in_a_row += 1
             if self.rejected_in_a_row >= self.config.max_rejected_in_a_row:  # gate lock-out recovery
-                self.Sigma = self.config.reject_inflation * self.Sigma
+                # the pose's variance times reject_inflation (D P D: its correlations scale along)
+                d = np.ones(n)
+                d[:3] = math.sqrt(self.config.reject_inflation)
+                self.P = d[:, None] * self.P * d[None, :]
                 self.rejected_in_a_row = 0
                 self.n_inflations += 1
                 self._rejected_here.clear()  # the doubted estimate is tried against them all again
@@ -622,8 +769,8 @@ class Localizer:
             Q,
             x_bar,
             Sigma_bar,
-            self.x.copy(),
-            self.Sigma.copy(),
+            self.x,
+            self.Sigma,
             nis,
             bool(accepted),
             int(n_inliers),
@@ -655,7 +802,7 @@ class Localizer:
         """
         if self.first_sighting_pending:
             raise ValueError("cannot clone the pose before the first landmark sighting of a measured start")
-        self._clone = _Clone(self.x.copy(), self.Sigma.copy(), self.Sigma.copy())
+        self._clone = _Clone(self.x, self.Sigma, self.P[:, :3].copy())
 
     @property
     def cloning(self) -> bool:
@@ -697,7 +844,9 @@ class Localizer:
         """
         z = np.asarray(z, float)
         Q = np.asarray(Q, float) + self.config.observation_floor(z)
-        x_bar, Sigma_bar = self.x.copy(), self.Sigma.copy()
+        x_bar, Sigma_bar = self.x, self.Sigma
+        P_bar = self.P.copy()
+        n = len(self.s)
         x_z, J = pose_from_observation(z, landmark.planar)
         Sigma_z = J @ Q @ J.T  # the sighting's pose covariance
         d = x_z - x_bar
@@ -706,21 +855,23 @@ class Localizer:
         nis = float(d @ np.linalg.solve(S, d))
         cfg = self.config
         kind = "fused"
+        accepted = True
         if nis <= chi2_quantile(cfg.gate_prob, 3):
-            K = np.linalg.solve(S, Sigma_bar).T  # K = Sigma_bar S^-1 (H = I)
-            x = x_bar + K @ d
-            IK = np.eye(3) - K
-            Sigma = IK @ Sigma_bar @ IK.T + K @ Sigma_z @ K.T  # Joseph form
+            K = np.linalg.solve(S, P_bar[:3, :]).T  # K = P_bar H^T S^-1, H = [I, 0] (n, 3)
+            s_new = self.s + K @ d
+            IKH = np.eye(n)
+            IKH[:, :3] -= K
+            P = IKH @ P_bar @ IKH.T + K @ Sigma_z @ K.T  # Joseph form
+            s_new[2] = wrap_angle(s_new[2])
+            self.s, self.P = s_new, 0.5 * (P + P.T)
         elif math.hypot(d[0], d[1]) <= cfg.first_sighting_max_offset_m and abs(d[2]) <= (
             cfg.first_sighting_max_offset_rad
         ):
-            kind, x, Sigma = "reset", x_z, Sigma_z
+            kind = "reset"  # the pose from the sighting; the calibration keeps its prior
+            self.x, self.Sigma = x_z, 0.5 * (Sigma_z + Sigma_z.T)
         else:
-            kind, x, Sigma = "outlier", None, None  # rejected
-        accepted = x is not None
+            kind, accepted = "outlier", False  # rejected
         if accepted:
-            x[2] = wrap_angle(x[2])
-            self.x, self.Sigma = x, 0.5 * (Sigma + Sigma.T)
             self.first_sighting_pending = False
         rec = UpdateRecord(
             t,
@@ -729,8 +880,8 @@ class Localizer:
             Q,
             x_bar,
             Sigma_bar,
-            self.x.copy(),
-            self.Sigma.copy(),
+            self.x,
+            self.Sigma,
             nis,
             accepted,
             int(n_inliers),
