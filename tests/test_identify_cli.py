@@ -180,5 +180,11 @@ def test_identify_hands_its_figures_the_robots_track(tmp_path, monkeypatch):
     end_loc = float(np.hypot(*(tr.estimate[-1, :2] - tr.truth[-1, :2])))
     assert end_odo == pytest.approx(res["odometry_error_m"], abs=1e-4)
     assert end_loc == pytest.approx(res["localization_error_m"], abs=1e-4)
+    assert set(res["odometry_calibration"]) == {
+        "turn_scale",
+        "turn_scale_sd",
+        "curvature_rad_per_m",
+        "curvature_sd_rad_per_m",
+    }
     assert tr.truth[0, 0] == pytest.approx(-1.2, abs=1e-6) and abs(tr.truth[0, 1]) <= 0.1  # the start
     assert (tmp_path / "fig5_pose_and_probabilities.png").is_file()

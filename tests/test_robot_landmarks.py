@@ -151,6 +151,10 @@ def test_a_map_whose_posters_are_never_seen_falls_back_and_says_so(tmp_path, cap
     assert blind["localization_note"] == "no landmark was seen: the pose is odometry alone"
     assert "lab: localization: no landmark was seen: the pose is odometry alone" in err
     assert unmapped["localization"] == "odometry" and unmapped["landmark_updates"] == 0
+    # no poster seen: the odometry's calibration is still its prior (the nominal base); none on odometry
+    cal = blind["odometry_calibration"]
+    assert cal["turn_scale"] == 1.0 and cal["curvature_rad_per_m"] == 0.0
+    assert cal["turn_scale_sd"] == pytest.approx(0.04, rel=0.2) and unmapped["odometry_calibration"] is None
     assert unmapped["localization_note"].startswith("no landmark map for this robot ([room] landmarks")
     for d in (blind, unmapped):
         assert json.loads(json.dumps(d))["localization_error_m"] is None  # no truth on the real robot

@@ -28,6 +28,15 @@ The filter never sees ground truth. Its equations, written as the code does::
                         (from x_0 = x_bar, until it stops moving: Gauss-Newton to the posterior's mode)
               Sigma = (I - K H) Sigma_bar (I - K H)^T + K Q K^T      (Joseph form: stays symmetric PSD)
 
+**The odometry's calibration** (``LocalizerConfig.odometry_calibration``, on by default): the largest
+odometry errors of a real base are systematic, the same on every turn (spin slip, the effective track
+width) and every metre (unequal wheels), so they add up linearly where the noise ``M(u)`` grows like a
+random walk. The state is then ``s = [x, y, theta, k, c]``: the pose, the turn scale ``k`` and the
+curvature bias ``c`` [rad/m], with ``theta' = theta + k dtheta + c dx`` (:func:`calibrated_motion_model`)
+and the same equations on the longer state (``H = [dh/dx, 0]``: a landmark sees the pose; a turn
+correlates the heading with ``k``, and the next update corrects both). ``x`` and ``Sigma`` stay the
+pose's mean and covariance.
+
 The update is iterated (``LocalizerConfig.update_iterations``) because one EKF step is linearised at the
 prior: after a long drive on realistic odometry the heading can be 15 deg off, and one step then left
 the estimate 15 cm from where a precise poster sighting put the robot, with a covariance claiming 2 cm
@@ -1077,6 +1086,22 @@ class LocalizedRobot(RobotWrapper):
         """The pose estimate (the localized pose, or the wheel odometry in ``odometry`` mode)."""
         self._sync()
         return self._pose()
+
+    def odometry_calibration(self) -> dict | None:
+        """What the filter learned of the base's odometry (:attr:`Localizer.calibration`), for a run's
+        JSON and the operator: ``turn_scale`` (the true turn per turn the wheels report; 0.96 means
+        they over-count turns by about 4 %), ``curvature_rad_per_m`` and their standard deviations.
+        None with ``mode=odometry`` or without ``odometry_calibration``."""
+        cal = self.localizer.calibration
+        if self.mode is LocalizationMode.ODOMETRY or cal is None:
+            return None
+        k, c, sk, sc = cal
+        return {
+            "turn_scale": round(k, 5),
+            "turn_scale_sd": round(sk, 5),
+            "curvature_rad_per_m": round(c, 5),
+            "curvature_sd_rad_per_m": round(sc, 5),
+        }
 
     def wheel_odometry(self) -> Pose2D:
         """The base's wheel odometry, which the estimate starts from (in the base's frame)."""

@@ -300,6 +300,7 @@ def _localization_fields(robot: LocalizedRobot, session: RobotSession, note) -> 
         "localization_error_m": loc_err,
         "landmark_updates": est.n_updates,
         "localization_note": note,
+        "odometry_calibration": robot.odometry_calibration(),
     }
 
 

@@ -218,6 +218,9 @@ class SearchResult:
         Landmark observations the localizer used (0 with landmarks: it fell back to odometry alone,
         and ``localization_note`` says so).
     localization_note : str or None
+    odometry_calibration : dict or None
+        The odometry's turn scale and curvature bias the localizer learned
+        (:meth:`~lab.navigation.localization.LocalizedRobot.odometry_calibration`).
     events : tuple of SearchEvent
     trace : SearchTrace
     recording : str or None
@@ -262,6 +265,7 @@ class SearchResult:
     localization: str = "landmarks"
     landmark_updates: int = 0
     localization_note: str | None = None
+    odometry_calibration: dict | None = None
     report_relocalization: dict | None = None
     events: tuple[SearchEvent, ...] = field(default=(), repr=False)
     trace: SearchTrace | None = field(default=None, repr=False, compare=False)
@@ -307,6 +311,7 @@ class SearchResult:
             "localization": self.localization,
             "landmark_updates": int(self.landmark_updates),
             "localization_note": self.localization_note,
+            "odometry_calibration": self.odometry_calibration,
             "report_relocalization": self.report_relocalization,
             "events": [{**e.as_dict(), "t": round(e.t - t0, 3)} for e in self.events],
             "recording": self.recording,
@@ -462,6 +467,7 @@ def run_search(
         localization=mode.value,
         landmark_updates=estimate.n_updates,
         localization_note=note,
+        odometry_calibration=robot.odometry_calibration(),
         report_relocalization=report_reloc,
         path_length_m=budget.path_length_m,
         global_searches=out.global_searches,
