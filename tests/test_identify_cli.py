@@ -49,6 +49,8 @@ def test_short_identify_episode_keeps_the_contract(tmp_path):
     for f in ("fig5_pose_and_probabilities.png", "fig6_information_gain_ring.png", "fig7_probabilities.png"):
         assert (out / f).is_file() or f.startswith("fig6") and res["actions"] == 0
     assert problems("identify", res) == []  # lab/schemas/identify.schema.json
+    summary = json.loads(r.stdout)  # the console's summary: the localization in words too
+    assert summary["localization_outcome"] == "odometry alone (--localization odometry)"
 
 
 def test_identify_bad_input_is_one_line():

@@ -65,6 +65,9 @@ def test_search_run_finds_the_toy_block_and_keeps_the_contract(tmp_path):
         assert (figs / name).stat().st_size > 10_000, name
     assert len(list(figs.glob("map_*.png"))) == len(res["map_snapshots"])
     assert problems("search", res) == []  # lab/schemas/search.schema.json
+    summary = json.loads(r.stdout)  # the console's summary: found / success and the localization, in words
+    assert summary["outcome"].startswith("found and a success")
+    assert summary["localization_outcome"].startswith(f"{res['landmark_updates']} landmark update")
 
 
 def test_outcome_in_words_says_found_success_and_the_missed_limit():
@@ -101,3 +104,34 @@ def test_progress_prints_each_event_and_keeps_the_observer_before_it(capsys):
     agent.observer(agent, e)
     assert seen == [e]
     assert capsys.readouterr().err == "lab search: t =   27.8 s  local (4, 13): found: 4 confirming updates\n"
+
+
+def test_localization_in_words_says_the_mode_the_updates_and_what_the_odometry_learned():
+    from lab.runs.room import localization_in_words
+
+    cal = {
+        "turn_scale": 0.96,
+        "turn_scale_sd": 0.006,
+        "curvature_rad_per_m": 0.012,
+        "curvature_sd_rad_per_m": 0.004,
+    }
+    run = {"localization": "landmarks", "landmark_updates": 54, "odometry_calibration": cal}
+    assert localization_in_words({**run, "localization_error_m": 0.0071}) == (
+        "54 landmark updates; the wheels over-count turns by 4.2 % (turn scale 0.960 +- 0.006) and drift "
+        "0.012 +- 0.004 rad per metre; 0.7 cm from the true pose at the end"
+    )
+    # on the robot there is no truth; a base that under-counts its turns says so
+    under = {**run, "odometry_calibration": {**cal, "turn_scale": 1.05}, "localization_error_m": None}
+    assert localization_in_words(under).startswith(
+        "54 landmark updates; the wheels under-count turns by 4.8 %"
+    )
+    assert localization_in_words({**run, "odometry_calibration": None, "landmark_updates": 1}) == (
+        "1 landmark update"
+    )
+    fallback = {
+        **run,
+        "landmark_updates": 0,
+        "localization_note": "no landmark was seen: the pose is odometry alone",
+    }
+    assert localization_in_words(fallback) == "no landmark was seen: the pose is odometry alone"
+    assert localization_in_words({"localization": "odometry"}) == "odometry alone (--localization odometry)"

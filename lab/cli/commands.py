@@ -121,7 +121,10 @@ def _cmd_identify(args) -> int:
         "odometry_error_m",
         "localization_error_m",
     ] + (["watchdog_stops"] if args.robot is not None else [])
+    from lab.runs.room import localization_in_words
+
     summary = {k: res[k] for k in keys}
+    summary["localization_outcome"] = localization_in_words(res)  # landmarks, the odometry learned, in words
     print(_json.dumps(summary, indent=2))
     if res["reason"] == "interrupted":
         said = f": the result so far is in {args.json}" if args.json is not None else ""
@@ -182,11 +185,13 @@ def _cmd_search(args) -> int:
             print(f"wrote {len(files)} figures and search.json into {args.out}", file=sys.stderr)
         else:
             print(f"wrote search.json into {args.out} (the figures are the simulator's)", file=sys.stderr)
+    from lab.runs.room import localization_in_words
     from lab.runs.search import outcome_in_words
 
     keys = ("object", "found", "success", "reason", "position_error_m", "orientation_error_deg")
     summary = {k: data.get(k) for k in (*keys, "path_length_m", "sim_time_s")}
     summary["outcome"] = outcome_in_words(data)  # found / success / why, in words
+    summary["localization_outcome"] = localization_in_words(data)
     print(_json.dumps(summary, indent=2))
     if res.interrupted:
         where = args.json or (None if args.out is None else args.out / "search.json")

@@ -34,7 +34,15 @@ from lab.navigation.localization import LocalizationMode, LocalizedRobot
 from lab.robot import Robot
 from lab.runs.robots import PlacedRobot, RobotKind
 
-__all__ = ["RobotStart", "RoomLandmarks", "check_room", "localize", "robot_start", "room_landmarks"]
+__all__ = [
+    "RobotStart",
+    "RoomLandmarks",
+    "check_room",
+    "localization_in_words",
+    "localize",
+    "robot_start",
+    "room_landmarks",
+]
 
 
 @dataclass(frozen=True)
@@ -258,3 +266,34 @@ def localize(
         Sigma0=start.Sigma0,
         start_measured_by_hand=True,
     )
+
+
+def localization_in_words(data: dict) -> str:
+    """How a run (the JSON fields of ``lab search`` or ``lab identify``) knew where the robot was, in one
+    line for the console: odometry alone, or how many landmark updates, what the filter learned of the
+    odometry (``odometry_calibration``: ``turn_scale`` is the true turn per reported turn, so the wheels
+    over-count turns by ``1 / turn_scale - 1``) and, in the simulator, how far the estimate ended from
+    the truth.
+
+    For example ``54 landmark updates; the wheels over-count turns by 4.2 % (turn scale 0.960 +- 0.006)
+    and drift 0.012 +- 0.004 rad per metre; 0.7 cm from the true pose at the end``.
+    """
+    if data.get("localization") != "landmarks":
+        return "odometry alone (--localization odometry)"
+    if data.get("localization_note"):
+        return str(data["localization_note"])
+    n = int(data.get("landmark_updates") or 0)
+    parts = [f"{n} landmark update{'' if n == 1 else 's'}"]
+    cal = data.get("odometry_calibration")
+    if cal is not None:
+        k, sk = cal["turn_scale"], cal["turn_scale_sd"]
+        over = 100.0 * (1.0 / k - 1.0)
+        verb = f"over-count turns by {over:.1f} %" if over >= 0 else f"under-count turns by {-over:.1f} %"
+        parts.append(
+            f"the wheels {verb} (turn scale {k:.3f} +- {sk:.3f}) and drift "
+            f"{cal['curvature_rad_per_m']:.3f} +- {cal['curvature_sd_rad_per_m']:.3f} rad per metre"
+        )
+    err = data.get("localization_error_m")
+    if err is not None:
+        parts.append(f"{100.0 * err:.1f} cm from the true pose at the end")
+    return "; ".join(parts)
