@@ -135,3 +135,5 @@ def test_localization_in_words_says_the_mode_the_updates_and_what_the_odometry_l
     }
     assert localization_in_words(fallback) == "no landmark was seen: the pose is odometry alone"
     assert localization_in_words({"localization": "odometry"}) == "odometry alone (--localization odometry)"
+    no_map = {"localization": "odometry", "localization_note": "no landmark map: the pose is odometry alone"}
+    assert localization_in_words(no_map) == no_map["localization_note"]  # asked for landmarks, fell back

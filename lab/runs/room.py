@@ -278,10 +278,10 @@ def localization_in_words(data: dict) -> str:
     For example ``54 landmark updates; the wheels over-count turns by 4.2 % (turn scale 0.960 +- 0.006)
     and drift 0.012 +- 0.004 rad per metre; 0.7 cm from the true pose at the end``.
     """
+    if data.get("localization_note"):  # a fallback to odometry (no landmark map, none seen) says why
+        return str(data["localization_note"])
     if data.get("localization") != "landmarks":
         return "odometry alone (--localization odometry)"
-    if data.get("localization_note"):
-        return str(data["localization_note"])
     n = int(data.get("landmark_updates") or 0)
     parts = [f"{n} landmark update{'' if n == 1 else 's'}"]
     cal = data.get("odometry_calibration")
