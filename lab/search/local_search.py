@@ -74,7 +74,7 @@ from lab.search.global_search import (
 from lab.search.pose_check import PoseCheckConfig, check_pose, rest_tilt_deg
 from lab.vision.colour import back_project, colour_histogram
 from lab.vision.database import FeatureDatabase
-from lab.vision.dense import disparity_map
+from lab.vision.dense import checked_disparity
 from lab.vision.matching import Matcher
 from lab.vision.roi import object_roi
 from lab.vision.stereo import sift, stereo_features, triangulate, upsampled_pair
@@ -515,8 +515,8 @@ class _LocalSearch:
 
         As the global search finds its peaks (:func:`lab.search.global_search.process_view`), with the
         ratio histogram's background the colours of these views: back-projection, window mean, the
-        ``n_hist`` strongest clusters of each view, the median dense disparity of the window's most
-        object-like pixels, and ``p_W = G_WR(odometry) G_RC(pan, tilt) p_C``."""
+        ``n_hist`` strongest clusters of each view, the median full-width checked disparity of the
+        window's most object-like pixels, and ``p_W = G_WR(odometry) G_RC(pan, tilt) p_C``."""
         c = sl.colour
         space = self.db.meta.get("colour_space", "rg")
         bins = self.db.histogram.shape[0]
@@ -528,7 +528,7 @@ class _LocalSearch:
             clusters = strongest_clusters(
                 window_mean(bp, c.window_px), c.n_hist, c.min_strength, c.suppression_px
             )
-            disp = disparity_map(fr.left, fr.right, num_disparities=c.num_disparities) if clusters else None
+            disp = checked_disparity(fr.left, fr.right, c.num_disparities) if clusters else None
             for u, v, strength in clusters:
                 d = peak_disparity(disp, bp, u, v, c.window_px)
                 if d is None or not d > 0:
