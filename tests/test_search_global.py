@@ -153,3 +153,30 @@ def test_peaks_are_recorded_with_their_fate(scans):
         if p.used:
             assert p.cell is not None and p.p_W is not None
     assert np.isclose(res.P_after.sum(), 1.0) and res.P_after.max() > res.P_before.max()
+
+
+def test_a_peak_at_the_left_edge_of_a_view_gets_its_depth():
+    """The upright book on the shelf, 2.2 m away, seen at the left edge of one view of the scan: plain
+    SGBM has no disparity in a view's left ``num_disparities`` columns (nor did the neighbouring view
+    make up for it: the peak was dropped); the full-width, left-right checked disparity places it."""
+    from lab.robot import Pose2D
+    from lab.vision.dense import disparity_map
+
+    place = (-2.75, 2.61, 1.2, 176.8)
+    scene = SCENE.with_pose("book", place)
+    cfg = GlobalSearchConfig()
+    with SimWorld(scene, RenderSettings(supersample=2)) as w:
+        robot = SimRobot(w, start=Pose2D(-0.5, 2.6, math.pi), seed=3, sensing="realistic")
+        robot.enable()
+        res = global_search(robot, search_database("book"), ProbabilityMap.over(-3, -4, 3, 4, 0.2), cfg)
+        centre = w.truth.G_W("book")[:3, 3] + [0.0, 0.0, 0.12]  # its middle: 24 cm tall
+    on_book = [p for p in res.peaks if p.p_W is not None and np.linalg.norm(p.p_W - centre) < 0.25]
+    in_band = [p for p in on_book if p.uv[0] < cfg.num_disparities]
+    assert in_band, [(p.uv, round(p.strength, 2), p.reason) for p in res.peaks]
+    p = in_band[0]
+    true_cell = ProbabilityMap.over(-3, -4, 3, 4, 0.2).cell_of(*centre[:2])
+    assert p.used and max(abs(a - b) for a, b in zip(p.cell, true_cell, strict=True)) <= 1  # 20 cm cells
+    f = res.views[p.view].frame
+    u, v = map(int, p.uv)
+    plain = disparity_map(f.left, f.right, num_disparities=cfg.num_disparities)
+    assert np.isnan(plain[v - 3 : v + 4, u - 3 : u + 4]).all()  # what the search used to get there
