@@ -8,6 +8,7 @@ import json
 import numpy as np
 
 from lab.cli import main
+from lab.evaluation import wilson_interval
 from lab.runs.placement import random_placement, searchable_objects
 from lab.scene import load_scene
 
@@ -130,3 +131,19 @@ def test_the_report_counts_confidently_wrong_poses_and_misses_at_the_object():
     events = [{"kind": "local", "cell": list(c), "detail": "not found"} for c in cells]
     events.append({"kind": "global", "cell": None, "detail": "scan"})
     assert es.local_searches_at_object({"place": list(place), "events": events}) == (2, 4)
+
+
+def test_the_report_counts_the_successes_a_shorter_budget_would_have_kept():
+    """benchmarks/eval_search.py report: the successes that ended within 90 s and 300 s of simulated time
+    (a failure, or a success after the shorter budget, does not count), with their Wilson intervals."""
+    es = _eval_search_script()
+    rows = [
+        {"success": True, "sim_time_s": 40.0},
+        {"success": True, "sim_time_s": 90.0},
+        {"success": True, "sim_time_s": 350.0},
+        {"success": False, "sim_time_s": 20.0},
+    ]
+    line = es.within_line(rows)
+    lo, hi = wilson_interval(2, 4)
+    assert f"<= 90 s: 2 (50.0 %, [{100 * lo:.1f}, {100 * hi:.1f}])" in line
+    assert "<= 300 s: 2 (50.0 %" in line

@@ -427,7 +427,7 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("--obstacles", help="no, yes or both (default both): boxes on the straight path")
     es.add_argument("--sensing", help="comma-separated: realistic, ideal (default realistic)")
     es.add_argument("--localization", help="comma-separated: landmarks, odometry (default landmarks)")
-    es.add_argument("--max-time", type=float, help="sim-time budget per trial [s] (default 300)")
+    es.add_argument("--max-time", type=float, help="sim-time budget per trial [s] (default 600)")
     es.add_argument("--max-wall-time", type=float, help="the trial's own wall-clock cap [s] (default none)")
     _sweep_run_arguments(es)
 

@@ -57,7 +57,7 @@ def identify_sweep(args):
 
 def search_sweep(args):
     """The grid of ``lab eval search``, checked."""
-    from lab.eval.search import SEARCH_FIELDS, SearchSweep
+    from lab.eval.search import SEARCH_FIELDS, SEARCH_MAX_TIME_S, SearchSweep
     from lab.evaluation import report_seeds
 
     spec = _spec(args, SEARCH_FIELDS)
@@ -70,7 +70,7 @@ def search_sweep(args):
         obstacles=str(spec.get("obstacles", "both")),
         sensing=_names(spec.get("sensing", "realistic")),
         localization=_names(spec.get("localization", "landmarks")),
-        max_time=float(spec.get("max_time", 300.0)),
+        max_time=float(spec.get("max_time", SEARCH_MAX_TIME_S)),
         max_wall_time=None if wall is None else float(wall),
     )
     sw.check()

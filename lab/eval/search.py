@@ -23,7 +23,16 @@ from lab.errors import ConfigError
 from lab.eval.executor import Job
 from lab.eval.sweep import SweepKind
 
-__all__ = ["SEARCH", "SEARCH_FIELDS", "SearchSweep", "search_job", "search_key", "shortest_path_m", "spl"]
+__all__ = [
+    "SEARCH",
+    "SEARCH_FIELDS",
+    "SEARCH_MAX_TIME_S",
+    "SearchSweep",
+    "search_job",
+    "search_key",
+    "shortest_path_m",
+    "spl",
+]
 
 #: The fields of a ``lab eval search`` sweep file (the flags' names).
 SEARCH_FIELDS = (
@@ -59,6 +68,13 @@ def search_key(
     return f"{strategy}_{ob}_{sensing}_{localization}_{object}_{surface}_s{seed}"
 
 
+#: The default sim-time budget of a trial [s]: ``lab search``'s own (``--max-time``), so the evaluation
+#: measures what a user's run does. (Until stop 42 the evaluation stopped at 300 s: 9 of the 10 paper
+#: misses on the report seeds 101000-101004 were that budget running out, and a 600 s budget found all
+#: of those 9 -- see the stop's note; the report prints the successes within 300 s beside it.)
+SEARCH_MAX_TIME_S = 600.0
+
+
 @dataclass(frozen=True)
 class SearchSweep:
     """The grid of ``lab eval search``."""
@@ -70,7 +86,7 @@ class SearchSweep:
     obstacles: str = "both"
     sensing: tuple[str, ...] = ("realistic",)
     localization: tuple[str, ...] = ("landmarks",)
-    max_time: float = 300.0
+    max_time: float = SEARCH_MAX_TIME_S
     max_wall_time: float | None = None
 
     def check(self) -> None:
