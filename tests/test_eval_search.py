@@ -147,3 +147,18 @@ def test_the_report_counts_the_successes_a_shorter_budget_would_have_kept():
     lo, hi = wilson_interval(2, 4)
     assert f"<= 90 s: 2 (50.0 %, [{100 * lo:.1f}, {100 * hi:.1f}])" in line
     assert "<= 300 s: 2 (50.0 %" in line
+
+
+def test_the_evaluation_budget_is_lab_searchs_own():
+    """``lab eval search`` stops a trial where ``lab search`` and ``run_search`` stop a
+    run by default: the evaluation measures what a user's run does."""
+    import inspect
+
+    from lab.cli.parser import build_parser
+    from lab.eval.search import SEARCH_MAX_TIME_S, SearchSweep
+    from lab.runs.search import run_search
+
+    assert SearchSweep().max_time == SEARCH_MAX_TIME_S
+    assert inspect.signature(run_search).parameters["max_time"].default == SEARCH_MAX_TIME_S
+    args = build_parser().parse_args(["search", "--object", "book"])
+    assert args.max_time == SEARCH_MAX_TIME_S
