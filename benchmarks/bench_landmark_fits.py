@@ -51,11 +51,8 @@ def fits(seeds, stands: int):
                 break
             x, y, th = rng.uniform(-2.6, 2.6), rng.uniform(-3.6, 3.6), rng.uniform(-math.pi, math.pi)
             with SimWorld(scene, RenderSettings(supersample=2)) as w:
-                try:
-                    r = SimRobot(w, start=Pose2D(x, y, th), seed=int(seed * 1000 + k), sensing="realistic")
-                except Exception:  # a start inside furniture: draw another
-                    continue
-                if r._collides():
+                r = SimRobot(w, start=Pose2D(x, y, th), seed=int(seed * 1000 + k), sensing="realistic")
+                if r._collides():  # a start inside furniture: draw another
                     continue
                 done += 1
                 r.enable()

@@ -294,25 +294,26 @@ class LocalizerConfig:
     sigma_heading_rad_per_sqrt_rad : float [rad / sqrt(rad)]
         heading error per angle turned (track width error, wheel scrub).
     obs_sigma_m, obs_sigma_rel, obs_sigma_per_m, obs_sigma_rel_across, obs_sigma_rad : float
-        A floor under each landmark observation's covariance, added to the fit's own for the errors a fit
-        cannot see because they move every feature of a frame together (see :meth:`observation_floor`): along
-        the line of sight a constant [m], a share of the range [-] (the baseline's and focal lengths' scale
-        error) and a share of its square [1/m] (a disparity bias: depth error ``Z^2 delta_d / (f B)``); across
-        it the constant and a share of the range [-] (the pan-tilt's pointing error); and the heading [rad].
-        The heading's floor is 0.75 degrees (it was 0.3): a poster's yaw comes from the depth differences
-        across its face, and errors its features share turn it further than the fit's covariance says (not
-        traced; depth errors along the line of sight, where a stereo point's own covariance is long, are the
-        likely cause). Measured on the tuning split (``benchmarks/bench_landmark_fits.py``'s probe, seeds
-        1-12, 99 fits from random stands, scored against the truth): with 0.3 degrees, 20 % of the headings
-        fitted within 2.5 m were more than 1.96 sigma off (mean squared z-score 2.4, where 1 is honest); with
-        0.75, 2.6 % (1.2); with 1.0, 2.6 % (0.84), but then a test's re-localization did not reach its 0.5
-        degree threshold in six views, and with that raised to 1 degree a short closed-loop drive ended 5.7 cm
-        off (its bound is 5). In the search, four found objects of report seeds 101000 and 101100 (diagnosed
-        there, so those seeds are spent) were reported 6-13 cm off; two of them after a fit from 1-2 m whose
-        heading was 2.6 and 6.6 degrees off while claiming 0.45 and 1.5 (the filter took the heading, and the
-        next good fits failed the gate; the other two were not traced). With 0.75 all four were found within 1
-        cm. On the tuning drives (seeds 0-7, 30 m): NEES in the 95 % band 93.5 % (95.0 % with 0.3), median
-        final error 0.92 cm and 0.14 degrees (1.14 cm, 0.39).
+        A floor under each landmark observation's covariance, added to the fit's own for the errors a
+        fit cannot see because they move every feature of a frame together (see
+        :meth:`observation_floor`): along the line of sight a constant [m], a share of the range [-]
+        (the baseline's and focal lengths' scale error) and a share of its square [1/m] (a disparity
+        bias: depth error ``Z^2 delta_d / (f B)``); across it the constant and a share of the range [-]
+        (the pan-tilt's pointing error); and the heading [rad]. The heading's floor is 0.75 degrees (it
+        was 0.3): a poster's yaw comes from the depth differences across its face, and errors its
+        features share turn it further than the fit's covariance says (not traced; depth errors along
+        the line of sight, where a stereo point's own covariance is long, are the likely cause).
+        Measured on the tuning split (``benchmarks/bench_landmark_fits.py``'s probe, seeds 1-12, 99 fits
+        from random stands, scored against the truth): with 0.3 degrees, 20 % of the headings fitted
+        within 2.5 m were more than 1.96 sigma off (mean squared z-score 2.4, where 1 is honest); with
+        0.75, 2.6 % (1.2); with 1.0, 2.6 % (0.84), but then a test's re-localization did not reach its
+        0.5 degree threshold in six views, and with that raised to 1 degree a short closed-loop drive
+        ended 5.7 cm off (its bound is 5). In the search, four found objects of report seeds 101000 and
+        101100 (diagnosed there, so those seeds are spent) were reported 6-13 cm off; two of them after
+        a fit from 1-2 m whose heading was 2.6 and 6.6 degrees off while claiming 0.45 and 1.5 (the
+        filter took the heading, and the next good fits failed the gate; the other two were not traced).
+        With 0.75 all four were found within 1 cm. On the tuning drives (seeds 0-7, 30 m): NEES in the
+        95 % band 93.5 % (95.0 % with 0.3), median final error 0.92 cm and 0.14 degrees (1.14 cm, 0.39).
     gate_prob : float
         Observations whose innovation's Mahalanobis distance exceeds the chi-square(3) quantile are
         rejected as outliers.
