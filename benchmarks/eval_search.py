@@ -3,7 +3,7 @@
 Run from the repository root (each trial is a full closed-loop run in the simulator, with the stereo-
 costmap navigator that ``lab search`` uses; expect one to three minutes of CPU per trial)::
 
-    python benchmarks/eval_search.py run --out out/eval_search [--strategies paper,lawnmower,frontier]
+    python benchmarks/eval_search.py run --out out/eval_search [--strategies paper,rate,lawnmower,frontier]
         [--seeds 100000,100001] [--sensing realistic|ideal]
         [--obstacles both|no|yes] [--surfaces floor,table,shelf] [--max-time 600]
         [--workers N | --scheduler tcp://HOST:8786]
@@ -223,7 +223,7 @@ def cmd_report(args) -> int:
     for d in rows:
         d["n_obstacles"] = n_obstacles_placed(d)
     strategies = sorted(
-        {d["strategy"] for d in rows}, key=lambda s: ("paper", "frontier", "lawnmower").index(s)
+        {d["strategy"] for d in rows}, key=lambda s: ("rate", "paper", "frontier", "lawnmower").index(s)
     )
     print(f"{len(rows)} trials")
     for s in strategies:
@@ -295,7 +295,7 @@ def main(argv=None) -> int:
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run")
     r.add_argument("--out", required=True, help="the sweep's folder (lab eval search --out)")
-    r.add_argument("--strategies", default="paper,lawnmower,frontier")
+    r.add_argument("--strategies", default="paper,rate,lawnmower,frontier")
     r.add_argument(
         "--seeds",
         default=",".join(str(s) for s in report_seeds(2)),

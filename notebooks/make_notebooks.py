@@ -1292,7 +1292,44 @@ else:
    navigate=navigator_factory)`). Which tilt of the global scan sees it?
 2. Give the local search a larger $\beta$ (`from lab.search import AgentConfig, LocalSearchConfig`, then
    `config=AgentConfig(local_search=LocalSearchConfig(beta=0.5))` in `run_search`) and search for the
-   glossy cup again: how does the sequence of snapshots change?""",
+   glossy cup again: how does the sequence of snapshots change?
+
+## Which cell next: the highest, or the best buy?
+
+The paper drives to the map's maximum wherever it is. But a cell costs time: the drive there, $d_i / v$,
+and the look, $t_{look}$. If looking at cell $i$ finds the object with probability $P_i$ (times the same
+$1 - \beta$ everywhere) and costs $t_i$, the order that minimises the **expected time to find** visits
+the cells in decreasing $P_i / t_i$: swapping two neighbours $i, j$ in any order changes the expected
+time by $P_j t_i - P_i t_j$, so $i$ goes first exactly when $P_i / t_i > P_j / t_j$. With travel the
+costs depend on where the robot stands, so `--strategy rate` takes this greedily, one visit at a time,
+among the map's peaks (`lab.search.agent.detection_rates`). Check the claim on five cells by brute force:""",
+    ),
+    (
+        "code",
+        """\
+import itertools
+from lab.search.agent import detection_rates
+
+P = np.array([0.30, 0.10, 0.25, 0.05, 0.20])                  # the peaks' probabilities
+centres = np.array([[4.0, 0.0], [0.5, 0.0], [0.0, -2.0], [1.0, 1.0], [0.0, 6.0]])   # [m], robot at (0, 0)
+rate = detection_rates(P, centres, (0.0, 0.0), standoff_m=0.75, speed_m_s=0.15, look_time_s=8.5)
+t = P / rate                                                   # each cell's cost [s]
+
+def expected_time(order):
+    return sum(P[i] * t[list(order[: k + 1])].sum() for k, i in enumerate(order))
+
+best = min(itertools.permutations(range(5)), key=expected_time)
+by_height, by_rate = (tuple(int(i) for i in np.argsort(-v)) for v in (P, rate))
+for name, order in (("highest first", by_height), ("best buy first", by_rate), ("brute force", best)):
+    print(f"{name:15s} {order}  expected time {expected_time(order):6.1f} s")
+assert by_rate == best
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise.** Run the toy-block search above with `strategy="rate"` (an argument of `run_search`).
+Does it visit the cells in another order? Where the map has one clear peak the two strategies agree;
+they differ when a weaker peak lies much nearer.""",
     ),
 ]
 

@@ -267,7 +267,7 @@ def build_parser() -> argparse.ArgumentParser:
     se.add_argument(
         "--strategy",
         default="paper",
-        choices=("paper", "lawnmower", "frontier"),
+        choices=("paper", "rate", "lawnmower", "frontier"),
         help="where to search next (default: paper, the probability map's peak)",
     )
     se.add_argument(
@@ -423,7 +423,9 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("--objects", help="comma-separated (default cereal_box,book,toy_block)")
     es.add_argument("--surfaces", help="placements: a subset of floor,table,shelf (default all three)")
     es.add_argument("--seeds", help="e.g. 100000-100001 (default: the report split's first 2)")
-    es.add_argument("--strategies", help="comma-separated: paper, lawnmower, frontier (default all three)")
+    es.add_argument(
+        "--strategies", help="comma-separated: paper, rate, lawnmower, frontier (default all four)"
+    )
     es.add_argument("--obstacles", help="no, yes or both (default both): boxes on the straight path")
     es.add_argument("--sensing", help="comma-separated: realistic, ideal (default realistic)")
     es.add_argument("--localization", help="comma-separated: landmarks, odometry (default landmarks)")

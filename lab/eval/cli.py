@@ -57,7 +57,7 @@ def identify_sweep(args):
 
 def search_sweep(args):
     """The grid of ``lab eval search``, checked."""
-    from lab.eval.search import SEARCH_FIELDS, SEARCH_MAX_TIME_S, SearchSweep
+    from lab.eval.search import SEARCH_FIELDS, SEARCH_MAX_TIME_S, STRATEGIES, SearchSweep
     from lab.evaluation import report_seeds
 
     spec = _spec(args, SEARCH_FIELDS)
@@ -66,7 +66,7 @@ def search_sweep(args):
         objects=_names(spec.get("objects", "cereal_box,book,toy_block")),
         surfaces=_names(spec.get("surfaces", "floor,table,shelf")),
         seeds=_ints(spec["seeds"], "seeds") if "seeds" in spec else tuple(report_seeds(2)),
-        strategies=_names(spec.get("strategies", "paper,lawnmower,frontier")),
+        strategies=_names(spec.get("strategies", ",".join(STRATEGIES))),
         obstacles=str(spec.get("obstacles", "both")),
         sensing=_names(spec.get("sensing", "realistic")),
         localization=_names(spec.get("localization", "landmarks")),

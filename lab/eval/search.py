@@ -47,7 +47,7 @@ SEARCH_FIELDS = (
     "max_wall_time",
 )
 
-STRATEGIES = ("paper", "lawnmower", "frontier")
+STRATEGIES = ("paper", "rate", "lawnmower", "frontier")
 OBSTACLES = {"no": (False,), "yes": (True,), "both": (False, True)}
 
 

@@ -370,7 +370,7 @@ def run_search(
         Where to put the object (checked: in the room, on a surface, clear of the other bodies and the
         robot). Default: a seeded random valid placement. Not on the real robot (the object is where
         the operator put it).
-    strategy : {"paper", "lawnmower", "frontier"}; max_time, max_wall_time : float [s]
+    strategy : {"paper", "rate", "lawnmower", "frontier"}; max_time, max_wall_time : float [s]
         Time budget of the robot's clock (simulated time; on a robot, wall time): the run ends "not
         found" when it is used up; and, optionally, a wall-clock budget.
     navigate : callable ``(robot, spec) -> navigate``
