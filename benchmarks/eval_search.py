@@ -40,7 +40,8 @@ several machines share the work through ``--scheduler`` (the old ``--shard K/N``
   driven path (odometry);
 * the median over the trials both strategies got right of the ratio of the paper strategy's path
   length to the lawnmower's on the same trial (the issue wants <= 0.7), and the same ratio with the
-  lawnmower's path on its failures counted as driven (a lower bound of what it would have needed).
+  lawnmower's path on its failures counted as driven (a lower bound of what it would have needed);
+  the same for the rate strategy against the paper's.
 """
 
 from __future__ import annotations
@@ -212,6 +213,38 @@ def local_searches_at_object(d: dict) -> tuple[int, int]:
     return len(near), len(cells)
 
 
+def paired_path_ratio(rows, by, a_s: str, b_s: str) -> None:
+    """Print the median ratio of strategy ``a_s``'s path length to ``b_s``'s over the trials both ran
+    and got right, and the same with ``b_s``'s path on its failures counted as driven."""
+    pairs = []
+    for d in rows:
+        if d["strategy"] != a_s:
+            continue
+        k = key(d)[:4] + (b_s,)
+        if k in by:
+            pairs.append((d, by[k]))
+    if not pairs:
+        return
+    both = [
+        a["path_length_m"] / b["path_length_m"] for a, b in pairs if a.get("success") and b.get("success")
+    ]
+    censored = [
+        a["path_length_m"] / b["path_length_m"]
+        for a, b in pairs
+        if a.get("success") and b["path_length_m"] > 0
+    ]
+    if both:
+        med = statistics.median(both)
+        print(f"path length {a_s} / {b_s}, same trials: median {med:.3f} over the {len(both)} both got right")
+    else:
+        print(f"path length {a_s} / {b_s}: no trial both got right")
+    if censored:
+        print(
+            f"  over the {len(censored)} the {a_s} strategy got right, the {b_s} strategy's path on its "
+            f"failures counted as driven (an upper bound): median {statistics.median(censored):.3f}"
+        )
+
+
 def cmd_report(args) -> int:
     rows = []
     for p in args.files:
@@ -246,36 +279,9 @@ def cmd_report(args) -> int:
             sub = [d for d in rs if d["object"] == name]
             if sub:
                 print(summary_line(f"  {name}", sub))
-    # paper vs lawnmower on the same trials
-    pairs = []
-    for d in rows:
-        if d["strategy"] != "paper":
-            continue
-        k = key(d)[:4] + ("lawnmower",)
-        if k in by:
-            pairs.append((d, by[k]))
-    if pairs:
-        both = [
-            a["path_length_m"] / b["path_length_m"] for a, b in pairs if a.get("success") and b.get("success")
-        ]
-        censored = [
-            a["path_length_m"] / b["path_length_m"]
-            for a, b in pairs
-            if a.get("success") and b["path_length_m"] > 0
-        ]
-        if both:
-            med = statistics.median(both)
-            print(
-                f"path length paper / lawnmower, same trials: median {med:.3f} "
-                f"over the {len(both)} both got right"
-            )
-        else:
-            print("path length paper / lawnmower: no trial both got right")
-        if censored:
-            print(
-                f"  over the {len(censored)} the paper strategy got right, the lawnmower's path on its "
-                f"failures counted as driven (an upper bound): median {statistics.median(censored):.3f}"
-            )
+    # the paper strategy against the lawnmower, and the rate strategy against the paper's, on the same trials
+    for a_s, b_s in (("paper", "lawnmower"), ("rate", "paper")):
+        paired_path_ratio(rows, by, a_s, b_s)
     fails = [d for d in rows if not d.get("success")]
     if fails:
         print("failures (not found: k/n of its local searches answered for the object's cell):")

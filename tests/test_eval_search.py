@@ -149,6 +149,24 @@ def test_the_report_counts_the_successes_a_shorter_budget_would_have_kept():
     assert "<= 300 s: 2 (50.0 %" in line
 
 
+def test_the_report_pairs_strategies_on_the_same_trials(capsys):
+    """benchmarks/eval_search.py report: rate / paper path length over the trials both got right (a trial
+    only one strategy ran, or one failed, is left out of the first median; the second counts the other
+    strategy's failures as driven)."""
+    es = _eval_search_script()
+
+    def trial(strategy, seed, path, success=True):
+        d = {"object": "book", "surface": "shelf", "seed": seed, "obstacles": False, "strategy": strategy}
+        return d | {"path_length_m": path, "success": success}
+
+    rows = [trial("rate", 1, 4.0), trial("paper", 1, 8.0), trial("rate", 2, 9.0), trial("paper", 2, 6.0)]
+    rows += [trial("rate", 3, 3.0), trial("paper", 3, 30.0, success=False), trial("rate", 4, 1.0)]
+    es.paired_path_ratio(rows, {es.key(d): d for d in rows}, "rate", "paper")
+    out = capsys.readouterr().out
+    assert "path length rate / paper, same trials: median 1.000 over the 2 both got right" in out
+    assert "over the 3 the rate strategy got right" in out and "median 0.500" in out
+
+
 def test_the_evaluation_budget_is_lab_searchs_own():
     """``lab eval search`` stops a trial where ``lab search`` and ``run_search`` stop a
     run by default: the evaluation measures what a user's run does."""

@@ -268,7 +268,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--strategy",
         default="paper",
         choices=("paper", "rate", "lawnmower", "frontier"),
-        help="where to search next (default: paper, the probability map's peak)",
+        help="where to search next (default: paper, the probability map's peak; rate: the peak with the most "
+        "probability per second of driving there and looking; lawnmower, frontier: baselines)",
     )
     se.add_argument(
         "--max-time",
