@@ -7,7 +7,8 @@ The data flow, one module per stage::
     local_search     9 pan-tilt views -> SIFT + EKF (RANSAC start, ROI, gate) -> 6D pose, or a second
                      look at the colour peaks near the cell on enlarged regions -> 6D pose or a miss;
                      "found" only for a pose that explains the image and rests on a face (pose_check)
-    agent            the closed loop (paper / lawnmower / frontier), navigation injected; after a miss
+    agent            the closed loop (paper / rate / lawnmower / frontier), navigation injected; the
+                     rate strategy's cell order by probability per second (detection_rates); after a miss
                      that saw the object's colours, the side look: 35 deg round the colour peak, each
                      way, the second look again (local_search.look_at_points)
     budget           the time budget: a Robot wrapper that stops the run at its deadline
@@ -27,6 +28,7 @@ from lab.search.agent import (
     SearchAgent,
     SearchEvent,
     Strategy,
+    detection_rates,
 )
 from lab.search.budget import BudgetedRobot, SearchBudgetExceeded
 from lab.search.global_search import ColourPeak, GlobalSearchConfig, GlobalSearchResult, global_search
@@ -69,6 +71,7 @@ __all__ = [
     "SearchBudgetExceeded",
     "SearchEvent",
     "Strategy",
+    "detection_rates",
     "bayes_update",
     "constant_beta_field",
     "detection_likelihood",
