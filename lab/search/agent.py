@@ -30,7 +30,7 @@ The rate strategy (:attr:`Strategy.RATE`) is the paper's loop with one change: t
 the map's maximum but, among the map's peaks worth a visit (local maxima above ``global_threshold /
 n_cells``), the one that buys the most probability per second of driving there and looking
 (:func:`detection_rates`; the saccadic-search idea of Chung and Burdick): a nearby peak of half the
-height comes before a far one.
+height can come before a far one.
 
 Two baselines use the same navigation and local search but choose where to look without the colour
 search: :attr:`Strategy.LAWNMOWER` visits a boustrophedon lattice of points covering the map, and
@@ -198,7 +198,7 @@ class AgentConfig:
     ----------
     strategy : Strategy
     travel_speed_m_s, look_time_s : float [m/s], [s]
-        The rate strategy's cost model (:meth:`SearchAgent._rate_target`): a drive makes good
+        The rate strategy's cost model (:meth:`SearchAgent._rate_cell`): a drive makes good
         ``travel_speed_m_s`` (turns, braking and the localizer's pan scans included) and a local search
         takes ``look_time_s``. Measured on the tuning split (seeds 1-2, 36 paper-strategy runs): median
         0.15 m/s (path length over the time spent navigating) and 8.5 s (median local search).
@@ -402,7 +402,7 @@ def detection_rates(
     With fixed costs, searching cells in decreasing order of ``P_i / t_i`` minimises the expected time
     to find the object (the classic result of optimal search; the local search's detection probability
     ``1 - beta`` is the same for every cell, so it drops out of the order). Here the cost of cell ``i``
-    is the drive to its local-search band plus the look::
+    is the drive to its local-search band plus the look (``c_i`` its centre, ``r`` the robot)::
 
         t_i = max(0, |c_i - r| - standoff_m) / speed_m_s + look_time_s
 
