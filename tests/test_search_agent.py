@@ -476,6 +476,15 @@ def test_lawnmower_and_frontier_targets():
 
 
 def test_strategy_names():
+    """The agent's strategies are the ones `lab search --strategy` and `lab eval search` offer (the parser
+    and the sweep keep their own lists so that importing them stays light)."""
+    from lab.cli.parser import build_parser
+    from lab.eval.search import STRATEGIES
+
+    names = tuple(s.value for s in Strategy)
+    assert STRATEGIES == names
+    search = build_parser()._subparsers._group_actions[0].choices["search"]
+    assert tuple(next(a for a in search._actions if a.dest == "strategy").choices) == names
     assert Strategy.parse("frontier") is Strategy.FRONTIER
     with pytest.raises(ConfigError, match="paper, rate, lawnmower, frontier"):
         Strategy.parse("random")
