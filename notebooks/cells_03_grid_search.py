@@ -1,0 +1,538 @@
+"""Notebook 03: grid search.
+
+``make_notebooks.py`` writes these cells as ``03_grid_search.ipynb``: ``INTRO``, then its common set-up
+cell, then ``CELLS``.
+"""
+
+INTRO = [
+    (
+        "md",
+        r"""# 03 Grid search
+
+The search paper's robot is told *which* object to find (a cereal box, a book, a toy block), but not
+*where* it is. It keeps a **probability map** of the floor and looks where the object most probably is:
+
+1. a coarse **global search**: the head turns around, patches whose colours look like the object are
+   found in the images, and the map cells they lie on become more probable;
+2. the robot drives to the most probable cell, on a **costmap** built from stereo, along an **A\***
+   path;
+3. a fine **local search** there: SIFT features and the pose EKF of notebook 01. Found: done, with the
+   object's 6D pose. Not found: that cell becomes less probable, and the robot goes to the next peak.
+
+This notebook builds each piece from the paper's equations (*A Probabilistic Framework for
+Stereo-Vision Based 3D Object Search with 6D Pose Estimation*, "the search paper") and then runs the
+whole search in the simulated lab room.
+
+**Notation.** The floor is cut into square cells $c_{ij}$ (20 cm, the paper's size). At step $k$ the
+robot makes a binary measurement $y^k_{uv} \in \{0, 1\}$: "I looked at cell $c_{uv}$ and did ($1$) or did
+not ($0$) detect the object". $\mathbf{Y}_{1:k}$ are all the measurements up to step $k$. The hypothesis
+$h^k_{ij} = 1$ says "the object is in cell $c_{ij}$". The **probability map** $M_p$ holds
+$P(h_{ij} = 1 \mid \mathbf{Y}_{1:k})$ for every cell; the object is in exactly one cell, so the map sums
+to 1.""",
+    ),
+]
+
+CELLS = [
+    (
+        "md",
+        r"""## The Bayes update, Eqs. (1)-(3)
+
+After a measurement $y_{uv}$ of cell $c_{uv}$, Bayes' rule gives every cell's new probability (the object
+does not move, so the map before the measurement is the prior):
+
+$$P(h_{ij}=1 \mid \mathbf{Y}_{1:k}) = \frac{P(y_{uv} \mid h_{ij}=1)\; P(h_{ij}=1 \mid \mathbf{Y}_{1:k-1})}
+{P(y_{uv} \mid \mathbf{Y}_{1:k-1})} \qquad (1)$$
+
+The **detection model** says how the detector errs. $\alpha$ is the probability of a *false alarm* (it
+says "yes" about a cell the object is not in), $\beta$ the probability of a *missed detection* (it says
+"no" about the object's cell):
+
+$$P(y_{uv}=0 \mid h_{ij}=1) = \begin{cases}\beta & (u,v) = (i,j)\\ 1-\alpha & (u,v)\ne(i,j)\end{cases},
+\qquad P(y_{uv}=1 \mid h_{ij}=1) = 1 - P(y_{uv}=0 \mid h_{ij}=1) \qquad (2)$$
+
+The denominator is the numerator summed over all cells, so that the map sums to 1 again:
+
+$$P(y_{uv} \mid \mathbf{Y}_{1:k-1}) = \sum_{m,n} P(y_{uv} \mid h_{mn}=1)\; P(h_{mn}=1 \mid \mathbf{Y}_{1:k-1})
+\qquad (3)$$
+
+We compute one update by hand on a small map of 8 x 6 cells, starting from the uniform prior
+$P_0 = 1/48$, and compare it with the library's `update`.""",
+    ),
+    (
+        "code",
+        """\
+from lab.navigation import GridSpec
+from lab.search import update
+
+small = GridSpec.from_bounds(0.0, 0.0, 1.6, 1.2, 0.2)       # 1.6 x 1.2 m of floor in 20 cm cells: 8 x 6
+P0 = np.full(small.shape, 1.0 / small.n_cells)               # the uniform prior P_0
+alpha, beta = 0.1, 0.2
+u, v = 3, 2                                                  # we searched cell c_32 and saw nothing: y = 0
+
+L = np.full(small.shape, 1 - alpha)                          # Eq. (2), y = 0: 1 - alpha on the other cells ...
+L[u, v] = beta                                               # ... and beta on the searched one
+evidence = (L * P0).sum()                                    # Eq. (3)
+P1_by_hand = L * P0 / evidence                               # Eq. (1)
+
+P1 = update(P0, (u, v), 0, alpha, beta)                      # the library
+assert np.allclose(P1, P1_by_hand) and np.isclose(P1.sum(), 1.0)
+print(f"searched cell: {P0[u, v]:.4f} -> {P1[u, v]:.4f};  every other cell: {P0[0, 0]:.4f} -> {P1[0, 0]:.4f}")
+""",
+    ),
+    (
+        "md",
+        r"""**A failed search moves probability.** Write $p$ for the searched cell's probability before a miss.
+By Eqs. (1)-(3) it becomes $\frac{\beta p}{\beta p + (1-\alpha)(1-p)}$, and every other cell is multiplied
+by the same factor $\frac{1-\alpha}{\beta p + (1-\alpha)(1-p)} > 1$: the searched cell's mass flows to
+all the others, in proportion to what they hold. Searching the same cell $n$ times without success
+leaves it
+
+$$p_n = \frac{\beta^n p}{\beta^n p + (1-\alpha)^n (1-p)} .$$
+
+Move the sliders: $\alpha$, $\beta$, how often the cell is searched, and what the detector says.""",
+    ),
+    (
+        "code",
+        """\
+import ipywidgets as widgets
+from lab.errors import ConfigError
+
+def repeated(P, cell, y, alpha, beta, n):
+    \"\"\"The map after n detections y of the same cell, and that cell's probability after each.\"\"\"
+    history = [P[cell]]
+    for _ in range(n):
+        P = update(P, cell, y, alpha, beta)
+        history.append(P[cell])
+    return P, np.array(history)
+
+out = widgets.Output()
+a_slider = widgets.FloatSlider(value=0.1, min=0.01, max=0.5, step=0.01, description="alpha")
+b_slider = widgets.FloatSlider(value=0.2, min=0.01, max=0.9, step=0.01, description="beta")
+n_slider = widgets.IntSlider(value=3, min=0, max=10, description="searches")
+y_toggle = widgets.ToggleButtons(options=[("not found, y = 0", 0), ("found, y = 1", 1)], value=0)
+
+def show(change=None):
+    with out:
+        out.clear_output(wait=True)
+        try:
+            P, hist = repeated(P0, (u, v), y_toggle.value, a_slider.value, b_slider.value, n_slider.value)
+        except ConfigError as e:                    # alpha + beta >= 1: the library says why it refuses
+            print("refused:", e)
+            return
+        fig, ax = plt.subplots(1, 2, figsize=(10, 3.2))
+        im = ax[0].imshow(P.T, origin="lower", extent=small.extent, cmap="viridis")
+        ax[0].plot(*small.cell_to_world(u, v), "rx", ms=12, mew=2)
+        ax[0].set_title(f"M_p after {n_slider.value} detections y = {y_toggle.value} of the red cell")
+        fig.colorbar(im, ax=ax[0])
+        ax[1].plot(hist, "o-"); ax[1].set_ylim(0, 1.02)
+        ax[1].set_xlabel("searches of the cell"); ax[1].set_ylabel("P(h_uv = 1 | Y)")
+        plt.show()
+
+for w in (a_slider, b_slider, n_slider, y_toggle):
+    w.observe(show, names="value")
+show()
+widgets.VBox([widgets.HBox([a_slider, b_slider, n_slider]), y_toggle, out])
+""",
+    ),
+    (
+        "code",
+        """\
+# the closed form for n misses agrees with n Bayes updates
+p = P0[u, v]
+for n in (1, 4, 10):
+    _, hist = repeated(P0, (u, v), 0, alpha, beta, n)
+    p_n = beta**n * p / (beta**n * p + (1 - alpha) ** n * (1 - p))
+    assert np.isclose(hist[-1], p_n), (n, hist[-1], p_n)
+print("p_n after 1, 4, 10 misses:", [f"{repeated(P0, (u, v), 0, alpha, beta, n)[1][-1]:.2e}" for n in (1, 4, 10)])
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise.**
+
+1. Set $\beta$ close to 0. What does one miss do to the searched cell? Why is that dangerous for an
+   object the local search cannot see well (the paper's glossy penguin cup)?
+2. The library refuses $\alpha + \beta \ge 1$. Show with Eq. (2) that for such a detector a *positive*
+   detection ($y = 1$) would make the detected cell *less* probable.
+
+## The global search's growing $\beta$
+
+The coarse colour search (next section) finds patches of object-like colour, each with a strength
+$P'_n \in [0, 1]$, and puts each onto a cell $c_{uv}$ by stereo. The paper treats a patch as a positive
+detection, $y_{uv} = 1$, with $P(y_{uv}=1 \mid h_{uv}=1) = P'_n$, that is $\beta_0 = 1 - P'_n$ at that cell,
+and lets $\beta$ "increase exponentially for neighbouring cells": stereo ranges at 3-5 m are off by
+10-40 cm, so the object may well be in a neighbour. With $d$ the distance [m] from $c_{uv}$ and a growth
+length $\lambda$ [m], the library's law is
+
+$$\beta(d) = \min\left(1-\alpha,\; \beta_0\, e^{d/\lambda}\right):$$
+
+the detection likelihood $1 - \beta(d)$ falls from $P'_n$ at the cell to the false-alarm rate $\alpha$ at
+$d = \lambda \ln\frac{1-\alpha}{\beta_0}$, and beyond that it *is* Eq. (2)'s "other cell". The global search
+uses $\alpha = 0.05$ and $\lambda = 0.2$ m, and never lets $\beta_0$ drop below 0.1.""",
+    ),
+    (
+        "code",
+        """\
+from lab.search import GlobalSearchConfig, growing_beta_field
+from lab.runs.search import map_spec
+from lab.scene import load_scene
+
+scene = load_scene("lab_room")           # the search paper's laboratory: 6 x 8 m, tables, a shelf, obstacles
+room = map_spec(scene)                   # M_p's grid: the room's floor in 20 cm cells
+gcfg = GlobalSearchConfig()              # alpha = 0.05, lambda = growth_m = 0.2 m, beta_min = 0.1
+cell = room.world_to_cell(1.0, 1.0)
+X, Y = room.cell_centers()
+d = np.hypot(X - room.cell_to_world(*cell)[0], Y - room.cell_to_world(*cell)[1])   # distance from c_uv [m]
+
+fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+for P_n in (0.9, 0.7, 0.5):
+    beta0 = max(gcfg.beta_min, 1 - P_n)
+    B = growing_beta_field(room, cell, gcfg.alpha, beta0, gcfg.growth_m)
+    reach = gcfg.growth_m * math.log((1 - gcfg.alpha) / beta0)
+    assert np.isclose(1 - B[cell], P_n) and np.allclose(1 - B[d > reach + 1e-9], gcfg.alpha)
+    order = np.argsort(d.ravel())
+    ax[0].plot(d.ravel()[order], (1 - B).ravel()[order], ".-", label=f"P'_n = {P_n} (reach {reach:.2f} m)")
+    if P_n == 0.9:
+        im = ax[1].imshow((1 - B).T, origin="lower", extent=room.extent, cmap="magma")
+        fig.colorbar(im, ax=ax[1]); ax[1].set_title("P(y=1 | h_ij = 1) for P'_n = 0.9")
+ax[0].set_xlim(0, 1); ax[0].set_xlabel("distance from the measured cell [m]"); ax[0].set_ylabel("1 - beta(d)")
+ax[0].legend();
+""",
+    ),
+    (
+        "md",
+        r"""## Colour back-projection (Sec. III-B)
+
+How does a camera image say "the object may be there"? By colour. A pixel's colour $(R, G, B)$ becomes
+its **chromaticity**
+
+$$r = \frac{R}{R+G+B}, \qquad g = \frac{G}{R+G+B},$$
+
+which ignores brightness, so a shaded side of the object has the same $(r, g)$ as a lit one. Counting
+the chromaticities of many pixels in $32 \times 32$ bins gives a 2D histogram. During training the
+robot recorded the **model histogram** $M(c)$ of the object's own pixels (bins $c$, normalised to sum
+to 1); it is stored with the object's SIFT database. $I(c)$ is the histogram of what the robot sees now.
+
+The paper back-projects $M$: every pixel gets $M$ of its bin. Grey walls and floors have a lot of
+pixels in the same few bins as the white and grey parts of a printed box, so they light up too. The
+library back-projects the **ratio** of the two histograms (after Swain and Ballard), scaled so that the
+most object-like colour gets 1:
+
+$$\rho(c) = \frac{M(c) / (I(c) + \epsilon)}{\max_{c'} M(c') / (I(c') + \epsilon)}, \qquad
+b(u, v) = \rho\big(c(u, v)\big)$$
+
+($\epsilon$ keeps a colour the image hardly holds from dominating). A colour common on the object and
+rare in the room scores near 1. Then a **fixed window** of $w \times w$ pixels averages $b$ into $s(u, v)$,
+the fraction of the window that looks like the object, and the $N_{hist}$ strongest **clusters** (the
+maximum, then the next maximum at least a suppression radius away, ...) are the candidate places, with
+strengths $P'_n = s$ at their centres.
+
+The robot stands in the middle of the room facing $+y$ and turns its head 55 degrees to the right. We
+search for the cereal box.""",
+    ),
+    (
+        "code",
+        """\
+from lab.geometry import Pose2D
+from lab.search import ProbabilityMap
+from lab.training import search_database
+from lab.search.global_search import object_likelihood_ratio, process_view, strongest_clusters, window_mean
+from lab.sim import RenderSettings, SimRobot, SimWorld
+from lab.vision.colour import back_project, chromaticity, colour_histogram
+
+db = search_database("cereal_box")        # SIFT features and the colour model M, trained once and cached
+world = SimWorld(scene, RenderSettings(supersample=2))
+robot = SimRobot(world, start=Pose2D(0.0, 0.0, math.pi / 2), seed=0)
+robot.enable()
+robot.command_pan_tilt(math.radians(-55), 0.0)
+robot.wait_pan_tilt()
+frame = robot.capture_stereo()
+
+bins = db.histogram.shape[0]
+M = db.histogram / db.histogram.sum()                              # the model histogram M(c)
+I = colour_histogram(frame.left, bins=bins); I = I / I.sum()       # what the robot sees, I(c)
+rho = M / (I + gcfg.ratio_eps); rho = rho / rho.max()              # the ratio rho(c)
+rg = chromaticity(frame.left)                                      # (H, W, 2): r and g of every pixel
+bin_of = np.minimum((rg * bins).astype(int), bins - 1)             # each pixel's bin c(u, v)
+b = rho[bin_of[..., 0], bin_of[..., 1]]                            # the back-projection b(u, v)
+
+rho_lib = object_likelihood_ratio(db.histogram, colour_histogram(frame.left, bins=bins), gcfg.ratio_eps)
+assert np.allclose(b, back_project(frame.left, rho_lib), atol=1e-5)   # the library's, step by step
+
+s = window_mean(b, gcfg.window_px)                                 # w x w window mean s(u, v)
+clusters = strongest_clusters(s, gcfg.n_hist, gcfg.min_strength, gcfg.suppression_px)
+print("clusters (u, v, P'_n):", [(u_, v_, round(p_, 2)) for u_, v_, p_ in clusters])
+
+fig, ax = plt.subplots(1, 4, figsize=(15, 3.2))
+ax[0].imshow(frame.left); ax[0].set_title("left image")
+for u_, v_, p_ in clusters:
+    ax[0].add_patch(plt.Circle((u_, v_), 10, fill=False, color="red", lw=2))
+ax[1].imshow(rho, origin="lower", extent=(0, 1, 0, 1), cmap="magma"); ax[1].set_title("rho(r, g)")
+ax[1].set_xlabel("g"); ax[1].set_ylabel("r")
+ax[2].imshow(b, cmap="gray", vmin=0, vmax=1); ax[2].set_title("back-projection b")
+ax[3].imshow(s, cmap="gray", vmin=0, vmax=1); ax[3].set_title(f"window mean s ({gcfg.window_px} px)")
+for a in (ax[0], ax[2], ax[3]):
+    a.axis("off")
+""",
+    ),
+    (
+        "md",
+        r"""**From a cluster to a map cell.** *Dense* stereo gives a disparity for every pixel, not only at
+SIFT features (OpenCV's semi-global block matching). The cluster's disparity $d$, the median over its
+most object-like pixels, gives its point $p_C$ in the camera frame by the triangulation of notebook 00,
+and the world point is
+
+$$p_W = G_{WR}\, G_{RC}\, p_C ,$$
+
+with $G_{WR}$ the robot's pose in the world frame $W$ from odometry and $G_{RC}$ the left camera's pose
+on the robot, from the pan-tilt head's current angles ($G_{AB}$ maps points from frame $B$ into frame
+$A$, the papers' convention). A point at a height where an object can stand, inside the room, is a
+positive detection of its cell with the growing $\beta$ above. `process_view` does this for one view;
+the global search does it for 12 views (6 pans at 2 tilts) and uses the whole scan's histogram as $I$.""",
+    ),
+    (
+        "code",
+        """\
+pmap = ProbabilityMap(room)                       # uniform P_0 over the room
+view = process_view(frame, rho_lib, "rg", pmap, gcfg)
+for p in view.peaks:
+    where = "" if p.p_W is None else f"p_W = {np.round(p.p_W, 2)}"
+    print(f"P'_n = {p.strength:.2f}  {where}  cell {p.cell}: {p.reason}")
+    if p.used:
+        pmap.update_global(p.cell, p.strength, gcfg.alpha, gcfg.growth_m, gcfg.beta_min)
+
+true_xy = np.array(scene.body("cereal_box").pose[:2])        # the scene file's placement: for checking only
+best = max(view.peaks, key=lambda p: p.strength if p.used else -1)
+err = np.linalg.norm(best.p_W[:2] - true_xy)
+print(f"strongest peak {err * 100:.0f} cm from the cereal box; its cell now holds P = {pmap.P[best.cell]:.3f} "
+      f"(uniform: {1 / room.n_cells:.4f})")
+assert best.used and err < 0.25 and pmap.peak() == best.cell
+plt.figure(figsize=(4, 5))
+plt.imshow(pmap.P.T, origin="lower", extent=room.extent); plt.colorbar(label="P(h_ij = 1)")
+plt.plot(*true_xy, "r+", ms=14, mew=2); plt.title("M_p after one view (red +: the true box)");
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise.**
+
+1. Back-project the plain model histogram, $M / \max M$, instead of $\rho$ (`back_project(frame.left, db.histogram)`).
+   What lights up now?
+2. The fire extinguisher on the right is red, like the box. Print $b$ on its pixels. Why does it score
+   so little? (Look at where its pixels fall in $\rho(r, g)$.)
+
+## The costmap and A* (Sec. III-D)
+
+To drive to a peak without hitting anything, the robot builds a second grid, the **costmap** $M_c$
+(10 cm cells). Dense stereo gives 3D points $p_W$; a plane fitted to the floor points gives each point's
+height $z$ above the floor. A point with $|z| \le 3$ cm is floor; one from 5 cm up to the robot's height
+(plus a margin) is an obstacle: a table top at 0.75 m is one, because the head would hit it. A cell is
+*obstacle* when obstacle points fell in it (obstacle wins over floor, the paper's conservative rule),
+*free* when only floor points did, and *unknown* otherwise. Obstacles are then **grown** by the robot's
+radius, so that A* can plan for a point.
+
+A* searches the 8-connected grid. A step from cell $u$ into its neighbour $v$ costs
+$c(u, v) = \ell(u, v)\, m(v)$, with $\ell = r$ or $\sqrt 2\, r$ ($r$ the cell size) and a multiplier
+$m(v) \ge 1$: 1 on seen floor, 2 in unknown cells, more close to obstacles, $\infty$ inside grown ones.
+Its heuristic, the estimate of the cost still to go from cell $n$, is the octile distance
+$\hat c(n) = m_{min}\, r\, (\Delta_{max} + (\sqrt 2 - 1)\, \Delta_{min})$ ($\Delta$: the cell offsets from $n$
+to the goal, $m_{min}$ the smallest multiplier). It never overestimates the remaining cost, so the path
+A* returns is a cheapest one.
+
+The robot looks around with its head tilted down, and the navigator builds the costmap:""",
+    ),
+    (
+        "code",
+        """\
+from scipy.ndimage import binary_dilation
+from lab.navigation import CellState, Navigator, room_bounds
+
+nav = Navigator(robot, bounds=room_bounds(scene))   # the costmap covers the scene's floor
+pans_deg = (-100, -50, 0, 50) if FAST else (-150, -100, -50, 0, 50, 100, 150)
+nav.scan(pans=[math.radians(a) for a in pans_deg])
+state = nav.costmap.state
+cm = nav.costmap.config
+truth = world.truth.occupancy(nav.spec, cm.obstacle_min_height, cm.obstacle_max_height)   # for checking only
+obstacle = state == CellState.OBSTACLE
+near_truth = binary_dilation(truth)            # a true obstacle's cell or a neighbour of one
+seen = state != CellState.UNKNOWN
+grid = nav.planning_grid()                     # obstacles grown by the robot's radius, cost multipliers m(v)
+print(f"{obstacle.sum()} obstacle cells, {np.mean(near_truth[obstacle]):.0%} of them at a true obstacle; "
+      f"{np.sum(truth & (state == CellState.FREE))} truly occupied cells labelled free")
+assert obstacle.sum() > 10 and np.mean(near_truth[obstacle]) > 0.9
+assert np.all(np.isinf(grid.cost[truth & seen]))   # whatever it has seen of an obstacle, A* will not enter
+""",
+    ),
+    (
+        "code",
+        """\
+import networkx as nx
+from lab.navigation import astar_to_region
+
+start, goal = robot.odometry(), (1.6, -1.6)
+path = astar_to_region(grid, start, goal, max_distance=0.3)
+print(f"A*: {path.status.value}, {path.length:.2f} m long, cost {path.cost:.2f}, {path.expanded} cells expanded")
+
+# an independent peer: Dijkstra (networkx) on the same graph, with every cell within 0.3 m of the goal a goal
+ok = np.isfinite(grid.cost)
+G = nx.DiGraph()
+for i, j in np.argwhere(ok):
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            a, b_ = i + di, j + dj
+            if (di, dj) == (0, 0) or not (0 <= a < ok.shape[0] and 0 <= b_ < ok.shape[1]) or not ok[a, b_]:
+                continue
+            if di and dj and not (ok[i + di, j] and ok[i, j + dj]):
+                continue                   # no cutting corners
+            G.add_edge((i, j), (a, b_), weight=(math.sqrt(2) if di and dj else 1.0) * grid.spec.resolution * grid.cost[a, b_])
+gx, gy = grid.spec.cell_centers()
+for i, j in np.argwhere(ok & (np.hypot(gx - goal[0], gy - goal[1]) <= 0.3)):
+    G.add_edge((i, j), "goal", weight=0.0)
+peer = nx.dijkstra_path_length(G, grid.spec.world_to_cell(start.x, start.y), "goal")
+print(f"Dijkstra: cost {peer:.2f}")
+assert path.found and np.isclose(path.cost, peer)
+
+x0, x1, y0, y1 = nav.spec.extent
+shade = np.choose(state.astype(int), [0.5, 0.0, 1.0])               # unknown grey, free black, obstacle white
+plt.figure(figsize=(5, 6))
+plt.imshow(shade.T, origin="lower", extent=nav.spec.extent, cmap="gray", vmin=0, vmax=1)
+plt.contour(gx, gy, (~ok).astype(float), [0.5], colors="orange", linewidths=1)
+plt.contour(gx, gy, truth.astype(float), [0.5], colors="red", linewidths=0.8)
+plt.plot(path.points_xy[:, 0], path.points_xy[:, 1], "y-", lw=2); plt.plot(*goal, "ys")
+plt.title("costmap: grown obstacles (orange), truth (red), A* path");
+world.close()
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise.** Set `unknown_cost` to `math.inf` (`nav.costmap.inflated(nav.radius, unknown_cost=math.inf)`)
+and plan again: what happens, and why does the navigator plan through unknown space by default?
+
+## The whole search
+
+The agent runs the paper's loop (its Fig. 4):
+
+```
+loop until found or out of time:
+    if the map has no clear peak: global search (12 views, the colour peaks update M_p)
+    cell = the most probable cell of M_p
+    drive near it, facing it (costmap + A*, replanning as new obstacles are seen)
+    local search: 9 head poses, SIFT + pose EKF     -> found: the object's 6D pose, done
+    not found: Eqs. (1)-(3) with y = 0 and the local search's alpha, beta; a snapshot of M_p
+    (ours) the colours were there but no pose: the side look, 35 deg round the colour peak each way
+```
+
+Three things in the local search are ours, not the paper's: before a cell is given up, a *second look*
+at the object's colour peaks near it, on a region enlarged twice (a small object far below the camera);
+after a miss that saw those colours, the *side look* (a book with its 5 cm spine to the room shows no
+pose from in front: 35 degrees round, a cover turns to the camera); and two checks before "found": the
+pose must explain enough of the database features it predicts in view, and it must rest on one of the
+box's faces within 10 degrees (a pose tilted more than that is more than 10 degrees wrong).
+
+`run_search` builds the world, places the object, runs the agent with the stereo navigator, and only
+afterwards scores the result against the simulator's truth (the agent never sees it).""",
+    ),
+    (
+        "code",
+        """\
+from lab.runs.search import run_search
+from lab.runs.placement import searchable_objects
+from lab.runs.search import navigator_factory
+
+target = "toy_block" if FAST else "cereal_box"       # the toy block stands near the start: a short run
+navigators = []
+
+def navigate(robot, spec):                           # the stereo navigator; we keep it for its costmap
+    nav_fn = navigator_factory(robot, spec)
+    navigators.append(nav_fn.navigator)
+    return nav_fn
+
+print("searchable:", searchable_objects(scene))
+res = run_search(target, seed=0, place=scene.body(target).pose, navigate=navigate, max_time=150 if FAST else 400)
+summary = {k: v for k, v in res.to_json().items() if k not in ("events", "map_snapshots", "true_pose", "estimated_pose")}
+print(summary)
+for e in res.events:
+    print(f"  t = {e.t:6.1f} s  {e.kind:14s} {e.detail}")
+assert res.found and res.success and res.collisions == 0, res.reason
+assert res.position_error_m <= 0.05 and res.orientation_error_deg <= 10
+""",
+    ),
+    (
+        "code",
+        """\
+from lab.viz.search import fig2_global_search, fig5_trial, fig6_snapshots
+
+agent = res.trace.agent
+for snap in agent.snapshots:
+    print(f"t = {snap.t:5.1f} s  {snap.label:20s} cell {snap.cell}  max P = {snap.P.max():.3f}")
+display(fig2_global_search(agent.globals_[0], res.trace.spec, search_database(target)))
+nav_run = navigators[0]
+display(fig5_trial(res, nav_run.costmap.state, nav_run.spec))
+""",
+    ),
+    (
+        "md",
+        r"""The paper's Fig. 6 is a *failed* search: its glossy penguin cup has almost no texture, so every
+local search misses it, and the snapshots show the Bayes update moving the mass from peak to peak.
+Our `glossy_cup` does the same (in full mode only: it takes a few minutes).""",
+    ),
+    (
+        "code",
+        """\
+if not FAST:
+    cup = run_search("glossy_cup", seed=1, navigate=navigator_factory, max_time=150)
+    print(cup.found, cup.reason, cup.local_searches, "local searches")
+    assert not cup.found
+    display(fig6_snapshots(cup))
+else:
+    display(fig6_snapshots(res))
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise.**
+
+1. Search for the `book` on the shelf, 1.2 m high (`run_search("book", seed=0, place=scene.body("book").pose,
+   navigate=navigator_factory)`). Which tilt of the global scan sees it?
+2. Give the local search a larger $\beta$ (`from lab.search import AgentConfig, LocalSearchConfig`, then
+   `config=AgentConfig(local_search=LocalSearchConfig(beta=0.5))` in `run_search`) and search for the
+   glossy cup again: how does the sequence of snapshots change?
+
+## Which cell next: the highest, or the best buy?
+
+The paper drives to the map's maximum wherever it is. But a cell costs time: the drive there, $d_i / v$,
+and the look, $t_{look}$. If looking at cell $i$ finds the object with probability $P_i$ (times the same
+$1 - \beta$ everywhere) and costs $t_i$, the order that minimises the **expected time to find** visits
+the cells in decreasing $P_i / t_i$: swapping two neighbours $i, j$ in any order changes the expected
+time by $P_j t_i - P_i t_j$, so $i$ goes first exactly when $P_i / t_i > P_j / t_j$. With travel the
+costs depend on where the robot stands, so `--strategy rate` takes this greedily, one visit at a time,
+among the map's peaks (`lab.search.agent.detection_rates`). Check the claim on five cells by brute force:""",
+    ),
+    (
+        "code",
+        """\
+import itertools
+from lab.search.agent import detection_rates
+
+P = np.array([0.30, 0.10, 0.25, 0.05, 0.20])                  # the peaks' probabilities
+centres = np.array([[4.0, 0.0], [0.5, 0.0], [0.0, -2.0], [1.0, 1.0], [0.0, 6.0]])   # [m], robot at (0, 0)
+rate = detection_rates(P, centres, (0.0, 0.0), standoff_m=0.75, speed_m_s=0.15, look_time_s=8.5)
+t = P / rate                                                   # each cell's cost [s]
+
+def expected_time(order):
+    return sum(P[i] * t[list(order[: k + 1])].sum() for k, i in enumerate(order))
+
+best = min(itertools.permutations(range(5)), key=expected_time)
+by_height, by_rate = (tuple(int(i) for i in np.argsort(-v)) for v in (P, rate))
+for name, order in (("highest first", by_height), ("best buy first", by_rate), ("brute force", best)):
+    print(f"{name:15s} {order}  expected time {expected_time(order):6.1f} s")
+assert by_rate == best
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise.** Run the toy-block search above with `strategy="rate"` (an argument of `run_search`).
+Does it visit the cells in another order? Where the map has one clear peak the two strategies agree;
+they differ when a weaker peak lies much nearer.""",
+    ),
+]
