@@ -64,8 +64,10 @@ __all__ = ["Localizer", "LocalizerConfig", "PlanarPoseEstimate", "UpdateRecord"]
 
 @dataclass(frozen=True)
 class LocalizerConfig:
-    """Noise models and thresholds of the localizer (tuned on seeds < 1000, see the benchmark; the
-    observation floor on the tuning drives 0-7, their filter inputs recorded and replayed).
+    """Noise models and thresholds of the localizer.
+
+    How each was chosen (the split, the evidence, the command): ``docs/tuning/localizer-*.md``, one file
+    per tuned quantity, named below.
 
     Attributes
     ----------
@@ -77,28 +79,19 @@ class LocalizerConfig:
     sigma_heading_rad_per_sqrt_m : float [rad / sqrt(m)]
         heading error per distance (unequal wheels curve a straight drive);
     sigma_heading_rad_per_sqrt_rad : float [rad / sqrt(rad)]
-        heading error per angle turned (track width error, wheel scrub).
+        heading error per angle turned (track width error, wheel scrub). How they were chosen:
+        docs/tuning/localizer-motion-noise.md.
     obs_sigma_m, obs_sigma_rel, obs_sigma_per_m, obs_sigma_rel_across, obs_sigma_rad : float
         A floor under each landmark observation's covariance, added to the fit's own for the errors a
         fit cannot see because they move every feature of a frame together (see
         :meth:`observation_floor`): along the line of sight a constant [m], a share of the range [-]
         (the baseline's and focal lengths' scale error) and a share of its square [1/m] (a disparity
         bias: depth error ``Z^2 delta_d / (f B)``); across it the constant and a share of the range [-]
-        (the pan-tilt's pointing error); and the heading [rad]. The heading's floor is 0.75 degrees (it
-        was 0.3): a poster's yaw comes from the depth differences across its face, and errors its
-        features share turn it further than the fit's covariance says (not traced; depth errors along
-        the line of sight, where a stereo point's own covariance is long, are the likely cause).
-        Measured on the tuning split (``benchmarks/bench_landmark_fits.py``'s probe, seeds 1-12, 99 fits
-        from random stands, scored against the truth): with 0.3 degrees, 20 % of the headings fitted
-        within 2.5 m were more than 1.96 sigma off (mean squared z-score 2.4, where 1 is honest); with
-        0.75, 2.6 % (1.2); with 1.0, 2.6 % (0.84), but then a test's re-localization did not reach its
-        0.5 degree threshold in six views, and with that raised to 1 degree a short closed-loop drive
-        ended 5.7 cm off (its bound is 5). In the search, four found objects of report seeds 101000 and
-        101100 (diagnosed there, so those seeds are spent) were reported 6-13 cm off; two of them after
-        a fit from 1-2 m whose heading was 2.6 and 6.6 degrees off while claiming 0.45 and 1.5 (the
-        filter took the heading, and the next good fits failed the gate; the other two were not traced).
-        With 0.75 all four were found within 1 cm. On the tuning drives (seeds 0-7, 30 m): NEES in the
-        95 % band 93.5 % (95.0 % with 0.3), median final error 0.92 cm and 0.14 degrees (1.14 cm, 0.39).
+        (the pan-tilt's pointing error); and the heading [rad]. The heading's floor is wide because a
+        poster's yaw comes from the depth differences across its face, and errors its features share
+        turn it further than the fit's covariance says (not traced; depth errors along the line of
+        sight, where a stereo point's own covariance is long, are the likely cause). How they were
+        chosen: docs/tuning/localizer-observation-floor.md and docs/tuning/localizer-heading-floor.md.
     gate_prob : float
         Observations whose innovation's Mahalanobis distance exceeds the chi-square(3) quantile are
         rejected as outliers.
@@ -114,19 +107,15 @@ class LocalizerConfig:
         one piece of evidence against its estimate, not a dozen, and counted frame by frame it could
         trip the recovery (the covariance x 9) on its own. Rejections of different landmarks from one
         place still count each (and after an inflation every landmark counts again: several landmarks
-        that all disagree with the estimate do move it). On 90 search trials (report seeds
-        100300-100304, where it was designed) it changed 3 runs: rejections were rare there (about one
-        per trial).
+        that all disagree with the estimate do move it). How it was chosen:
+        docs/tuning/localizer-recount-rule.md.
     min_inliers : int
         Fewest RANSAC inliers for a landmark observation.
     min_face_in_image : float
         Smallest share of the printed face that must project into the image, at the fitted pose, for a
         fit to be used (:func:`face_share_in_image`). A fit from a patch of the face at the image's edge
-        rests on features from a small part of it, and its covariance can understate its error. On the
-        tuning split (18 search trials, the shelf, seeds 1-3: 433 fits, scored against the truth) a
-        poster cut by the image's top edge, 0.21 of it in view, was fitted 20 cm and 8 deg off while
-        claiming 1.9 cm, and the filter accepted it. The 21 fits from under a third of a face were 6.0
-        cm off at the median (1.4 cm from a third to a half, 0.7 cm from more), so they add little.
+        rests on features from a small part of it, and its covariance can understate its error. How it
+        was chosen: docs/tuning/localizer-min-face-in-image.md.
     max_range_m, min_facing : float
         A landmark is looked for in a frame only within this range and when seen at most
         ``acos(min_facing)`` off its face normal.
@@ -135,8 +124,8 @@ class LocalizerConfig:
         (the larger axis of the covariance ellipse) or the heading's exceeds these.
     report_sigma_m, report_sigma_rad : float [m], [rad]
         The same thresholds before a run reports a pose in the room (a found object's): tighter, since
-        the object's world pose inherits the robot's error whole. With ``relocalize_sigma_m`` = 5 cm a
-        found object was reported up to 2 sigma = 10 cm off, twice the search's 5 cm bar.
+        the object's world pose inherits the robot's error whole. How they were chosen:
+        docs/tuning/localizer-report-sigma.md.
     report_max_views, report_passes : int
         At most this many head views for the reporting re-localization, going round the landmarks in
         view up to ``report_passes`` times (a second look at a poster brings fresh image noise, not a
@@ -151,15 +140,16 @@ class LocalizerConfig:
     report_detour_above_m : float [m]
         The detour is made only when the point's standard deviation is above this after the
         re-localization where the robot stands: the odometry of a detour itself leaves about 3 cm at
-        1.5 m (the tests' drive), so a point known better than this gains nothing from one. On the tuning
-        split (table, seeds 1-2) a find left at 1.54 cm set off a detour whose two drives both failed.
+        1.5 m, so a point known better than this gains nothing from one. How it was chosen:
+        docs/tuning/localizer-report-detour.md.
     first_sighting_max_offset_m, first_sighting_max_offset_rad : float [m], [rad]
         A start pose measured by hand (:class:`Localizer` with ``first_sighting=True``): the first
         landmark sighting that disagrees with it beyond the gate replaces it when the pose it implies is
         within these of the start (farther: an outlier, rejected).
     update_iterations : int
         The landmark update's iterations (the iterated EKF: relinearise at the new mean until it stops
-        moving, at most this many); 1 is the plain EKF.
+        moving, at most this many); 1 is the plain EKF. How it was chosen:
+        docs/tuning/localizer-update-iterations.md.
     odometry_calibration : bool
         Estimate the odometry's turn scale ``k`` and curvature bias ``c`` in the state
         (:func:`calibrated_motion_model`); False: the pose alone, with the systematic errors left to the
@@ -174,7 +164,8 @@ class LocalizerConfig:
     calibrated_heading_rad_per_sqrt_m, calibrated_heading_rad_per_sqrt_rad : float
         With the calibration on, the heading noise per distance and per angle turned that is left once
         the systematic part is in the state: these replace ``sigma_heading_rad_per_sqrt_m`` and
-        ``sigma_heading_rad_per_sqrt_rad`` in :meth:`motion_noise`.
+        ``sigma_heading_rad_per_sqrt_rad`` in :meth:`motion_noise`. How they and the calibration's
+        prior were chosen: docs/tuning/localizer-motion-noise.md.
     """
 
     sigma_along_m_per_sqrt_m: float = 0.02
