@@ -16,15 +16,15 @@ from scipy.stats import chi2
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D, Rz, pan_tilt_G_RC, relative_pose2d, se3, se3_inv, wrap_angle
-from lab.navigation.landmarks import Landmark
-from lab.navigation.localization import (
+from lab.localization import (
+    Landmark,
     LandmarkObservation,
     LandmarkObserver,
     LocalizationMode,
     LocalizedRobot,
     Localizer,
     LocalizerConfig,
-    PoseEstimate,
+    PlanarPoseEstimate,
     face_share_in_image,
     measurement_jacobian,
     measurement_model,
@@ -636,7 +636,7 @@ def test_point_sigma_matches_a_monte_carlo_of_the_pose():
     cs, sn = np.cos(x[:, 2]), np.sin(x[:, 2])
     pts = np.stack([x[:, 0] + cs * p_R[0] - sn * p_R[1], x[:, 1] + sn * p_R[0] + cs * p_R[1]], axis=1)
     mc = math.sqrt(np.linalg.eigvalsh(np.cov(pts.T))[-1])
-    est = PoseEstimate(pose, Sigma)
+    est = PlanarPoseEstimate(pose, Sigma)
     assert est.point_sigma_m(p_W) == pytest.approx(mc, rel=0.01)
     assert est.point_sigma_m([pose.x, pose.y]) == pytest.approx(est.sigma_xy_m, rel=1e-9)
 

@@ -31,7 +31,7 @@ from lab.identification.agent import AgentConfig, IdentificationAgent, PlannerCh
 from lab.identification.evaluators import make_evaluator
 from lab.identification.scoring import ScoringConfig
 from lab.io import write_json_atomic
-from lab.navigation.localization import LocalizationMode, LocalizedRobot
+from lab.localization import LocalizationMode, LocalizedRobot
 from lab.robot import Robot
 from lab.runs.robots import PlacedRobot, RobotKind, RobotSession, load_robot_config, make_robot, robot_kind
 from lab.runs.room import RoomLandmarks, localize, robot_start, room_landmarks
@@ -145,7 +145,7 @@ def run_identify(
         or ideal), recorded as the JSON's ``sensing``; a rehearsal's rendered camera follows its camera
         section (the JSON's ``sensing_applies_to`` says which sections applied).
     localization : {"landmarks", "odometry"}
-        Where the robot's pose comes from (:class:`lab.navigation.localization.LocalizedRobot`); the
+        Where the robot's pose comes from (:class:`lab.localization.LocalizedRobot`); the
         landmark map on a robot is its config's ``[room] landmarks``, a rehearsal's by default the posters
         of the scene it renders (:mod:`lab.runs.room`).
     start : (x_m, y_m, heading_deg), optional

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lab.geometry import wrap_angle
-from lab.navigation.localization import LocalizationMode, LocalizedRobot, LocalizerConfig
+from lab.localization import LocalizationMode, LocalizedRobot, LocalizerConfig
 from lab.training.landmarks import trained_landmark_map
 
 __all__ = ["DriveResult", "drive_loop_waypoints", "run_localization_drive"]

@@ -39,10 +39,10 @@ import numpy as np
 
 from lab.errors import ConfigError, SafetyStop
 from lab.geometry import Pose2D, R_to_euler_zyx, Rz, se3, se3_inv
+from lab.localization import LocalizationMode, LocalizedRobot, PlanarPoseEstimate
 from lab.navigation.astar import astar_to_region
 from lab.navigation.drive_loop import NavOutcome
 from lab.navigation.grid import GridSpec
-from lab.navigation.localization import LocalizationMode, LocalizedRobot, PoseEstimate
 from lab.navigation.navigator import Navigator
 from lab.robot import Robot
 from lab.runs.placement import (
@@ -213,14 +213,14 @@ class SearchResult:
         Distance between the robot's pose estimate (odometry alone, or localized against the room's
         landmarks) and the true robot position at the end of the run (None on the real robot).
     localization : str
-        ``odometry`` or ``landmarks`` (:mod:`lab.navigation.localization`).
+        ``odometry`` or ``landmarks`` (:mod:`lab.localization`).
     landmark_updates : int
         Landmark observations the localizer used (0 with landmarks: it fell back to odometry alone,
         and ``localization_note`` says so).
     localization_note : str or None
     odometry_calibration : dict or None
         The odometry's turn scale and curvature bias the localizer learned
-        (:meth:`~lab.navigation.localization.LocalizedRobot.odometry_calibration`).
+        (:meth:`~lab.localization.LocalizedRobot.odometry_calibration`).
     events : tuple of SearchEvent
     trace : SearchTrace
     recording : str or None
@@ -389,7 +389,7 @@ def run_search(
     sensing : str or mapping
         The simulator's sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic).
     localization : {"landmarks", "odometry"}
-        Where the robot's pose comes from (:class:`lab.navigation.localization.LocalizedRobot`): the
+        Where the robot's pose comes from (:class:`lab.localization.LocalizedRobot`): the
         odometry corrected by the room's posters (default), or wheel odometry alone, as in the papers.
         The map: the scene's posters; on a robot its config's ``[room] landmarks`` (a rehearsal without
         one: the rendered scene's posters; the real robot without one falls back to odometry and says
@@ -668,7 +668,9 @@ def _relocalized_find(
     return replace(out, G_WO=G_WO), info
 
 
-def _report_detour(robot: LocalizedRobot | TrackedRobot, navigate) -> tuple[PoseEstimate | None, dict | None]:
+def _report_detour(
+    robot: LocalizedRobot | TrackedRobot, navigate
+) -> tuple[PlanarPoseEstimate | None, dict | None]:
     """Keep the robot's pose in the filter (:meth:`Localizer.start_clone`), drive to the nearest place
     from which a landmark is seen well (:meth:`LocalizedRobot.landmark_vantage_points`, on the
     navigator's costmap; the next one if a drive fails, two tries), re-localize there to the report's
@@ -713,7 +715,7 @@ def _report_detour(robot: LocalizedRobot | TrackedRobot, navigate) -> tuple[Pose
     finally:
         x_c, S_c = loc.end_clone()
     info["updates"] = int(robot.pose_estimate().n_updates - n0)
-    kept = PoseEstimate(Pose2D(*(float(v) for v in x_c)), S_c, robot.now(), LocalizationMode.LANDMARKS)
+    kept = PlanarPoseEstimate(Pose2D(*(float(v) for v in x_c)), S_c, robot.now(), LocalizationMode.LANDMARKS)
     return kept, info
 
 

@@ -39,7 +39,7 @@ import numpy as np
 
 from lab.errors import AssetError, ConfigError
 from lab.geometry import Rz, se3, se3_inv, transform_points
-from lab.navigation.landmarks import Landmark, LandmarkMap, inward_normal
+from lab.localization import Landmark, LandmarkMap, inward_normal
 from lab.paths import cache_dir
 from lab.robot import SIM_CAMERA, StereoCamera
 from lab.scene import BodySpec, Scene, load_scene
