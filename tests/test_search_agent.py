@@ -411,10 +411,10 @@ def test_a_robot_that_cannot_leave_its_cell_ends_the_run_as_stuck(monkeypatch):
 
 
 def test_the_budget_holds_when_relocalization_looks_round_before_each_drive(monkeypatch):
-    """run_search's active re-localization looks round (20 s of views) on the robot beneath the budget
-    wrapper before every drive; with every drive failing at once (each cell unreachable) the run went
-    on to 768 s of a 300 s budget. The budget is now checked round it: the run ends within one look."""
-    from lab.runs.search import _relocalizing
+    """The report policy's active re-localization looks round (20 s of views) on the robot beneath the
+    budget wrapper before every drive; with every drive failing at once (each cell unreachable) the run
+    went on to 768 s of a 300 s budget. The budget is now checked round it: the run ends within one look."""
+    from lab.search.report_policy import ReportPolicy
 
     class LooksRound:  # the localized robot beneath the budget: its views step the base directly
         def __init__(self, base):
@@ -425,12 +425,36 @@ def test_the_budget_holds_when_relocalization_looks_round_before_each_drive(monk
 
     def unreachable(robot):
         nav = lambda target_xy, lo, hi: NavigationResult(False, "UNREACHABLE", robot.odometry())  # noqa: E731
-        return _relocalizing(nav, LooksRound(robot.base), robot)
+        return ReportPolicy(LooksRound(robot.base), nav, check=robot.check).relocalizing()
 
     peaks = [((x, y), 0.9) for x in (-2.0, -1.0, 1.0, 2.0) for y in (-1.0, 1.0, 2.5)]
     out, _, robot = scripted_run(monkeypatch, (2.5, 3.5), peaks, max_time=100.0, navigate=unreachable)
     assert not out.found and out.reason.startswith("time budget of 100 s used up")
     assert 100.0 <= robot.now() <= 120.0 + 1e-6, robot.now()
+
+
+def test_the_policy_relocalizes_between_two_budget_checks_before_each_drive_and_keeps_the_navigator():
+    """The agent's navigate is the search's own behind a re-localization: budget check, look round,
+    budget check, then the drive, with the same arguments and result; its navigator is the policy's."""
+    from lab.search.report_policy import ReportPolicy
+
+    calls = []
+
+    class Looks:
+        def relocalize(self):
+            calls.append("relocalize")
+
+    def drive(target_xy, lo, hi):
+        calls.append(("drive", target_xy, lo, hi))
+        return "result"
+
+    navigator = object()
+    policy = ReportPolicy(Looks(), drive, navigator, check=lambda: calls.append("check"))
+    navigate = policy.relocalizing()
+    assert navigate((1.0, 2.0), 0.5, 0.9) == "result"
+    assert calls == ["check", "relocalize", "check", ("drive", (1.0, 2.0), 0.5, 0.9)]
+    assert navigate.navigator is navigator and navigate.navigate is drive
+    assert ReportPolicy(Looks(), drive).relocalizing().navigator is None
 
 
 def test_all_peaks_failed_triggers_a_new_global_search(monkeypatch):

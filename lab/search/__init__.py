@@ -12,6 +12,9 @@ The data flow, one module per stage::
                      that saw the object's colours, the side look: 35 deg round the colour peak, each
                      way, the second look again (local_search.look_at_points)
     budget           the time budget: a Robot wrapper that stops the run at its deadline
+    navigate         the agent's navigate on a Navigator: scan once, then drive near each target
+    report_policy    when to re-localize: before every drive, and before a find is reported (with a
+                     detour to a landmark when none is seen well from where the object was found)
     baselines        where the lawnmower and frontier baselines look next
 
 Around it, in the layers above: the search's object databases are trained in
@@ -39,6 +42,7 @@ from lab.search.local_search import (
     local_search,
     look_at_points,
 )
+from lab.search.navigate import NavigatorAdapter
 from lab.search.probability_map import (
     DetectionModel,
     ProbabilityMap,
@@ -52,6 +56,7 @@ from lab.search.probability_map import (
     update,
     update_global,
 )
+from lab.search.report_policy import RelocalizingNavigate, ReportPolicy
 
 __all__ = [
     "AgentConfig",
@@ -66,7 +71,10 @@ __all__ = [
     "SecondLookConfig",
     "MapSnapshot",
     "NavigationResult",
+    "NavigatorAdapter",
     "ProbabilityMap",
+    "RelocalizingNavigate",
+    "ReportPolicy",
     "SearchAgent",
     "SearchBudgetExceeded",
     "SearchEvent",
