@@ -11,25 +11,24 @@ Euler angles (``docs/conventions.md``).
   :class:`PoseEstimate` of :mod:`~lab.estimation.estimate` (and its NEES).
   ``EKFConfig(chart=OrientationChart.ROTATION_VECTOR)`` keeps the covariance over a small rotation
   vector instead of the Euler angles: same state, no gimbal-lock breakdown.
-* :mod:`~lab.estimation.bank`: :class:`EKFBank`, one filter per database model.
+* :mod:`~lab.estimation.kernel`: the update's algebra (whitening, the 6x6 information-form update,
+  Eq. (9)'s :func:`data_log_likelihood`) and the checked inputs a filter's steps pass on.
+* :mod:`~lab.estimation.uncertainty`: the errors the filter models besides each feature's own noise,
+  :class:`CalibrationUncertainty` (the camera's calibration) and :class:`ModelUncertainty` (the
+  database's points).
+* :mod:`~lab.estimation.health`: :class:`DivergenceConfig` and the check of a filter's state.
+* :mod:`~lab.estimation.bank`: :class:`EKFBank`, one filter per database model, driving its filters
+  through :class:`PoseEKF`'s public steps with their shared work batched.
 * :mod:`~lab.estimation.synthetic`: synthetic box features and stereo-like noise for tests and notebooks.
 """
 
 from lab.estimation.bank import EKFBank
-from lab.estimation.ekf import (
-    CalibrationUncertainty,
-    DivergenceConfig,
-    EKFConfig,
-    ModelUncertainty,
-    PoseEKF,
-    UpdateOutcome,
-    UpdateResult,
-    data_log_likelihood,
-    model_offset_covariance,
-)
+from lab.estimation.ekf import EKFConfig, PoseEKF, UpdateOutcome, UpdateResult
 from lab.estimation.estimate import PoseEstimate, nees
 from lab.estimation.fit import InitResult, RansacConfig, fit_rigid_transform, ransac_pose
 from lab.estimation.gate import GateConfig, gate_matches
+from lab.estimation.health import DivergenceConfig
+from lab.estimation.kernel import data_log_likelihood
 from lab.estimation.models import (
     ObjectNoiseKind,
     OrientationChart,
@@ -51,6 +50,7 @@ from lab.estimation.models import (
     rv_to_euler_jacobian,
     state_residual,
 )
+from lab.estimation.uncertainty import CalibrationUncertainty, ModelUncertainty, model_offset_covariance
 
 __all__ = [
     "DivergenceConfig",

@@ -288,7 +288,7 @@ def measurement_covariance(Sigma_d) -> np.ndarray:
     return out
 
 
-def _camera_motion(G_RC_prev, G_RC, G_odom) -> np.ndarray:
+def camera_motion(G_RC_prev, G_RC, G_odom) -> np.ndarray:
     """``G_{C(k) C(k-1)} = G_RC(k)^-1 G_{R(k-1)R(k)}^-1 G_RC(k-1)``: the previous camera in the new one."""
     return se3_inv(G_RC) @ se3_inv(G_odom) @ G_RC_prev
 
@@ -322,7 +322,7 @@ def motion_model(X_prev, G_RC_prev, G_RC, G_odom, G_OO=None) -> np.ndarray:
     X : ndarray, shape (6,) [m, rad]
     """
     A, G_OO = _motion_inputs(G_RC_prev, G_RC, G_odom, G_OO)
-    return _predict(_check_state(X_prev), A, G_OO, jacobian=False)[0]
+    return motion_step(_check_state(X_prev), A, G_OO, jacobian=False)[0]
 
 
 def motion_jacobian(
@@ -348,16 +348,17 @@ def motion_jacobian(
     ``F = [[R_A, -R_A [R p_o]_x], [0, R_A]]``.
     """
     A, G_OO = _motion_inputs(G_RC_prev, G_RC, G_odom, G_OO)
-    return _predict(_check_state(X_prev), A, G_OO, jacobian=True, chart=chart)[1]
+    return motion_step(_check_state(X_prev), A, G_OO, jacobian=True, chart=chart)[1]
 
 
 def _motion_inputs(G_RC_prev, G_RC, G_odom, G_OO):
-    A = _camera_motion(_check_G(G_RC_prev, "G_RC_prev"), _check_G(G_RC, "G_RC"), _check_G(G_odom, "G_odom"))
+    A = camera_motion(_check_G(G_RC_prev, "G_RC_prev"), _check_G(G_RC, "G_RC"), _check_G(G_odom, "G_odom"))
     return A, (None if G_OO is None else _check_G(G_OO, "G_OO"))
 
 
-def _predict(X_prev, A, G_OO, jacobian: bool, chart: OrientationChart = OrientationChart.EULER):
-    """``X_k`` (Eq. (1)) and, if asked, ``F`` for the camera motion ``A = G_{C_k C_{k-1}}``."""
+def motion_step(X_prev, A, G_OO, jacobian: bool, chart: OrientationChart = OrientationChart.EULER):
+    """``X_k`` (Eq. (1)) and, if asked, ``F`` for the camera motion ``A = G_{C_k C_{k-1}}``
+    (:func:`camera_motion`): :func:`motion_model` and :func:`motion_jacobian` on checked inputs."""
     R = euler_zyx_to_R(X_prev[3], X_prev[4], X_prev[5])
     G = A @ se3(R, X_prev[:3])
     if G_OO is not None:
