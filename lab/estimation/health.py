@@ -50,8 +50,9 @@ class DivergenceConfig:
 def health_many(dc: DivergenceConfig, euler: bool, mu: np.ndarray, P: np.ndarray) -> list[str | None]:
     """Why each of k states ``mu`` (k, 6) with covariance ``P`` (k, 6, 6) is not a usable estimate, or
     None: the first of non-finite, not symmetric, not positive definite, a covariance blow-up (the
-    largest position or angle standard deviation over ``dc``'s bound), gimbal lock (Euler chart). The
-    checks run on all k at once (one Cholesky call: a bank checks its filters together)."""
+    largest position or angle standard deviation over ``dc``'s bound), gimbal lock (``euler``: the
+    covariance is over the Euler angles). The checks run on all k at once (one Cholesky call: a bank
+    checks its filters together)."""
     k = len(mu)
     out: list[str | None] = [None] * k
     finite = np.isfinite(mu).all(axis=1) & np.isfinite(P).all(axis=(1, 2))

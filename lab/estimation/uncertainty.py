@@ -105,7 +105,8 @@ class CalibrationUncertainty:
         """The stated accuracy of a :class:`lab.robot.StereoCamera`'s calibration (zero: exact): its
         focal lengths' (``focal_std``) and the rest of its depth scale's, the baseline's,
         ``sqrt(depth_scale_std**2 - focal_std**2)``. Its ``pointing_std_deg`` (the pan-tilt's zero) is
-        left out: it places C on the robot and does not move the points measured in C."""
+        left out: it places C on the robot and does not move the points measured in C. How this model
+        was chosen: docs/tuning/ekf-calibration-error.md."""
         focal = float(camera.focal_std)
         return cls(math.sqrt(max(0.0, float(camera.depth_scale_std) ** 2 - focal**2)), 0.0, focal)
 
