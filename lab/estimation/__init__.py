@@ -4,7 +4,7 @@ State ``X = [x, y, z, alpha, beta, gamma]``: the object frame O in the left came
 Euler angles (``docs/conventions.md``).
 
 * :mod:`~lab.estimation.models`: measurement model Eq. (3) and motion model Eqs. (1)-(2) with their
-  analytic Jacobians, process noise.
+  analytic Jacobians; :mod:`~lab.estimation.noise`: the process noise of Eq. (2).
 * :mod:`~lab.estimation.fit`: closed-form rigid fit and RANSAC initialisation.
 * :mod:`~lab.estimation.ekf`: :class:`PoseEKF` (predict, gated Joseph-form update, Eq. (9) likelihood,
   divergence detection), with the geometric gate of :mod:`~lab.estimation.gate` and the
@@ -30,9 +30,7 @@ from lab.estimation.gate import GateConfig, gate_matches
 from lab.estimation.health import DivergenceConfig
 from lab.estimation.kernel import data_log_likelihood
 from lab.estimation.models import (
-    ObjectNoiseKind,
     OrientationChart,
-    ProcessNoise,
     euler_rate_matrix,
     euler_rate_matrix_inv,
     euler_to_rv_jacobian,
@@ -42,13 +40,17 @@ from lab.estimation.models import (
     measurement_model,
     motion_jacobian,
     motion_model,
-    motion_noise_jacobians,
-    odometry_covariance,
-    process_noise_covariance,
     retract_rv,
     rotvec_to_R,
     rv_to_euler_jacobian,
     state_residual,
+)
+from lab.estimation.noise import (
+    ObjectNoiseKind,
+    ProcessNoise,
+    motion_noise_jacobians,
+    odometry_covariance,
+    process_noise_covariance,
 )
 from lab.estimation.uncertainty import CalibrationUncertainty, ModelUncertainty, model_offset_covariance
 

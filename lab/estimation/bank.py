@@ -40,7 +40,7 @@ from lab.estimation.fit import check_matches, valid_rows
 from lab.estimation.gate import gate_rows_many
 from lab.estimation.health import health_many
 from lab.estimation.kernel import LOG_2PI, checked_motion, information_update, whitened
-from lab.estimation.models import odometry_covariance
+from lab.estimation.noise import odometry_covariance
 
 __all__ = ["EKFBank"]
 

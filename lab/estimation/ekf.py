@@ -50,14 +50,13 @@ from lab.estimation.kernel import (
 )
 from lab.estimation.models import (
     OrientationChart,
-    ProcessNoise,
     canonical_state,
     euler_to_rv_jacobian,
     motion_step,
-    process_noise_covariance,
     retract_rv,
     rv_to_euler_jacobian,
 )
+from lab.estimation.noise import ProcessNoise, process_noise_covariance
 from lab.estimation.uncertainty import (
     CalibrationUncertainty,
     ModelUncertainty,
