@@ -65,7 +65,9 @@ LOG_2PI = math.log(2.0 * math.pi)
 
 
 def whitened(r, C, S):
-    """Whiten residuals (n,3) and Jacobian blocks (n,3,k) by L_j^-1 (L_j L_j^T = Sigma_j)."""
+    """Whiten residuals ``y_j = d_j - h_j(mu_bar)`` (n, 3) and Jacobian blocks ``C_j`` (n, 3, k) by
+    ``L_j^-1`` (``L_j L_j^T = Sigma_j``, the measurement covariance's blocks): ``(y~ (3n,), C~ (3n, k),
+    log|Sigma_m|)``. Raises LinAlgError when a ``Sigma_j`` is not positive definite."""
     L = np.linalg.cholesky(S)  # (n, 3, 3)
     sol = np.linalg.solve(L, np.concatenate([r[..., None], C], axis=2))  # (n, 3, 1 + k)
     logdet_m = 2.0 * float(np.sum(np.log(np.diagonal(L, axis1=1, axis2=2))))
@@ -73,7 +75,8 @@ def whitened(r, C, S):
 
 
 def information_update(Sigma_bar, y_w, C_w, logdet_m):
-    """The Kalman update with whitened quantities (see the module docstring). Raises LinAlgError.
+    """Eq. (3)'s Kalman update, Joseph form, and Eq. (9)'s likelihood, from :func:`whitened`'s
+    quantities and the prior ``Sigma_bar`` (see the module docstring). Raises LinAlgError.
 
     Returns the correction ``K y`` (6,), the Joseph-form posterior covariance, the NIS and the log
     likelihood; the caller adds the correction to ``mu_bar`` (in its chart)."""
@@ -152,9 +155,11 @@ def _is_rotation(G) -> bool:
 
 @dataclass(frozen=True)
 class PendingUpdate:
-    """An update between its checks and its linear algebra (:meth:`PoseEKF._begin_update`): the used
-    rows' residuals ``r`` (m, 3), Jacobians ``C`` (m, 3, k), covariances ``S`` (m, 3, 3) and database
-    points ``b`` (m, 3), and the prior (k, k), with the calibration error when it is modelled."""
+    """An update between its checks and its linear algebra (:meth:`lab.estimation.PoseEKF.begin_update`):
+    the used rows' residuals ``r`` (m, 3), Jacobians ``C`` (m, 3, k), covariances ``S`` (m, 3, 3) and
+    database points ``b`` (m, 3), and the prior (k, k), with the calibration error when it is modelled;
+    ``n`` rows were passed in, ``n_valid`` were usable (``note`` says how many were dropped), ``keep``
+    marks the usable rows the gate passed and ``inliers`` the input rows used."""
 
     n: int
     n_valid: int
@@ -170,7 +175,9 @@ class PendingUpdate:
 
 @dataclass(frozen=True)
 class Motion:
-    """One step's checked motion inputs (:func:`checked_motion`), shared by every filter of a bank."""
+    """One step's checked motion inputs (:func:`checked_motion`), shared by every filter of a bank: the
+    transforms ``mats`` by name, the ``bad`` ones (non-finite or absurd), ``dt`` and the camera's own
+    motion ``A``."""
 
     mats: dict
     bad: list
@@ -179,8 +186,10 @@ class Motion:
 
 
 def checked_motion(G_RC_prev, G_RC, G_odom, dt, G_OO=None) -> Motion:
-    """:meth:`PoseEKF.predict`'s inputs, checked (ValueError for wrong shapes, a non-rigid transform or
-    a bad ``dt``); transforms that are non-finite or absurd (> 1 km) are listed in ``bad``."""
+    """:meth:`lab.estimation.PoseEKF.predict`'s inputs (Eqs. (1)-(2)'s ``u``), checked (ValueError for
+    wrong shapes, a non-rigid transform or a bad ``dt``); transforms that are non-finite or absurd
+    (> 1 km) are listed in ``bad``. The camera's motion ``A = G_{C(k) C(k-1)}`` is computed here, once
+    per step for all the filters of a bank."""
     mats = {"G_RC_prev": G_RC_prev, "G_RC": G_RC, "G_odom": G_odom}
     if G_OO is not None:
         mats["G_OO"] = G_OO
