@@ -30,7 +30,7 @@ JUSTIFIED = "private-ok:"
 #: of trials.
 _TUNING = re.compile(
     r"\bseeds?\s+\d|\b\d{5,6}\s*[-–]\s*\d|\b10\d{4}\b"
-    r"|\b\d+\s+(?:of\s+\d+\s+)?(?:trials|episodes|placements|drives|seeded runs)\b",
+    r"|\b\d+\s+(?:of\s+\d+\s+)?(?:[a-z-]+\s+)?(?:trials|episodes|placements|drives|runs)\b",
     re.IGNORECASE,
 )
 
