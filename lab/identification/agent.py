@@ -349,9 +349,10 @@ class IdentificationAgent:
 
         The probabilities score every model at the best of the filters' poses and their look-alike
         turns, so a model can be identified from its unique face while its own filter still sits a turn
-        off: measured 180 degrees off in 2 of 80 evasive episodes, where the turn evidence (one keyframe
-        a second) had not yet passed ``reseat_margin``. The frame that favoured the model most is the one
-        that saw the unique face; the turn it was scored at is where the unique face is.
+        off (180 degrees off in evasive episodes, where the turn evidence, one keyframe a second, had not
+        yet passed ``reseat_margin``). The frame that favoured the model most is the one that saw the
+        unique face; the turn it was scored at is where the unique face is. What it was measured on:
+        docs/tuning/identified-model-reseat.md.
         """
         rec = self._decisive[i]
         est = self.bank[i].estimate
