@@ -206,7 +206,7 @@ def search_job(
     from lab.runs.placement import random_placement
     from lab.runs.search import navigator_factory, run_search
     from lab.scene import load_scene
-    from lab.search.agent import AgentConfig
+    from lab.search.config import SearchAgentConfig
 
     scene = load_scene("lab_room")
     place = random_placement(scene, object, np.random.default_rng(placement_key), surface)
@@ -225,7 +225,7 @@ def search_job(
     d = r.to_json()
     d["n_snapshots"] = len(d.pop("map_snapshots", []))
     d["obstacles_on_path"] = bool(obstacles)  # asked for (``obstacles`` lists the boxes that fit)
-    lc = AgentConfig().local_search
+    lc = SearchAgentConfig().local_search
     sp = shortest_path_m(r.trace.scene, place, lc.max_distance_m, lc.min_distance_m)
     d["shortest_path_m"] = round(sp, 4) if math.isfinite(sp) else None
     return d

@@ -59,17 +59,12 @@ from lab.runs.robots import RobotKind, load_robot_config, make_robot, robot_kind
 from lab.runs.room import localize, robot_start, room_landmarks
 from lab.runs.tracks import RobotTrack, TrackedRobot
 from lab.scene import BodySpec, Scene, load_scene
-from lab.search.agent import (
-    INTERRUPTED,
-    AgentConfig,
-    AgentResult,
-    NavigationResult,
-    SearchAgent,
-    SearchEvent,
-    Strategy,
-)
+from lab.search.agent import INTERRUPTED, SearchAgent
 from lab.search.budget import BudgetedRobot, SearchBudgetExceeded
+from lab.search.config import SearchAgentConfig
 from lab.search.probability_map import ProbabilityMap
+from lab.search.records import AgentResult, NavigationResult, SearchEvent
+from lab.search.strategies import Strategy
 from lab.training.search import search_database
 from lab.vision.database import FeatureDatabase
 
@@ -345,7 +340,7 @@ def run_search(
     *,
     obstacles: bool = False,
     world: str | Scene = "lab_room",
-    config: AgentConfig | None = None,
+    config: SearchAgentConfig | None = None,
     supersample: int = 2,
     max_wall_time: float | None = None,
     progress: bool = False,
@@ -430,7 +425,7 @@ def run_search(
         scene, place, surface, obstacle_poses = _place_object(scene, object, place, obstacles, rng)
         G_WO_measured = None
     db = search_database(object, progress=progress)
-    cfg = replace(config or AgentConfig(), strategy=strategy)
+    cfg = replace(config or SearchAgentConfig(), strategy=strategy)
     spec = map_spec(scene)
     with contextlib.ExitStack() as stack:
         run, truth_of = _session(
