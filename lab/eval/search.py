@@ -69,9 +69,8 @@ def search_key(
 
 
 #: The default sim-time budget of a trial [s]: ``lab search``'s own (``--max-time``), so the evaluation
-#: measures what a user's run does. (Until stop 42 the evaluation stopped at 300 s: 9 of the 10 paper
-#: misses on the report seeds 101000-101004 were that budget running out, and a 600 s budget found all
-#: of those 9 -- see the stop's note; the report prints the successes within 300 s beside it.)
+#: measures what a user's run does; the report prints the successes within shorter budgets beside it.
+#: How it was chosen: docs/tuning/search-time-budget.md.
 SEARCH_MAX_TIME_S = 600.0
 
 

@@ -73,8 +73,7 @@ class GlobalSearchConfig:
         of view cover the full circle but for the 40 degrees behind the robot the PTU cannot reach;
         the two tilts with the 60 degree vertical field of view cover -60 to +40 degrees of elevation:
         from the lab room's 1.1 m mast, the floor from 0.65 m out, and the far floor, tables and shelf
-        near the horizon inside both views rather than at an edge (with -35 and +20, tuned for a 0.7 m
-        mast, an object on the floor 5.5 m away fell between the views' edges and was missed).
+        near the horizon inside both views rather than at an edge (docs/tuning/global-search-scan-tilts.md).
     window_px : int [px]
         Side of the fixed scanning window (box filter).
     n_hist : int
@@ -99,10 +98,8 @@ class GlobalSearchConfig:
     num_disparities : int
         SGBM disparity range (48 px: down to 0.52 m at f = 208 px, b = 0.12 m). Plain SGBM gives no
         disparity in the left ``num_disparities`` columns, and the neighbouring pan's view (15 degrees
-        of overlap, about 42 px) does not make up for it. Measured for a thin book on the shelf (4
-        placements, 9 spots across the room each): its peak was used from 11 of the 36 spots with plain
-        SGBM, most of the others dropped as "no stereo disparity", and from 28 with the full-width
-        disparity used now.
+        of overlap, about 42 px) does not make up for it, so the peaks take the full-width disparity
+        (:func:`lab.vision.dense.checked_disparity`; docs/tuning/global-search-full-width-disparity.md).
     ratio_eps : float
         ``epsilon`` of :func:`object_likelihood_ratio`.
     """

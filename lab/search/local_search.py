@@ -34,11 +34,10 @@ back-projected over the 9 views (the ratio histogram of the global search agains
 colours, :func:`lab.search.global_search.object_likelihood_ratio`), the strongest window means whose
 stereo point lies near the searched cell are aimed at, one at a time, and each new frame's region around
 the peak is enlarged ``upsample`` times (:func:`lab.vision.stereo.upsampled_pair`) before SIFT. The
-start, refinement and "found" are the same as above, the refinement on enlarged regions too. Measured on
-the tuning seeds (``benchmarks/bench_local_search.py``): the misses of objects in view were mostly an
-object on the floor, seen 1.1-1.3 m away from 40-50 degrees above (the 1.1 m mast), spanning 25-40 px
-on a side at 320 x 240: SIFT found 7-23 features on it and 0-3 right matches, too few for a start; on
-the 2x enlarged region the same view gave up to 10 right matches and a start.
+start, refinement and "found" are the same as above, the refinement on enlarged regions too. It is for
+small objects far below the camera (an object on the floor seen from the 1.1 m mast spans a few tens of
+pixels at 320 x 240, too few SIFT matches for a start), which the enlarged region gives enough
+matches. How this was measured: docs/tuning/search-second-look-upsample.md.
 ``second_look=None`` is the paper's local search.
 
 The result is a detection of the searched cell (:class:`~lab.search.probability_map.LocalSearchDetection`,
@@ -104,10 +103,9 @@ class SecondLookConfig:
     ----------
     upsample : int
         Enlargement of the region around a colour peak before SIFT (bicubic;
-        :func:`lab.vision.stereo.upsampled_pair`). Chosen on the tuning seeds (0-5, the misses of
-        ``benchmarks/bench_local_search.py`` with a 0-inlier start, regions around the true object):
-        2x raised the right matches of the best view from 2 to 10, 2 to 6 and 2 to 3 on three of
-        four floor misses (RANSAC starts of 24, 14 and 5 inliers); 3x did worse than 2x on all four.
+        :func:`lab.vision.stereo.upsampled_pair`): 2x gave the floor misses' best views enough right
+        matches for a RANSAC start, and 3x did worse than 2x. How it was chosen:
+        docs/tuning/search-second-look-upsample.md.
     n_looks : int
         At most this many peaks are looked at, strongest first.
     max_offset_m : float [m]
