@@ -59,12 +59,17 @@ from lab.runs.robots import RobotKind, load_robot_config, make_robot, robot_kind
 from lab.runs.room import localize, robot_start, room_landmarks
 from lab.runs.tracks import RobotTrack, TrackedRobot
 from lab.scene import BodySpec, Scene, load_scene
-from lab.search.agent import INTERRUPTED, SearchAgent
+from lab.search.agent import (
+    INTERRUPTED,
+    AgentResult,
+    NavigationResult,
+    SearchAgent,
+    SearchEvent,
+    Strategy,
+)
 from lab.search.budget import BudgetedRobot, SearchBudgetExceeded
 from lab.search.config import SearchAgentConfig
 from lab.search.probability_map import ProbabilityMap
-from lab.search.records import AgentResult, NavigationResult, SearchEvent
-from lab.search.strategies import Strategy
 from lab.training.search import search_database
 from lab.vision.database import FeatureDatabase
 

@@ -46,6 +46,9 @@ class NavigationResult:
 
 
 class Navigate(Protocol):
+    """``navigate(target_xy, min_distance, max_distance)``: drive to within the distance band [m] of
+    ``target_xy`` [m], facing it; returns a :class:`NavigationResult`-like object (module docstring)."""
+
     def __call__(self, target_xy: tuple[float, float], min_distance: float, max_distance: float): ...
 
 
