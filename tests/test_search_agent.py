@@ -590,3 +590,27 @@ def test_a_device_fault_ends_the_run_with_its_reason(monkeypatch):
     assert not out.found
     assert "DeviceTimeout" in out.reason and "pan-tilt" in out.reason
     assert out.events[-1].kind == "end"
+
+
+def test_each_strategy_is_a_target_strategy_and_the_agent_is_its_search_state(monkeypatch):
+    """The agent asks ``make_strategy(config)`` for the next target; it gives the strategy what
+    :class:`SearchState` names (public attributes only)."""
+    from lab.search.strategies import (
+        FrontierStrategy,
+        LawnmowerStrategy,
+        MapPeakStrategy,
+        SearchState,
+        make_strategy,
+    )
+
+    kinds = {"paper": MapPeakStrategy, "rate": MapPeakStrategy}
+    kinds |= {"lawnmower": LawnmowerStrategy, "frontier": FrontierStrategy}
+    for name, cls in kinds.items():
+        assert type(make_strategy(SearchAgentConfig(strategy=name))) is cls
+    monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)
+    robot = KinematicRobot(Pose2D(0.0, -3.0, math.pi / 2))
+    agent = SearchAgent(robot, [None], None, ProbabilityMap(SPEC), rng=np.random.default_rng(0))
+    for name in ("robot", "pmap", "global_searches", "local_since_global", "scan_points", "searched"):
+        assert hasattr(agent, name) and name in SearchState.__annotations__
+    assert agent.excluded.shape == agent.excluded_for_good.shape == SPEC.shape
+    assert callable(agent.global_search)
