@@ -72,8 +72,9 @@ from lab.runs.search_result import (
 )
 from lab.runs.tracks import TrackedRobot
 from lab.scene import BodySpec, Scene, load_scene
-from lab.search.agent import INTERRUPTED, AgentConfig, SearchAgent, SearchEvent, Strategy
+from lab.search.agent import INTERRUPTED, SearchAgent, SearchEvent, Strategy
 from lab.search.budget import BudgetedRobot
+from lab.search.config import SearchAgentConfig
 from lab.search.navigate import NavigatorAdapter
 from lab.search.probability_map import ProbabilityMap
 from lab.search.report_policy import ReportPolicy
@@ -202,7 +203,7 @@ class TrialOptions:
     navigate: NavigatorFactory | None = None
     obstacles: bool = False
     world: str | Scene = "lab_room"
-    config: AgentConfig | None = None
+    config: SearchAgentConfig | None = None
     supersample: int = 2
     max_wall_time: float | None = None
     progress: bool = False
@@ -226,7 +227,7 @@ def run_search(
     *,
     obstacles: bool = False,
     world: str | Scene = "lab_room",
-    config: AgentConfig | None = None,
+    config: SearchAgentConfig | None = None,
     supersample: int = 2,
     max_wall_time: float | None = None,
     progress: bool = False,
@@ -285,7 +286,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     rng = np.random.default_rng(seed)
     scene, place, surface, obstacle_poses, G_WO_measured = _trial_world(kind, scene, object, opts, rng)
     db = search_database(object, progress=opts.progress)
-    cfg = replace(opts.config or AgentConfig(), strategy=strategy)
+    cfg = replace(opts.config or SearchAgentConfig(), strategy=strategy)
     spec = map_spec(scene)
     with contextlib.ExitStack() as stack:
         run, truth_of = _session(stack, kind, hw, scene, object, seed, opts, G_WO_measured)

@@ -14,7 +14,7 @@ from lab.navigation.astar import astar_to_region
 from lab.navigation.drive_loop import NavOutcome
 from lab.navigation.grid import GridSpec
 from lab.navigation.navigator import Navigator, NavigatorConfig
-from lab.search.agent import NavigationResult
+from lab.search.records import NavigationResult
 
 __all__ = ["NavigatorAdapter"]
 

@@ -31,8 +31,8 @@ import numpy as np
 from lab.errors import SafetyStop
 from lab.geometry import Pose2D, se3_inv
 from lab.localization import LocalizationMode, PlanarPoseEstimate
-from lab.search.agent import AgentResult, NavigationResult
 from lab.search.budget import SearchBudgetExceeded
+from lab.search.records import AgentResult, NavigationResult
 
 __all__ = ["RelocalizingNavigate", "ReportPolicy", "unlimited"]
 
