@@ -16,6 +16,38 @@ predicted by the **measurement model**, Eq. (3) of the identification paper:
 
 $$d_j = x_r + R(x_o)\, b_{J(j)} + \xi, \qquad R(x_o) = R_z(\alpha) R_y(\beta) R_x(\gamma).$$""",
     ),
+    (
+        "md",
+        r"""**Learning objectives.** After this notebook you can:
+
+1. write the z-y-x Euler rotation $R(x_o) = R_z(\alpha) R_y(\beta) R_x(\gamma)$ and the measurement model of Eq. (3);
+2. derive the measurement Jacobian $C = \partial H / \partial X$ and verify it with finite differences;
+3. carry out one EKF update (innovation, $S$, gain, posterior in Joseph form) and compare it with filterpy;
+4. run the filter on rendered stereo frames and read its error against the simulator's truth;
+5. explain why the robot's filter uses the rotation-vector chart (gimbal lock).
+
+**Prerequisites:** notebook [00](00_simulator_and_stereo.ipynb) (stereo points and their covariances); rotation matrices; partial derivatives; the Gaussian distribution and the idea of a Kalman filter (predict, then correct).
+
+**Time:** about 75 minutes (reading 30, exercises 45). The exercises marked *checked* answer back when you run their cell: "correct", or a hint
+that names your mistake (`lab.exercises`); until you write your code they say "not attempted yet". This
+notebook prepares the [`ekf` assignment](../assignments/ekf/README.md); the course plan is
+[docs/course.md](../docs/course.md).""",
+    ),
+]
+
+SUMMARY = [
+    (
+        "md",
+        r"""## Summary
+
+* The state is the object's pose in $C$, $X = [x, y, z, \alpha, \beta, \gamma]$; a matched feature is predicted by $d_j = x_r + R(x_o) b_j$ (Eq. (3)).
+* The EKF linearises it with $C = [I_3 \;\; \partial(R b_j)/\partial x_o]$ per feature; a Jacobian is right when it agrees with finite differences.
+* One update: $y = D - H(\bar\mu)$, $S = C\bar\Sigma C^T + \Sigma_m$, $K = \bar\Sigma C^T S^{-1}$, $\mu = \bar\mu + K y$, and the Joseph form keeps $\Sigma$ symmetric positive definite; filterpy agrees to $10^{-9}$.
+* On rendered frames the filter, started by RANSAC, converges to within 2 cm of the true pose.
+
+**Next:** [02 Entropy planning](02_entropy_planning.ipynb). **Assignment:** [`ekf`](../assignments/ekf/README.md) (its
+README says what to write and how it is graded).""",
+    ),
 ]
 
 CELLS = [
@@ -34,6 +66,21 @@ print("first predicted points in C:\\n", d[:3].round(3))
     ),
     (
         "md",
+        r"""**Exercise 1 (checked): the rotation of Eq. (3).** Write `my_rotation_zyx(alpha, beta, gamma)`, the (3, 3) matrix $R = R_z(\alpha) R_y(\beta) R_x(\gamma)$, angles in radians. The check compares with SciPy's `Rotation.from_euler`. (It is `rotation_zyx` of the `ekf` assignment.)""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_rotation_zyx
+
+def my_rotation_zyx(alpha, beta, gamma):
+    raise NotImplementedError   # your code: build Rz, Ry, Rx and multiply them
+
+check_rotation_zyx(my_rotation_zyx)
+""",
+    ),
+    (
+        "md",
         r"""## The Jacobian $C = \partial H / \partial X$
 
 The EKF linearises the measurement model. For each feature the $3 \times 6$ block is
@@ -48,6 +95,22 @@ C_fd = np.column_stack([(measurement_model(X + eps * e, b_O) - measurement_model
                         for e in np.eye(6)])
 print("largest difference:", np.abs(C - C_fd).max())
 assert np.allclose(C, C_fd, atol=1e-7)
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise 2 (checked): the Jacobian.** Write `my_measurement_jacobian(X, b_O)`, shape (3n, 6), rows $3j..3j+2$ for feature $j$, analytically (with $\partial R / \partial \alpha$ etc.; not by finite differences, the check uses those). A wrong column is named, and so is a wrong sign.""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_measurement_jacobian
+
+def my_measurement_jacobian(X, b_O):
+    X, b_O = np.asarray(X, float), np.asarray(b_O, float)
+    raise NotImplementedError   # your code: stack one 3 x 6 block [I_3, d(R b_j)/d(alpha, beta, gamma)] per feature
+
+check_measurement_jacobian(my_measurement_jacobian)
 """,
     ),
     (
@@ -122,6 +185,21 @@ fp.update(z.ravel(), lambda x: measurement_jacobian(x, b_O), lambda x: measureme
 print("state difference:", np.abs(ours.estimate.mu - fp.x).max())
 assert np.allclose(ours.estimate.mu, fp.x, atol=1e-9) and np.allclose(ours.Sigma, fp.P, atol=1e-9)
 world.close()
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise 3 (checked): one Kalman update.** Write `my_kalman_update(mu_bar, Sigma_bar, y, C, Sigma_m)` returning `(mu, Sigma)`: the gain from $S$, the mean, and the covariance in Joseph form; `y` is the innovation $D - H(\bar\mu)$. The check compares with the *information form* of the same update ($\Sigma^{-1} = \bar\Sigma^{-1} + C^T \Sigma_m^{-1} C$), an independent route.""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_kalman_update
+
+def my_kalman_update(mu_bar, Sigma_bar, y, C, Sigma_m):
+    raise NotImplementedError   # your code: S, K, then (mu, Sigma)
+
+check_kalman_update(my_kalman_update)
 """,
     ),
     (
