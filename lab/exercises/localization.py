@@ -138,13 +138,14 @@ def check_joseph_covariance(joseph_covariance) -> Feedback:
     for ANY gain ``K``: the check passes half the optimal gain. The reference is the covariance of the
     new error :math:`e' = [I - KH,\; -K]\,[e; v]` with
     :math:`[e; v] \sim N(0, \mathrm{diag}(\bar\Sigma, Q))`."""
-    from scipy.linalg import block_diag
 
     name = "joseph_covariance"
     Sb, K, H, Q = _joseph_inputs()
     got = answer_array(
         name, call_answer(name, joseph_covariance, Sb.copy(), K.copy(), H.copy(), Q.copy()), (3, 3)
     )
+    from scipy.linalg import block_diag  # after the answer ran: a stub costs nothing
+
     A = np.hstack([np.eye(3) - K @ H, -K])
     want = A @ block_diag(Sb, Q) @ A.T
     IKH = np.eye(3) - K @ H

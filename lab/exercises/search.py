@@ -140,13 +140,14 @@ def check_octile_heuristic(octile_heuristic) -> Feedback:
     """Check ``octile_heuristic(cell, goal, min_cost) -> h``, the cost of the cheapest 8-connected path on
     open floor where every cell costs ``min_cost`` (steps of length 1 and sqrt 2), against networkx's
     Dijkstra on that grid."""
-    import networkx as nx
 
     name = "octile_heuristic"
     m = 1.5
     got = answer_array(
         name, [call_answer(name, octile_heuristic, c, g, m) for c, g in _OCTILE_CASES], (len(_OCTILE_CASES),)
     )
+    import networkx as nx  # after the answer ran: a stub costs nothing
+
     G = nx.Graph()
     for i in range(9):
         for j in range(9):
