@@ -248,14 +248,15 @@ def is_spent(seed: int, ledger=None) -> bool:
     return any(seed in e for e in _entries(ledger))
 
 
-def spent_among(seeds: Iterable[int], ledger=None) -> dict[int, SpentSeeds]:
-    """The spent seeds among ``seeds``, each with the first ledger entry that holds it."""
+def spent_among(seeds: Iterable[int], ledger=None, run: str | None = None) -> dict[int, SpentSeeds]:
+    """The spent seeds among ``seeds``, each with the first ledger entry that holds it (the first one
+    whose ``runs`` name ``run``, when there is one)."""
     entries = _entries(ledger)
     out = {}
     for s in sorted(set(seeds)):
-        hit = next((e for e in entries if s in e), None)
-        if hit is not None:
-            out[s] = hit
+        hits = [e for e in entries if s in e]
+        if hits:
+            out[s] = next((e for e in hits if run in e.runs), hits[0])
     return out
 
 
@@ -290,8 +291,11 @@ def seed_ranges_text(seeds: Iterable[int]) -> str:
     return ",".join(str(a) if a == b else f"{a}-{b}" for a, b in _ranges(seeds))
 
 
-def check_report_seeds(seeds: Iterable[int], allow_spent: bool = False, ledger=None) -> dict[int, SpentSeeds]:
-    """The spent seeds among ``seeds`` (see :func:`spent_among`), or a refusal.
+def check_report_seeds(
+    seeds: Iterable[int], allow_spent: bool = False, ledger=None, run: str | None = None
+) -> dict[int, SpentSeeds]:
+    """The spent seeds among ``seeds`` (see :func:`spent_among`; ``run``, e.g. ``"search"``, picks the
+    entry the refusal quotes), or a refusal.
 
     Raises
     ------
@@ -301,13 +305,13 @@ def check_report_seeds(seeds: Iterable[int], allow_spent: bool = False, ledger=N
     """
     seeds = list(seeds)
     entries = _entries(ledger)
-    spent = spent_among((s for s in seeds if s >= REPORT_SEEDS_START), entries)
+    spent = spent_among((s for s in seeds if s >= REPORT_SEEDS_START), entries, run)
     if spent and not allow_spent:
         s, e = next(iter(spent.items()))
         fresh = fresh_report_seeds(max(1, len(set(seeds))), entries)
         src = f" ({e.source})" if e.source else ""
         raise ConfigError(
-            f"seed {s} is spent: it decided {e.decided}{src}; {len(spent)} of the {len(set(seeds))} seeds "
+            f"seed {s} is spent: it decided {e.decided}{src}; {len(spent)} of {len(set(seeds))} seeds given "
             f"are in the ledger of spent seeds. Report on fresh seeds (e.g. --seeds "
             f"{seed_ranges_text(fresh)}), or give {ALLOW_SPENT_FLAG} and the report says 'on spent seeds'"
         )

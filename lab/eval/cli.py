@@ -110,7 +110,7 @@ def run_eval(args) -> int:
         raise ConfigError(f"--retries must be >= 0, got {args.retries}")
     if args.job_timeout is not None and not args.job_timeout > 0:
         raise ConfigError(f"--job-timeout must be > 0 s, got {args.job_timeout:g}")
-    check_report_seeds(sw.seeds, allow_spent=args.allow_spent_seeds)
+    check_report_seeds(sw.seeds, allow_spent=args.allow_spent_seeds, run=args.eval_command)
     jobs = sw.jobs()
     out = Path(args.out)
     if not args.resume and (out / "results.csv").exists():

@@ -314,7 +314,7 @@ def write_report(out: Path, rows: list[dict], kind: SweepKind = IDENTIFY) -> Pat
     if seeds:
         lines.append(f"Seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}): the {split_of(seeds)} split.")
         lines.append("")
-        note = spent_note(spent_among(seeds), len(seeds))
+        note = spent_note(spent_among(seeds, run=kind.name), len(seeds))
         if note:
             lines += [note, ""]
     heads = [*kind.conditions, "success", "Wilson 95 %", *(h for h, _ in kind.medians), "errors"]
