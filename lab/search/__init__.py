@@ -4,6 +4,8 @@ The data flow, one module per stage::
 
     probability_map  M_p: Eqs. (1)-(3), the detection model with alpha and beta, the growing beta;
                      ProbabilityMap.observe applies either search's detections
+    motion           the prediction step for a moving object: mass diffuses at the speed bound over
+                     the cells the robot's costmap leaves passable (a no-op at speed 0)
     global_search    pan-tilt scan -> colour back-projection -> N_hist clusters -> sparse stereo -> M_p
     local_search     9 pan-tilt views -> SIFT + EKF (RANSAC start, ROI, gate) -> 6D pose, or a second
                      look at the colour peaks near the cell on enlarged regions -> 6D pose or a miss;
@@ -36,6 +38,7 @@ from lab.search.local_search import (
     local_search,
     look_at_points,
 )
+from lab.search.motion import MotionModel, diffuse_step, diffusion_coefficient, passable_from_costmap, predict
 from lab.search.navigate import NavigatorAdapter
 from lab.search.probability_map import (
     ColourPeakDetection,
@@ -72,6 +75,7 @@ __all__ = [
     "LocalSearchResult",
     "SecondLookConfig",
     "MapSnapshot",
+    "MotionModel",
     "NavigationResult",
     "NavigatorAdapter",
     "Navigate",
@@ -95,6 +99,10 @@ __all__ = [
     "local_search",
     "look_at_points",
     "map_peaks",
+    "diffuse_step",
+    "diffusion_coefficient",
+    "passable_from_costmap",
+    "predict",
     "observe",
     "region_prior",
     "uniform_prior",

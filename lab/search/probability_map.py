@@ -63,6 +63,7 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.navigation.grid import GridSpec
+from lab.search import motion
 
 __all__ = [
     "ColourPeakDetection",
@@ -446,3 +447,9 @@ class ProbabilityMap:
           nothing).
         """
         self.P = observe(self.P, self.spec, detection)
+
+    def predict(self, dt_s: float, passable: np.ndarray, model: motion.MotionModel) -> None:
+        r"""The prediction step for a moving object (:func:`lab.search.motion.predict`): the prior of
+        Eq. (1) becomes :math:`\sum_{m,n} T_{ij,mn}(\Delta t) P_{mn}`, mass diffusing at ``model``'s
+        speed bound for ``dt_s`` [s] over the ``passable`` cells; a no-op at speed 0."""
+        self.P = motion.predict(self.P, passable, dt_s, model, self.spec.resolution)
