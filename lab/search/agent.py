@@ -137,6 +137,10 @@ class SearchAgent:
     observer : callable, optional
         ``observer(agent, event)`` after every :class:`SearchEvent` (live views and recordings,
         :mod:`lab.viz.live`). None (the default) costs nothing.
+    passable : callable, optional
+        ``passable() -> (nx, ny) bool`` on the map's grid: where a moving object may go, as the robot
+        believes (:func:`lab.search.motion.passable_from_costmap` of its costmap); used only with a
+        moving ``config.motion``. None: every cell.
     """
 
     def __init__(
@@ -150,9 +154,12 @@ class SearchAgent:
         rng: np.random.Generator,
         max_time_s: float = math.inf,
         observer: Callable | None = None,
+        passable: Callable | None = None,
     ):
         self.robot, self.db, self.navigate, self.pmap = robot, db, navigate, pmap
         self.observer = observer
+        self.passable = passable
+        self._t_predicted: float | None = None  # the robot time the map was last predicted to
         self.last_local: LocalSearchResult | None = None  # the last local search (for the observer)
         self.config = config or SearchAgentConfig()
         self.rng = rng
@@ -252,7 +259,24 @@ class SearchAgent:
             self.robot.now(),
         )
 
+    @property
+    def moving(self) -> bool:
+        """Whether the map has a prediction step (a motion model with a speed above 0)."""
+        return self.config.motion is not None and self.config.motion.moving
+
+    def predict(self) -> None:
+        """The prediction step (:meth:`ProbabilityMap.predict`) from the last prediction to the robot's
+        clock now; a no-op for a stationary object."""
+        if not self.moving:
+            return
+        now = self.robot.now()
+        if self._t_predicted is not None and now > self._t_predicted:
+            free = np.ones(self.pmap.spec.shape, bool) if self.passable is None else self.passable()
+            self.pmap.predict(now - self._t_predicted, free, self.config.motion)
+        self._t_predicted = now
+
     def _next_target(self) -> Target | None:
+        self.predict()
         pose = self.robot.odometry()
         return self.target_strategy.next_target(self, pose)
 
@@ -261,6 +285,7 @@ class SearchAgent:
         p = self.robot.odometry()
         self.scan_points.append((p.x, p.y))
         res = global_search(self.robot, self.db, self.pmap, self.config.global_search)
+        self.predict()
         for detection in res.detections:
             self.pmap.observe(detection)
         self.global_searches += 1
@@ -380,6 +405,7 @@ class SearchAgent:
         if res.found:
             self._event("local", cell, res.reason)
             return res
+        self.predict()
         self.pmap.observe(res.detection)  # Eqs. (1)-(3): searched, not found
         for c in res.detection.cells(self.pmap.spec):
             self._misses[c] += 1
@@ -452,7 +478,7 @@ class SearchAgent:
         """The map's strategies (paper, rate) give up the cells ``max_local_misses`` failed searches
         answered for."""
         m = self.config.max_local_misses
-        if self.config.strategy not in (Strategy.PAPER, Strategy.RATE) or m == 0:
+        if self.config.strategy not in (Strategy.PAPER, Strategy.RATE) or m == 0 or self.moving:
             return
         new = (self._misses >= m) & ~self._excluded
         if new.any():

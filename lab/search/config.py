@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from lab.errors import ConfigError
 from lab.search.global_search import GlobalSearchConfig
 from lab.search.local_search import LocalSearchConfig
+from lab.search.motion import MotionModel
 from lab.search.strategies import Strategy
 
 __all__ = ["SearchAgentConfig"]
@@ -82,6 +83,11 @@ class SearchAgentConfig:
         docs/tuning/search-max-local-misses.md.
     max_actions : int
         Safety bound on the loop (the time budget normally ends it first).
+    motion : MotionModel, optional
+        A moving object's motion model: before every map update and every choice of the next target the
+        map is predicted over the time since the last prediction (:mod:`lab.search.motion`), and no cell
+        is excluded for good after failed searches (mass flows back into it). None (the default) or a
+        speed of 0: the paper's stationary object, the map untouched between updates.
     """
 
     strategy: Strategy = Strategy.PAPER
@@ -102,6 +108,7 @@ class SearchAgentConfig:
     max_nav_failures: int = 2
     max_local_misses: int = 2
     max_actions: int = 500
+    motion: MotionModel | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "strategy", Strategy.parse(self.strategy))

@@ -1,0 +1,89 @@
+"""The search agent with a moving object's prediction step (SearchAgentConfig.motion): opt-in, the
+static search unchanged without it, and with it the map predicted on the robot's clock between
+updates, over the cells the robot believes passable."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_search_agent import SPEC, scripted_run
+
+from lab.search.config import SearchAgentConfig
+from lab.search.motion import MotionModel, predict
+from lab.search.probability_map import LocalSearchDetection, ProbabilityMap
+
+DISTRACTOR, OBJECT = (1.5, 0.5), (-1.5, 1.9)
+PEAKS = [(DISTRACTOR, 0.9), (OBJECT, 0.6)]
+
+
+def record(out):
+    return [(e.t, e.kind, e.cell, e.detail) for e in out.events], [s.P for s in out.snapshots], out.P_final
+
+
+@pytest.mark.parametrize("motion", [None, MotionModel(speed_mps=0.0)])
+def test_without_a_moving_object_the_run_is_the_static_one_bit_for_bit(monkeypatch, motion):
+    static, _, _ = scripted_run(monkeypatch, OBJECT, PEAKS)
+    other, _, _ = scripted_run(monkeypatch, OBJECT, PEAKS, config=SearchAgentConfig(motion=motion))
+    ev0, snaps0, P0 = record(static)
+    ev1, snaps1, P1 = record(other)
+    assert ev1 == ev0
+    assert len(snaps1) == len(snaps0) and all(
+        np.array_equal(a, b) for a, b in zip(snaps0, snaps1, strict=True)
+    )
+    assert np.array_equal(P1, P0)
+
+
+def test_a_moving_object_map_is_predicted_on_the_robots_clock(monkeypatch):
+    """Between the global search's update and the failed local search's, the map diffuses for exactly
+    the robot time that passed: the snapshot after the miss is Eq. (1) applied to the predicted map."""
+    model = MotionModel(speed_mps=0.05)
+    out, _, _ = scripted_run(monkeypatch, OBJECT, PEAKS, config=SearchAgentConfig(motion=model))
+    assert out.found
+    g = [s for s in out.snapshots if s.label == "global search"][0]
+    miss = [s for s in out.snapshots if s.label == "local search failed"][0]
+    # recompute: predict the global snapshot to the miss's time, then the local miss's update
+    P = predict(g.P, np.ones(SPEC.shape, bool), miss.t - g.t, model, SPEC.resolution)
+    pmap = ProbabilityMap(SPEC, P)
+    cfg = SearchAgentConfig().local_search
+    pmap.observe(LocalSearchDetection(miss.cell, 0, cfg.detection))
+    np.testing.assert_allclose(miss.P, pmap.P, rtol=1e-9, atol=1e-15)
+    assert abs(miss.P.sum() - 1.0) < 1e-12
+
+
+def test_a_moving_object_is_never_excluded_for_good(monkeypatch):
+    """A cell two failed searches answered for is excluded for a stationary object; a moving object
+    may come back, so with the prediction step mass flows back in and nothing is excluded."""
+    far_object = (2.5, 3.5)
+    cfg = SearchAgentConfig(motion=MotionModel(speed_mps=0.05))
+    out, _, _ = scripted_run(
+        monkeypatch, far_object, [(DISTRACTOR, 0.95)], max_time=400.0, config=cfg, visible=lambda p: False
+    )
+    assert not any(e.kind == "exclude" for e in out.events)
+    static, _, _ = scripted_run(
+        monkeypatch, far_object, [(DISTRACTOR, 0.95)], max_time=400.0, visible=lambda p: False
+    )
+    assert any(e.kind == "exclude" for e in static.events)
+
+
+def test_the_passable_mask_is_read_from_the_agent(monkeypatch):
+    """The agent asks ``passable()`` at each prediction; a wall across the map changes the prediction
+    (the unit tests of lab/search/motion.py show that no mass crosses it)."""
+    import lab.search.agent as agent_mod
+    from lab.search.agent import SearchAgent
+
+    calls = []
+    orig = SearchAgent.__init__
+
+    def init(self, *a, **k):
+        wall = np.ones(SPEC.shape, bool)
+        wall[:, 25] = False
+        k["passable"] = lambda: calls.append(1) or wall
+        orig(self, *a, **k)
+
+    cfg = SearchAgentConfig(motion=MotionModel(speed_mps=0.1))
+    open_room, _, _ = scripted_run(monkeypatch, OBJECT, PEAKS, config=cfg)
+    monkeypatch.setattr(agent_mod.SearchAgent, "__init__", init)
+    walled, _, _ = scripted_run(monkeypatch, OBJECT, PEAKS, config=cfg)
+    assert calls
+    assert not np.array_equal(walled.P_final, open_room.P_final)
+    assert walled.P_final.sum() == pytest.approx(1.0, abs=1e-12)
