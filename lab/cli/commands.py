@@ -133,6 +133,17 @@ def _cmd_identify(args) -> int:
     return 0
 
 
+def _moving(args):
+    """``lab search``'s moving object (--moving, --object-speed, --pause, --static-map), or None."""
+    if args.moving is None:
+        if args.static_map:
+            raise LabError("--static-map is the baseline for a moving object: give --moving too")
+        return None
+    from lab.runs.moving import MovingOptions
+
+    return MovingOptions(args.moving, args.object_speed, args.pause, predict=not args.static_map)
+
+
 def _cmd_search(args) -> int:
     import json as _json
 
@@ -169,6 +180,7 @@ def _cmd_search(args) -> int:
         robot_config=args.robot,
         truth=args.truth,
         start=args.start,
+        moving=_moving(args),
     )
     data = res.to_json()
     if args.json is not None:

@@ -271,6 +271,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
     se.add_argument("--obstacles", action="store_true", help="drop obstacles on the straight path")
     se.add_argument(
+        "--moving",
+        choices=("random", "evasive"),
+        help="the object moves on a carrier over the floor (simulator only): random, a random walk in free "
+        "space; evasive, it leaves the camera's view when seen. The search then predicts its map between "
+        "updates (default: the stationary object of the paper)",
+    )
+    se.add_argument(
+        "--object-speed", type=float, default=0.1, help="with --moving: its speed [m/s] (default 0.1)"
+    )
+    se.add_argument(
+        "--pause", type=float, default=5.0, help="with --moving: its pause after each leg [s] (default 5)"
+    )
+    se.add_argument(
+        "--static-map",
+        action="store_true",
+        help="with --moving: the baseline, a search whose map does not predict the motion",
+    )
+    se.add_argument(
         "--strategy",
         default="paper",
         choices=("paper", "rate", "lawnmower", "frontier"),

@@ -48,6 +48,7 @@ from lab.geometry import Rz, se3
 from lab.localization import LocalizationMode
 from lab.navigation.grid import GridSpec
 from lab.robot import Robot
+from lab.runs.moving import MovingOptions, agent_config, found_time, passable_of, start_mover
 from lab.runs.placement import (
     check_placement,
     circle_polygon,
@@ -195,6 +196,9 @@ class TrialOptions:
         ``place``); the run is then scored against it.
     emulator_setup : callable, optional
         A rehearsal's fault injection (:func:`lab.runs.rehearsal.rehearsal`).
+    moving : MovingOptions, optional
+        The simulator only: the object moves over the floor, and the agent predicts it unless it is the
+        static-map baseline (:mod:`lab.runs.moving`). None: the paper's stationary object.
     """
 
     place: tuple | None = None
@@ -215,6 +219,7 @@ class TrialOptions:
     truth: object = None
     emulator_setup: Callable | None = None
     start: tuple | None = None
+    moving: MovingOptions | None = None
 
 
 def run_search(
@@ -239,6 +244,7 @@ def run_search(
     truth=None,
     emulator_setup: Callable | None = None,
     start=None,
+    moving: MovingOptions | None = None,
 ) -> SearchResult:
     """Run one search trial (in the simulator, a rehearsal or on the robot) and score it.
 
@@ -266,6 +272,7 @@ def run_search(
         truth=truth,
         emulator_setup=emulator_setup,
         start=start,
+        moving=moving,
     )
     return run_trial(object, seed, options)
 
@@ -287,6 +294,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     scene, place, surface, obstacle_poses, G_WO_measured = _trial_world(kind, scene, object, opts, rng)
     db = search_database(object, progress=opts.progress)
     cfg = replace(opts.config or SearchAgentConfig(), strategy=strategy)
+    cfg = cfg if opts.moving is None else agent_config(cfg, opts.moving)
     spec = map_spec(scene)
     with contextlib.ExitStack() as stack:
         run, truth_of = _session(stack, kind, hw, scene, object, seed, opts, G_WO_measured)
@@ -332,6 +340,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
         robot=run.name,
         watchdog_stops=watchdog,
         t0=t0,
+        moving=None if opts.moving is None else {**opts.moving.as_dict(), "truth_time_s": truth_end.time_s},
     )
 
 
@@ -340,6 +349,8 @@ def _trial_world(kind: RobotKind, scene: Scene, object: str, opts: TrialOptions,
     the measured truth: returns the scene, the placement, its surface, the obstacles' poses and the
     object's measured pose G_WO (None but on the real robot with ``truth``)."""
     place, truth = opts.place, opts.truth
+    if opts.moving is not None and kind is not RobotKind.SIM:
+        raise ConfigError("--moving moves a simulated object; with --robot the object is what you move")
     if kind is RobotKind.HARDWARE:
         G_WO_measured = _check_real_robot_trial(scene, object, place, opts.obstacles, truth)
         place, surface, obstacle_poses = (None if truth is None else tuple(float(v) for v in truth)), None, []
@@ -349,7 +360,8 @@ def _trial_world(kind: RobotKind, scene: Scene, object: str, opts: TrialOptions,
             "--truth is the object's measured pose on the real robot; in the simulator and a rehearsal "
             "the truth is known (put the object with --place)"
         )
-    scene, place, surface, obstacle_poses = _place_object(scene, object, place, opts.obstacles, rng)
+    floor = None if opts.moving is None else "floor"  # a moving object rides a carrier on the floor
+    scene, place, surface, obstacle_poses = _place_object(scene, object, place, opts.obstacles, rng, floor)
     return scene, place, surface, obstacle_poses, None
 
 
@@ -361,6 +373,7 @@ class _TruthOf:
     G_WC: Callable  # () -> the camera in W at the last frame or None
     robot_pose: Callable  # () -> Pose2D of the base in W or None
     collisions: Callable  # () -> int
+    G_WO_at: Callable | None = None  # (t) -> the object in W at robot time t (a moving object)
 
 
 def _session(stack, kind, robot_config, scene, object, seed, opts: TrialOptions, G_WO):
@@ -372,7 +385,8 @@ def _session(stack, kind, robot_config, scene, object, seed, opts: TrialOptions,
         w = stack.enter_context(SimWorld(scene, RenderSettings(supersample=supersample)))
         run = stack.enter_context(make_robot(world=w, seed=seed, sensing=sensing))
         t = w.truth
-        return run, _TruthOf(lambda: t.G_W(object), t.G_WC, t.robot_pose, lambda: int(t.collisions))
+        at = None if opts.moving is None else start_mover(w, object, opts.moving, seed).G_WO_at
+        return run, _TruthOf(lambda: t.G_W(object), t.G_WC, t.robot_pose, lambda: int(t.collisions), at)
     robot = make_robot(robot_config, seed=seed, scene=scene, emulator_setup=emulator_setup, sensing=sensing)
     run = stack.enter_context(robot)
     bumps = lambda: int(run.robot.bumps)  # noqa: E731 - the bumpers' count: a robot's own collisions
@@ -453,7 +467,10 @@ def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, 
     navigator = drive.navigator if isinstance(drive, NavigatorAdapter) else None
     policy = ReportPolicy(tracked, drive, navigator, check=budget.check)
     nav = policy.relocalizing()
-    agent = SearchAgent(budget, db, nav, ProbabilityMap(spec), cfg, rng=np.random.default_rng([seed, 1]))
+    passable = passable_of(drive, spec) if cfg.motion is not None else None
+    agent = SearchAgent(
+        budget, db, nav, ProbabilityMap(spec), cfg, rng=np.random.default_rng([seed, 1]), passable=passable
+    )
     if recorder is not None:
         from lab.viz.live import LiveView
 
@@ -466,12 +483,14 @@ def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, 
     if out.reason != INTERRUPTED:
         out, report_reloc = policy.report(out)
     tracked.record(force=True)  # where the run ended
+    t_found = found_time(out) if truth_of.G_WO_at is not None else None  # a moving object: at the find
     truth = TrialTruth(
-        G_WO=truth_of.G_WO(),
+        G_WO=truth_of.G_WO() if t_found is None else truth_of.G_WO_at(t_found),
         G_WC=G_WC,
         robot_pose=truth_of.robot_pose(),
         collisions=truth_of.collisions(),
         robot_time_s=robot.now(),
+        time_s=robot.now() if t_found is None else t_found,
     )
     return out, truth, budget, robot.base.odometry(), tracked.track(), report_reloc
 
@@ -521,12 +540,19 @@ def _check_trial(scene: Scene, object: str, navigate, max_time, record):
     return Recorder(record)
 
 
-def _place_object(scene: Scene, object: str, place, obstacles: bool, rng: np.random.Generator):
-    """Put the object at ``place`` (checked) or at a seeded random valid spot, and the path's obstacles:
-    returns the scene, the placement, its surface and the obstacles' poses."""
+def _place_object(scene: Scene, object: str, place, obstacles: bool, rng: np.random.Generator, floor=None):
+    """Put the object at ``place`` (checked) or at a seeded random valid spot (on the ``floor`` only
+    when it is ``"floor"``), and the path's obstacles: returns the scene, the placement, its surface and
+    the obstacles' poses."""
     if place is None:
-        place = random_placement(scene, object, rng)
+        place = (
+            random_placement(scene, object, rng)
+            if floor is None
+            else random_placement(scene, object, rng, floor)
+        )
     surface = check_placement(scene, object, place).kind
+    if floor is not None and surface != floor:
+        raise ConfigError(f"--moving puts the object on the floor; --place put it on the {surface}")
     place = tuple(float(v) for v in place)
     scene = scene.with_pose(object, place)
     obstacle_poses: list = []

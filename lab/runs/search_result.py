@@ -133,6 +133,10 @@ class SearchResult:
         ``sim``, or the robot config's path.
     watchdog_stops : int or None
         How often the robot's watchdog stopped the base (None in the simulator).
+    moving : dict or None
+        A moving object's trial (``lab search --moving``): its kind, speed, pause, whether the agent
+        predicted it, and ``truth_time_s``, the robot time of the truth the find is scored against (the
+        moment it was confirmed); None (and absent from the JSON) for a stationary object.
     t0 : float [s]
         The robot's time at the start of the search (0 in the simulator): the JSON's event and snapshot
         times are from it.
@@ -173,6 +177,7 @@ class SearchResult:
     robot: str = "sim"
     watchdog_stops: int | None = None
     t0: float = 0.0
+    moving: dict | None = None
 
     @property
     def interrupted(self) -> bool:
@@ -226,7 +231,7 @@ class SearchResult:
                 }
                 for s in snaps
             ],
-        }
+        } | ({} if self.moving is None else {"moving": self.moving})
 
 
 def _round(v: float | None, digits: int) -> float | None:
@@ -300,3 +305,4 @@ class TrialTruth:
     robot_pose: object  # Pose2D of the base, or None
     collisions: int
     robot_time_s: float  # the robot's clock at the end
+    time_s: float | None = None  # the robot's clock when G_WO was read (a moving object: at the find)

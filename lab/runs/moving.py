@@ -1,0 +1,111 @@
+"""A search trial with an object that moves (``lab search --moving random|evasive``).
+
+The object stands on the floor (its placement is drawn on the floor only) and rides a carrier of the
+world (:mod:`lab.sim.moving_object`) at ``--object-speed``, pausing ``--pause`` after each leg. The
+agent, unless it is the static-map baseline (``predict=False``), runs the probability map's prediction
+step (:mod:`lab.search.motion`) with the object's speed as its speed bound, over the cells its
+navigator's costmap leaves passable, and its local search's pose EKF lets the object move by the same
+bound (:class:`~lab.estimation.noise.ProcessNoise` ``sigma_v``). A find is scored against the truth
+at the moment it was confirmed (the local search's event), which the result records as
+``moving.truth_time_s``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from lab.errors import ConfigError
+from lab.search.config import SearchAgentConfig
+from lab.search.motion import MotionModel, passable_from_costmap
+
+__all__ = ["MovingOptions", "agent_config", "found_time", "passable_of", "start_mover"]
+
+MOVING_KINDS = ("random", "evasive")
+
+
+@dataclass(frozen=True)
+class MovingOptions:
+    """How the searched-for object moves, and whether the agent predicts it.
+
+    Attributes
+    ----------
+    kind : {"random", "evasive"}
+    speed_mps : float [m/s]
+        The object's speed on a leg; the agent's speed bound.
+    pause_s : float [s]
+        How long it stands after each leg.
+    predict : bool
+        The agent's map has the prediction step (False: the static-map baseline on the same motion).
+    """
+
+    kind: str = "random"
+    speed_mps: float = 0.1
+    pause_s: float = 5.0
+    predict: bool = True
+
+    def __post_init__(self):
+        if self.kind not in MOVING_KINDS:
+            raise ConfigError(f"--moving must be one of {', '.join(MOVING_KINDS)}, got {self.kind!r}")
+        if not (
+            isinstance(self.speed_mps, (int, float)) and math.isfinite(self.speed_mps) and self.speed_mps > 0
+        ):
+            raise ConfigError(f"--object-speed must be a finite number > 0 m/s, got {self.speed_mps!r}")
+        if not (_number(self.pause_s) and self.pause_s >= 0):
+            raise ConfigError(f"--pause must be a finite number >= 0 s, got {self.pause_s!r}")
+
+    def as_dict(self) -> dict:
+        """The result JSON's ``moving`` (the trial adds ``truth_time_s``)."""
+        return {
+            "kind": self.kind,
+            "speed_mps": self.speed_mps,
+            "pause_s": self.pause_s,
+            "predict": self.predict,
+        }
+
+
+def _number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def agent_config(cfg: SearchAgentConfig, moving: MovingOptions) -> SearchAgentConfig:
+    """The agent's config for a moving object: the map's motion model and the pose EKF's object motion
+    at the speed bound (the baseline keeps the static config)."""
+    if not moving.predict:
+        return cfg
+    ls = cfg.local_search
+    process = replace(ls.process, sigma_v=float(moving.speed_mps))  # constant position, velocity noise
+    return replace(
+        cfg, motion=MotionModel(speed_mps=float(moving.speed_mps)), local_search=replace(ls, process=process)
+    )
+
+
+def start_mover(world, object: str, moving: MovingOptions, seed: int):
+    """Put the object of a simulated world on its carrier (seeded apart from the trial's other draws)."""
+    from lab.sim.moving_object import MovingKind, MovingObjectConfig, make_moving_object
+
+    cfg = MovingObjectConfig(MovingKind(moving.kind), float(moving.speed_mps), float(moving.pause_s))
+    return make_moving_object(world, object, cfg, np.random.default_rng([int(seed), 50]))
+
+
+def passable_of(navigate, spec):
+    """``passable()`` for the agent from the navigator's costmap (the robot's belief), or None (every
+    cell) when the navigate callable has no navigator."""
+    navigator = getattr(navigate, "navigator", None)
+    if navigator is None:
+        return None
+    costmap = navigator.costmap
+    return lambda: passable_from_costmap(costmap.state, costmap.spec, spec)
+
+
+def found_time(out) -> float | None:
+    """The robot time at which the run's find was confirmed: its last local-search event; None when
+    not found."""
+    if not out.found:
+        return None
+    for e in reversed(out.events):
+        if e.kind == "local":
+            return e.t
+    return out.t_end
