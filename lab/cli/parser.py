@@ -466,6 +466,16 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("--localization", help="comma-separated: landmarks, odometry (default landmarks)")
     es.add_argument("--max-time", type=float, help="sim-time budget per trial [s] (default 600)")
     es.add_argument("--max-wall-time", type=float, help="the trial's own wall-clock cap [s] (default none)")
+    es.add_argument(
+        "--moving",
+        choices=("random", "evasive"),
+        help="the object moves (floor placements): each trial runs with the map's prediction step and with "
+        "the static-map baseline",
+    )
+    es.add_argument(
+        "--object-speed", type=float, help="with --moving: the object's speed [m/s] (default 0.1)"
+    )
+    es.add_argument("--pause", type=float, help="with --moving: its pause after each leg [s] (default 5)")
     _sweep_run_arguments(es)
     sp = evs.add_parser(
         "spend",

@@ -67,7 +67,7 @@ def search_sweep(args):
     wall = spec.get("max_wall_time")
     sw = SearchSweep(
         objects=_names(spec.get("objects", "cereal_box,book,toy_block")),
-        surfaces=_names(spec.get("surfaces", "floor,table,shelf")),
+        surfaces=_names(spec.get("surfaces", "floor" if spec.get("moving") else "floor,table,shelf")),
         seeds=_ints(spec["seeds"], "seeds") if "seeds" in spec else tuple(fresh_report_seeds(SEARCH_SEEDS)),
         strategies=_names(spec.get("strategies", ",".join(STRATEGIES))),
         obstacles=str(spec.get("obstacles", "both")),
@@ -75,6 +75,9 @@ def search_sweep(args):
         localization=_names(spec.get("localization", "landmarks")),
         max_time=float(spec.get("max_time", SEARCH_MAX_TIME_S)),
         max_wall_time=None if wall is None else float(wall),
+        moving=spec.get("moving"),
+        object_speed=float(spec.get("object_speed", 0.1)),
+        pause=float(spec.get("pause", 5.0)),
     )
     sw.check()
     return sw
@@ -101,9 +104,10 @@ def run_eval(args) -> int:
     if args.eval_command == "identify":
         sw, kind = identify_sweep(args), IDENTIFY  # every check before anything starts
     elif args.eval_command == "search":
-        from lab.eval.search import SEARCH
+        from lab.eval.search import SEARCH, SEARCH_MOVING
 
-        sw, kind = search_sweep(args), SEARCH
+        sw = search_sweep(args)
+        kind = SEARCH if sw.moving is None else SEARCH_MOVING
     else:
         raise ConfigError(f"unknown sweep {args.eval_command!r}; sweeps: identify, search, spend")
     if args.retries < 0:

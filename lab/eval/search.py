@@ -11,13 +11,18 @@ the job runs. These are the placements ``benchmarks/eval_search.py`` has always 
 for figures) plus ``obstacles_on_path`` (the boxes were asked for) and ``shortest_path_m``, the shortest
 collision-free path from the start to local search range of the object on the scene's true occupancy
 (evaluation only, the robot never sees it), from which the report computes SPL (success weighted by path
-length)."""
+length).
+
+**A moving object** (``--moving random|evasive``, :mod:`lab.runs.moving`): the floor placements only,
+and every trial twice on the same placement, seed and motion: with the map's prediction step
+(``map = predict``) and the static-map baseline (``map = static``); the report groups by both.
+"""
 
 from __future__ import annotations
 
 import math
 import statistics
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from lab.errors import ConfigError
 from lab.eval.executor import Job
@@ -26,6 +31,7 @@ from lab.eval.sweep import SweepKind
 __all__ = [
     "SEARCH",
     "SEARCH_FIELDS",
+    "SEARCH_MOVING",
     "SEARCH_MAX_TIME_S",
     "SearchSweep",
     "search_job",
@@ -45,7 +51,13 @@ SEARCH_FIELDS = (
     "localization",
     "max_time",
     "max_wall_time",
+    "moving",
+    "object_speed",
+    "pause",
 )
+
+MOVING_KINDS = ("random", "evasive")
+MAPS = ("predict", "static")  # the map of a moving-object trial: with the prediction step, the baseline
 
 STRATEGIES = ("paper", "rate", "lawnmower", "frontier")
 OBSTACLES = {"no": (False,), "yes": (True,), "both": (False, True)}
@@ -87,6 +99,9 @@ class SearchSweep:
     localization: tuple[str, ...] = ("landmarks",)
     max_time: float = SEARCH_MAX_TIME_S
     max_wall_time: float | None = None
+    moving: str | None = None
+    object_speed: float = 0.1
+    pause: float = 5.0
 
     def check(self) -> None:
         from lab.runs.placement import SURFACES, searchable_objects
@@ -123,6 +138,14 @@ class SearchSweep:
             raise ConfigError(f"max_time must be > 0 s, got {self.max_time}")
         if self.max_wall_time is not None and not self.max_wall_time > 0:
             raise ConfigError(f"max_wall_time must be > 0 s, got {self.max_wall_time}")
+        if self.moving is not None:
+            if self.moving not in MOVING_KINDS:
+                raise ConfigError(f"unknown --moving {self.moving!r}; allowed: {', '.join(MOVING_KINDS)}")
+            if tuple(self.surfaces) != ("floor",):
+                raise ConfigError("a moving object rides on the floor: --surfaces floor")
+            from lab.runs.moving import MovingOptions
+
+            MovingOptions(self.moving, self.object_speed, self.pause)  # one clear line for a bad speed
 
     def jobs(self) -> list[Job]:
         """Every trial; the shelf's last (the slowest), strategies next to each other on a placement."""
@@ -150,8 +173,15 @@ class SearchSweep:
                                         placement_key=[seed, objects.index(name), SURFACES.index(surface)],
                                     )
                                     key = search_key(strategy, ob, sensing, name, surface, seed, loc)
-                                    out.append(Job(key, search_job, kw))
+                                    out.extend(self._moving_jobs(key, kw))
         return out
+
+    def _moving_jobs(self, key: str, kw: dict) -> list[Job]:
+        """The job of a stationary object as it always was; for a moving one, one job per map."""
+        if self.moving is None:
+            return [Job(key, search_job, kw)]
+        motion = dict(moving=self.moving, object_speed=self.object_speed, pause=self.pause)
+        return [Job(f"{key}_moving-{self.moving}-{m}", search_job, {**kw, **motion, "map": m}) for m in MAPS]
 
 
 def shortest_path_m(scene, place, local_max_m: float, local_min_m: float) -> float:
@@ -197,11 +227,16 @@ def search_job(
     max_wall_time: float | None,
     placement_key: list[int],
     localization: str = "landmarks",
+    moving: str | None = None,
+    object_speed: float = 0.1,
+    pause: float = 5.0,
+    map: str = "static",
 ) -> dict:
     """One search trial in this worker process (its own PyBullet client): the ``lab search --json``
     result without its map snapshots, with ``shortest_path_m``."""
     import numpy as np
 
+    from lab.runs.moving import MovingOptions
     from lab.runs.placement import random_placement
     from lab.runs.search import navigator_factory, run_search
     from lab.scene import load_scene
@@ -220,9 +255,14 @@ def search_job(
         max_wall_time=max_wall_time,
         sensing=sensing,
         localization=localization,
+        moving=None
+        if moving is None
+        else MovingOptions(moving, object_speed, pause, predict=map == "predict"),
     )
     d = r.to_json()
     d["n_snapshots"] = len(d.pop("map_snapshots", []))
+    if moving is not None:
+        d["truth_time_s"] = d["moving"]["truth_time_s"]
     d["obstacles_on_path"] = bool(obstacles)  # asked for (``obstacles`` lists the boxes that fit)
     lc = SearchAgentConfig().local_search
     sp = shortest_path_m(r.trace.scene, place, lc.max_distance_m, lc.min_distance_m)
@@ -289,4 +329,20 @@ SEARCH = SweepKind(
         f"success {res['success']} (found {res['found']}), path {res['path_length_m']:.1f} m, "
         f"{res['sim_time_s']:.1f} s sim: {res['reason']}"
     ),
+)
+
+#: ``lab eval search --moving``: the same sweep, its rows grouped by the motion and the map as well.
+SEARCH_MOVING = replace(
+    SEARCH,
+    columns=(
+        *SEARCH.columns[:-2],
+        "moving",
+        "map",
+        "object_speed",
+        "pause",
+        "truth_time_s",
+        *SEARCH.columns[-2:],
+    ),
+    params=(*SEARCH.params, "moving", "map", "object_speed", "pause"),
+    conditions=("moving", "map", *SEARCH.conditions),
 )

@@ -1,0 +1,64 @@
+"""`lab eval search --moving`: every trial twice on the same floor placement, seed and motion (the
+map's prediction step and the static-map baseline), each job the `lab search --moving` run it names,
+and the report grouped by motion and map; bad moving sweeps refused in one line."""
+
+import csv
+import json
+
+import numpy as np
+from test_eval_search import _strip
+
+from lab.cli import main
+from lab.runs.placement import random_placement, searchable_objects
+from lab.scene import load_scene
+
+SWEEP = ["--objects", "toy_block", "--seeds", "3", "--strategies", "paper", "--obstacles", "no",
+         "--sensing", "ideal", "--max-time", "0.5", "--moving", "random"]  # fmt: skip
+
+
+def test_a_moving_sweep_runs_both_maps_on_the_same_trials(tmp_path):
+    out = tmp_path / "sweep"
+    assert main(["eval", "search", *SWEEP, "--out", str(out)]) == 0
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    base = "paper_free_ideal_landmarks_toy_block_floor_s3_moving-random"
+    assert [r["key"] for r in rows] == [f"{base}-predict", f"{base}-static"]
+    jobs = [json.loads((out / "jobs" / f"{r['key']}.json").read_text()) for r in rows]
+    assert jobs[0]["place"] == jobs[1]["place"] and jobs[0]["surface"] == "floor"
+    assert [j["moving"]["predict"] for j in jobs] == [True, False]
+    assert all(j["truth_time_s"] == j["moving"]["truth_time_s"] for j in jobs)
+    assert [r["map"] for r in rows] == ["predict", "static"] and {r["moving"] for r in rows} == {"random"}
+    # the peer: `lab search --moving random` at that placement, same seed and budget
+    rng = np.random.default_rng([3, searchable_objects().index("toy_block"), 0])
+    place = ",".join(map(repr, random_placement(load_scene("lab_room"), "toy_block", rng, "floor")))
+    for job, extra in zip(jobs, ([], ["--static-map"]), strict=True):
+        peer = tmp_path / "peer.json"
+        argv = ["search", "--object", "toy_block", "--seed", "3", "--place=" + place, "--sensing", "ideal",
+                "--max-time", "0.5", "--moving", "random", *extra, "--json", str(peer)]  # fmt: skip
+        assert main(argv) == 0
+        got = {k: v for k, v in job.items() if k != "truth_time_s"}
+        assert _strip(got) == _strip(json.loads(peer.read_text()))
+    report = (out / "report.md").read_text()
+    assert "| random | predict | paper |" in report and "| random | static | paper |" in report
+
+
+def test_bad_moving_sweeps_are_refused_in_one_line(tmp_path, capsys):
+    out = tmp_path / "o"
+    cases = [
+        ([*SWEEP, "--surfaces", "table", "--out", str(out)], "a moving object rides on the floor"),
+        ([*SWEEP, "--object-speed", "0", "--out", str(out)], "--object-speed must be a finite number > 0"),
+        ([*SWEEP, "--pause", "-1", "--out", str(out)], "--pause must be a finite number >= 0"),
+    ]
+    for argv, msg in cases:
+        assert main(["eval", "search", *argv]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and msg in err[0], (argv, err)
+        assert not out.exists()
+
+
+def test_lab_search_moving_refuses_what_it_cannot_do(capsys):
+    assert main(["search", "--object", "book", "--static-map", "--max-time", "1"]) == 2
+    assert "--static-map is the baseline for a moving object" in capsys.readouterr().err
+    bad = ["search", "--object", "book", "--moving", "random", "--place", "1.9,2.6,0.75,0"]  # on table_a
+    assert main(bad) == 2
+    err = capsys.readouterr().err
+    assert "--moving puts the object on the floor; --place put it on the table" in err
