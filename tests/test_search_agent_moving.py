@@ -50,19 +50,32 @@ def test_a_moving_object_map_is_predicted_on_the_robots_clock(monkeypatch):
     assert abs(miss.P.sum() - 1.0) < 1e-12
 
 
-def test_a_moving_object_is_never_excluded_for_good(monkeypatch):
-    """A cell two failed searches answered for is excluded for a stationary object; a moving object
-    may come back, so with the prediction step mass flows back in and nothing is excluded."""
+def test_a_distractor_is_given_up_for_a_moving_object_too(monkeypatch):
+    """A thing of the object's colours stays put while the object moves: the cells two failed searches
+    answered for are excluded as for a stationary object (without it the robot went back to a
+    distractor again and again), while the prediction keeps moving mass into them."""
     far_object = (2.5, 3.5)
-    cfg = SearchAgentConfig(motion=MotionModel(speed_mps=0.05))
-    out, _, _ = scripted_run(
-        monkeypatch, far_object, [(DISTRACTOR, 0.95)], max_time=400.0, config=cfg, visible=lambda p: False
-    )
-    assert not any(e.kind == "exclude" for e in out.events)
-    static, _, _ = scripted_run(
-        monkeypatch, far_object, [(DISTRACTOR, 0.95)], max_time=400.0, visible=lambda p: False
-    )
-    assert any(e.kind == "exclude" for e in static.events)
+    motion = MotionModel(speed_mps=0.05)
+
+    def near_distractor(config):
+        out, script, _ = scripted_run(
+            monkeypatch,
+            far_object,
+            [(DISTRACTOR, 0.95)],
+            max_time=400.0,
+            config=config,
+            visible=lambda p: False,
+        )
+        dx, dy = SPEC.cell_to_world(*SPEC.world_to_cell(*DISTRACTOR))
+        near = [
+            c for c in script.local_cells if np.hypot(*np.subtract(SPEC.cell_to_world(*c), (dx, dy))) < 0.45
+        ]
+        return out, len(near)
+
+    out, n = near_distractor(SearchAgentConfig(motion=motion))
+    off, n_off = near_distractor(SearchAgentConfig(motion=motion, max_local_misses=0))
+    assert any(e.kind == "exclude" for e in out.events) and not any(e.kind == "exclude" for e in off.events)
+    assert n <= 3 < n_off  # given up after the misses; without the exclusion it keeps going back
 
 
 def test_the_passable_mask_is_read_from_the_agent(monkeypatch):

@@ -478,7 +478,7 @@ class SearchAgent:
         """The map's strategies (paper, rate) give up the cells ``max_local_misses`` failed searches
         answered for."""
         m = self.config.max_local_misses
-        if self.config.strategy not in (Strategy.PAPER, Strategy.RATE) or m == 0 or self.moving:
+        if self.config.strategy not in (Strategy.PAPER, Strategy.RATE) or m == 0:
             return
         new = (self._misses >= m) & ~self._excluded
         if new.any():

@@ -85,9 +85,10 @@ class SearchAgentConfig:
         Safety bound on the loop (the time budget normally ends it first).
     motion : MotionModel, optional
         A moving object's motion model: before every map update and every choice of the next target the
-        map is predicted over the time since the last prediction (:mod:`lab.search.motion`), and no cell
-        is excluded for good after failed searches (mass flows back into it). None (the default) or a
-        speed of 0: the paper's stationary object, the map untouched between updates.
+        map is predicted over the time since the last prediction (:mod:`lab.search.motion`). Cells that
+        ``max_local_misses`` failed searches answered for are still given up: a distractor of the
+        object's colours stays put while the object moves (docs/tuning/search-moving-object.md). None
+        (the default) or a speed of 0: the paper's stationary object, the map untouched between updates.
     """
 
     strategy: Strategy = Strategy.PAPER
