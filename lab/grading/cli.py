@@ -7,6 +7,7 @@ from pathlib import Path
 
 from lab.errors import ConfigError
 from lab.grading.assignments import Assignment, get_assignment, list_assignments
+from lab.grading.isolation import make_grader_private
 from lab.grading.report import GradeReport, write_scores_csv
 from lab.grading.runner import choose_sandbox, grade_submission
 
@@ -79,6 +80,9 @@ def _batch(chosen: list[Assignment], folder: Path, args) -> int:
     if not students:
         raise ConfigError(f"{folder} has no student subfolders")
     rows: list[tuple[str, list[GradeReport]]] = []
+    if choose_sandbox(getattr(args, "insecure", False)).kind == "uid":
+        # the uid mode's children see the filesystem: no student may read a classmate's folder
+        make_grader_private([folder, *([Path(args.out)] if args.out else [])])
     for s in students:
         # each student's every test in a sandbox of its own that sees only that student's copy
         reports = [
