@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
+from grade_modes import *  # noqa: F403  (the fixtures grading_mode and any_mode)
 
 from lab.cli import main
 from lab.grading import get_assignment, grade_submission
@@ -106,7 +107,7 @@ def _assert_refused(report, words):
     assert any(words in r.output for r in report.tests)  # the student reads it in the feedback
 
 
-def test_reading_the_reference_solution_by_path(tmp_path, template):
+def test_reading_the_reference_solution_by_path(tmp_path, template, grading_mode):
     attack = (
         FIND
         + """
@@ -119,12 +120,12 @@ if _src:
     assert _scores_without_sandbox(sub) == 2  # without the sandbox the attack works
     report = grade_submission(EKF, sub)
     assert report.score == 0, report.summary()
-    assert report.sandbox == "bwrap-uid" or report.sandbox == "bwrap-userns"
+    assert report.sandbox == find_sandbox().kind and report.sandbox.startswith(grading_mode)
     _assert_refused(report, f"open {ASSIGNMENTS}/ekf/ekf.py: ")  # outside the submission, or (a clone
     # under /tmp) outside the sandbox
 
 
-def test_reading_the_graded_tests_and_using_their_oracles(tmp_path, template):
+def test_reading_the_graded_tests_and_using_their_oracles(tmp_path, template, grading_mode):
     attack = (
         FIND
         + """
@@ -160,7 +161,7 @@ if _src:
     _assert_refused(report, f"open {ASSIGNMENTS}/ekf/hidden_tests.py: ")
 
 
-def test_importing_the_course_library_past_the_import_blocker(tmp_path, template):
+def test_importing_the_course_library_past_the_import_blocker(tmp_path, template, grading_mode):
     attack = """
 import importlib, pkgutil, sys
 
@@ -191,7 +192,7 @@ if lab is not None:  # wherever the library keeps its estimation code
 
 
 @pytest.mark.parametrize("kind", ["symlink", "linked_folder", "fifo", "folder"])
-def test_a_module_that_is_not_a_regular_file_is_refused(tmp_path, kind):
+def test_a_module_that_is_not_a_regular_file_is_refused(tmp_path, kind, any_mode):
     sub = tmp_path / "student"
     sub.mkdir()
     if kind == "symlink":
@@ -212,7 +213,7 @@ def test_a_module_that_is_not_a_regular_file_is_refused(tmp_path, kind):
     assert all(said in r.output for r in report.tests)
 
 
-def test_writing_the_graders_memory_through_proc(tmp_path, template):
+def test_writing_the_graders_memory_through_proc(tmp_path, template, grading_mode):
     grader = os.getpid()
     attack = f"""
 import os
@@ -236,7 +237,7 @@ print("opened the memory of", _opened)
     assert libc.prctl(3, 0, 0, 0, 0) == 0  # PR_GET_DUMPABLE: the grading process is not dumpable
 
 
-def test_a_detached_process_cannot_rewrite_results_after_the_grader(tmp_path, template):
+def test_a_detached_process_cannot_rewrite_results_after_the_grader(tmp_path, template, grading_mode):
     results = tmp_path / "results" / "results.json"
     fake = json.dumps({"score": 6.0, "tests": []})
     attack = f"""
@@ -267,11 +268,12 @@ _detach()
     time.sleep(1.5)  # longer than the detached process would wait
     assert results.read_text() == written
     data = json.loads(written)
-    assert data["score"] == 0 and data["extra_data"]["sandbox"].startswith("bwrap")
+    assert data["score"] == 0 and data["extra_data"]["sandbox"].startswith(grading_mode)
+    assert data["extra_data"]["secure"] is True
     assert any("starting a process" in n for n in data["extra_data"]["refused"])
 
 
-def test_every_process_of_a_sandbox_is_gone_when_it_is_ended(tmp_path):
+def test_every_process_of_a_sandbox_is_gone_when_it_is_ended(tmp_path, grading_mode):
     """The mechanism behind the last test, without the process limit that already stops a fork there:
     a sandboxed child leaves a detached grandchild behind; ending the sandbox leaves no process."""
     sb = find_sandbox()
@@ -285,27 +287,32 @@ def test_every_process_of_a_sandbox_is_gone_when_it_is_ended(tmp_path):
     scratch.mkdir(mode=0o755)
     info_r, info_w = os.pipe()
     cmd = sb.command(["-I", "-c", code], scratch, ENTRY, uid)
-    cmd[1:1] = ["--info-fd", str(info_w)]
+    if sb.bubblewrap:
+        cmd[1:1] = ["--info-fd", str(info_w)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, pass_fds=(info_w,), start_new_session=True)
     os.close(info_w)
     try:
         assert proc.stdout.readline().strip() == b"ready"
-        init = json.loads(os.read(info_r, 4096))["child-pid"]
-        members = pid_namespace_members(init)
-        assert len(members) == 3  # bwrap's first process, the child, the detached grandchild
+        if sb.bubblewrap:
+            init = json.loads(os.read(info_r, 4096))["child-pid"]
+            members = pid_namespace_members(init)
+            assert len(members) == 3  # bwrap's first process, the child, the detached grandchild
+        else:  # no PID namespace: the uid is what holds them together
+            init, members = None, processes_of_uid(uid)
+            assert len(members) == 2  # the child and the detached grandchild (in a session of its own)
         proc.kill()
         end_all(init, uid)
         proc.wait()
         assert [p for p in members if _alive(p)] == []
-        if uid is not None:
-            assert processes_of_uid(uid) == []
+        if uid is not None:  # a zombie waiting for its new parent to reap it runs nothing
+            assert [p for p in processes_of_uid(uid) if _alive(p)] == []
     finally:
         proc.kill()
         proc.wait()
         os.close(info_r)
 
 
-def test_batch_a_student_cannot_read_or_break_a_classmates_folder(tmp_path, template):
+def test_batch_a_student_cannot_read_or_break_a_classmates_folder(tmp_path, template, grading_mode):
     klass = tmp_path / "class"
     bob = klass / "bob"
     bob.mkdir(parents=True)
@@ -335,7 +342,7 @@ except OSError as e:
     assert any("bob/stereo.py: not in the sandbox" in n for n in alice["extra_data"]["refused"])
 
 
-def test_no_network_connection_leaves_the_sandbox(tmp_path, template):
+def test_no_network_connection_leaves_the_sandbox(tmp_path, template, grading_mode):
     server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     server.bind(("127.0.0.1", 0))
     server.listen(8)
@@ -377,8 +384,12 @@ def depth_std(Z, f, baseline, sigma_disparity):
         assert accepted() > 0  # without the sandbox the data leaves
         report = grade_submission(stereo, sub)
         assert report.score == 0
-        assert accepted() == 0
         _assert_refused(report, "a network connection to ('127.0.0.1', ")
+        if grading_mode == "uid":  # what the uid mode cannot stop, said by --check-sandbox (a WARNING)
+            assert any(c.startswith("the network") for c in find_sandbox().cannot_stop)
+            assert accepted() > 0  # the data leaves: the platform must cut the network (--network none)
+        else:
+            assert accepted() == 0
     finally:
         server.close()
 
@@ -403,15 +414,37 @@ def test_without_a_sandbox_grading_is_refused_unless_insecure(tmp_path, template
     assert all(t["output"].startswith("INSECURE") for t in data["tests"])
 
 
-def test_check_sandbox_reports_every_attempt_stopped(capsys):
+def test_check_sandbox_reports_every_attempt_stopped(capsys, grading_mode):
     assert main(["grade", "--check-sandbox"]) == 0
     out = capsys.readouterr().out
     assert "sandbox active" in out and "BAD" not in out
     for what in ("network connection", "hidden_tests.py", "the grader", "not dumpable"):
         assert what in out
+    warnings = [line for line in out.splitlines() if line.startswith("WARNING")]
+    if grading_mode == "uid":  # what it cannot stop is said, not hidden
+        assert any("cannot stop the network" in w and "--network none" in w for w in warnings), out
+    else:
+        assert warnings == []
 
 
-def test_an_assignment_inside_the_python_installation_is_masked(tmp_path):
+def test_check_sandbox_gives_the_same_verdict_from_any_folder(tmp_path, grading_mode):
+    """From /tmp a write to ./results.json lands in bubblewrap's private /tmp: not a false alarm."""
+    verdicts = {}
+    for cwd in ("/tmp", tmp_path, Path(__file__).parent):
+        r = subprocess.run(
+            [sys.executable, "-m", "lab", "grade", "--check-sandbox"],
+            capture_output=True,
+            text=True,
+            cwd=cwd,
+            timeout=300,
+        )
+        assert "BAD" not in r.stdout, r.stdout
+        verdicts[str(cwd)] = (r.returncode, r.stdout.splitlines()[-1])
+    assert set(verdicts.values()) == {(0, "sandbox active: grading is isolated")}, verdicts
+    assert not (tmp_path / "results.json").exists()  # the check's own file is removed again
+
+
+def test_an_assignment_inside_the_python_installation_is_masked(tmp_path, grading_mode):
     """A non-editable install puts the course's files inside site-packages, which the child is given:
     the assignment's folder is masked there (the course library likewise)."""
     import shutil
@@ -441,6 +474,8 @@ def test_an_assignment_inside_the_python_installation_is_masked(tmp_path):
         )
         assert grade_submission(toy, sub, sandbox=INSECURE).score == 1  # readable without the sandbox
         report = grade_submission(toy, sub)
-        assert report.score == 0 and "hidden: [Errno 2]" in report.tests[0].output, report.summary()
+        # bubblewrap masks the folder (it is not there); the uid mode makes it private (no permission)
+        said = "hidden: [Errno 2]" if grading_mode == "bwrap" else "hidden: [Errno 13]"
+        assert report.score == 0 and said in report.tests[0].output, report.summary()
     finally:
         shutil.rmtree(inside)

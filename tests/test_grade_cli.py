@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import pytest
+from grade_modes import *  # noqa: F403  (the fixtures grading_mode and any_mode)
 
 from lab.contract import problems
 from lab.grading import get_assignment
@@ -19,7 +20,7 @@ def _lab(*args, cwd=None):
     )
 
 
-def test_grade_writes_gradescope_results_and_a_summary(tmp_path):
+def test_grade_writes_gradescope_results_and_a_summary(tmp_path, any_mode):
     a = get_assignment("stereo")
     sub = tmp_path / "submission"
     sub.mkdir()
@@ -34,7 +35,7 @@ def test_grade_writes_gradescope_results_and_a_summary(tmp_path):
     assert {"name", "score", "max_score", "output", "visibility"} <= set(data["tests"][0])
 
 
-def test_batch_grades_a_class_into_one_csv(tmp_path):
+def test_batch_grades_a_class_into_one_csv(tmp_path, any_mode):
     stereo, planning = get_assignment("stereo"), get_assignment("planning")
     released = tmp_path / "release"
     assert _lab("assignments", "release", released, "stereo", "planning").returncode == 0
