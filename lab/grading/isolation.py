@@ -347,9 +347,9 @@ def make_private(paths) -> list[str]:
     read nor enter them. Only folders this process owns are changed, never a shared sticky one such as
     ``/tmp`` nor one holding the Python installation the child needs (a repository with its venv);
     returns the folders that are private now (changed or already so)."""
-    done = []
+    done: list[str] = []
     pythons = [r.rstrip("/") + "/" for r in _python_roots()]
-    for p in paths:
+    for p in dict.fromkeys(os.path.realpath(q) for q in paths):
         try:
             st = os.stat(p)
         except OSError:
