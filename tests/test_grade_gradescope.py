@@ -135,3 +135,12 @@ def test_run_autograder_writes_results_even_when_grading_fails(autograder):
     data = json.loads((root / "results" / "results.json").read_text())
     assert data["score"] == 0 and data["extra_data"]["grading_failed"] is True
     assert "could not grade this submission" in data["output"]
+
+
+def test_setup_fails_the_image_build_when_no_isolation_mode_works(autograder):
+    root, env = autograder
+    only_bwrap = {**env, "LAB_GRADE_SANDBOX": "bwrap"}  # and bubblewrap is hidden: no mode is left
+    setup = _docker_like(["bash", str(root / "source" / "setup.sh")])
+    r = subprocess.run(setup, env=only_bwrap, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 1
+    assert "BAD no sandbox" in r.stdout and "refusing to build" in r.stderr
