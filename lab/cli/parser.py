@@ -356,6 +356,18 @@ def build_parser() -> argparse.ArgumentParser:
         description="List the scene files in worlds/ with their named bodies.",
     )
 
+    ck = sub.add_parser(
+        "check",
+        help="students: run an assignment's public tests on your folder before submitting",
+        description="Run the public tests of ASSIGNMENT (the test_*.py you received) on the module in "
+        "FOLDER, on any OS, without the grader's sandbox or the graded tests: your grade may differ.",
+    )
+    ck.add_argument("assignment", help="assignment name (see `lab assignments list`), e.g. ekf")
+    ck.add_argument("folder", type=Path, help="the folder holding your module (e.g. ekf.py), or the file")
+    ck.add_argument(
+        "--assignments", type=Path, help="assignments folder (default: $LAB_ASSIGNMENTS or assignments/)"
+    )
+
     g = sub.add_parser(
         "grade",
         help="grade a submission of an assignment (Gradescope results.json)",
