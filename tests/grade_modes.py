@@ -65,4 +65,4 @@ def any_mode(monkeypatch) -> str:
         return find_sandbox().kind
     except SandboxUnavailable as e:
         why = str(e).split(";")[0]
-        pytest.skip(f"needs an isolation mode for grading: {WHAT_TO_INSTALL['bwrap']} ({why})")
+        pytest.skip(f"needs an isolation mode for grading: {why} (or run as root on Linux: the uid mode)")

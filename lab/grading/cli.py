@@ -46,12 +46,13 @@ def run_grade(args, batch=None) -> int:
     if not sub.exists() and not sub.is_symlink():
         raise ConfigError(f"submission {sub} does not exist")
     insecure = getattr(args, "insecure", False)
-    choose_sandbox(insecure)  # refuses here, once, before any grading, when there is no sandbox
     if args.batch:
         _check_batch(sub, args)
-        return (batch or _batch)(chosen, sub, args)
-    if len(chosen) != 1:
+    elif len(chosen) != 1:
         raise ConfigError("grade one assignment at a time (several, or 'all', only with --batch)")
+    choose_sandbox(insecure)  # refuses here, once, before any grading, when there is no sandbox
+    if args.batch:
+        return (batch or _batch)(chosen, sub, args)
     if args.json and choose_sandbox(insecure).kind == "uid":  # the results' folder: the grader's alone
         make_grader_private([Path(args.json).resolve().parent])
     report = grade_submission(

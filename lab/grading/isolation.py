@@ -528,8 +528,8 @@ def check_sandbox(results_path: str | Path | None = None) -> tuple[bool, list[st
         if (a_dir / name).exists():
             targets.append(str((a_dir / name).resolve()))
     results = Path(results_path or Path.cwd() / "results.json").resolve()
-    if sb.kind == "uid":
-        for p in make_grader_private([results.parent]):
+    if sb.kind == "uid":  # as lab grade would (not the results' folder: a check changes no folder of yours)
+        for p in make_grader_private():
             lines.append(f"ok  made private (chmod go-rwx): {p}")
     entry = Path(__file__).with_name("sandbox.py")
     ok = undumpable
