@@ -449,6 +449,7 @@ def test_without_a_sandbox_grading_is_refused_unless_insecure(tmp_path, template
     assert main(["grade", "stereo", str(sub), "--insecure", "--json", str(out), "--quiet"]) == 0
     data = json.loads(out.read_text())
     assert data["score"] == 6 and data["extra_data"]["sandbox"] == "none"
+    assert data["extra_data"]["secure"] is False  # an insecure score is marked
     assert data["output"].startswith("INSECURE")
     assert all(t["output"].startswith("INSECURE") for t in data["tests"])
 

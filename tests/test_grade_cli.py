@@ -51,11 +51,13 @@ def test_batch_grades_a_class_into_one_csv(tmp_path, any_mode):
     assert "alice: stereo 6/6, planning 14/14; total 20/20" in r.stdout
     rows = list(csv.DictReader(scores.open()))
     assert [row["student"] for row in rows] == ["alice", "bob", "carol"]
+    assert {row["sandbox"] for row in rows} == {any_mode}  # the isolation mode, named for each student
     assert [row["total"] for row in rows] == ["20", "0", "0"] and rows[0]["max_score"] == "20"
     header = rows[0].keys()
     assert "stereo:triangulate_matches_opencv" in header and "planning:posterior_log_space" in header
     assert rows[0]["planning:posterior_log_space"] == "2" and rows[1]["planning:posterior_log_space"] == "0"
     results = json.loads((each / "carol" / "stereo.json").read_text())
+    assert results["extra_data"]["sandbox"] == any_mode and results["extra_data"]["secure"] is True
     assert results["score"] == 0 and "no stereo.py found" in results["tests"][0]["output"]
 
 

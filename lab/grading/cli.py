@@ -50,10 +50,13 @@ def run_grade(args, batch=None) -> int:
         _check_batch(sub, args)
     elif len(chosen) != 1:
         raise ConfigError("grade one assignment at a time (several, or 'all', only with --batch)")
-    choose_sandbox(insecure)  # refuses here, once, before any grading, when there is no sandbox
+    sb = choose_sandbox(insecure)  # refuses here, once, before any grading, when there is no sandbox
+    if not args.quiet:  # what the mode cannot stop is said, not hidden (stderr: not the student's)
+        for c in sb.cannot_stop:
+            print(f"lab grade: WARNING: the {sb.kind} isolation mode cannot stop {c}", file=sys.stderr)
     if args.batch:
         return (batch or _batch)(chosen, sub, args)
-    if args.json and choose_sandbox(insecure).kind == "uid":  # the results' folder: the grader's alone
+    if args.json and sb.kind == "uid":  # the results' folder: the grader's alone
         make_grader_private([Path(args.json).resolve().parent])
     report = grade_submission(
         chosen[0], sub, jobs=args.jobs, timeout_scale=args.timeout_scale, insecure=insecure
