@@ -370,8 +370,12 @@ def make_private(paths) -> list[str]:
 
 def make_grader_private(extra=()) -> list[str]:
     """:func:`make_private` on the grader's own folders (the course library, the repository, the
-    assignments) and on ``extra`` (an assignment's folder, a class's submissions, the results)."""
-    return make_private([*_secrets(), *extra])
+    assignments; the repository's tests, which hold edits of the reference solutions, for when the
+    repository itself must stay readable because the venv is inside it) and on ``extra`` (an
+    assignment's folder, a class's submissions, the results)."""
+    from lab.paths import repo_root
+
+    return make_private([*_secrets(), repo_root() / "tests", *extra])
 
 
 def private_workdir(uid: int | None, prefix: str) -> Path:
