@@ -51,9 +51,6 @@ def run_grade(args, batch=None) -> int:
     elif len(chosen) != 1:
         raise ConfigError("grade one assignment at a time (several, or 'all', only with --batch)")
     sb = choose_sandbox(insecure)  # refuses here, once, before any grading, when there is no sandbox
-    if not args.quiet:  # what the mode cannot stop is said, not hidden (stderr: not the student's)
-        for c in sb.cannot_stop:
-            print(f"lab grade: WARNING: the {sb.kind} isolation mode cannot stop {c}", file=sys.stderr)
     if args.batch:
         return (batch or _batch)(chosen, sub, args)
     if args.json and sb.kind == "uid":  # the results' folder: the grader's alone
@@ -67,7 +64,14 @@ def run_grade(args, batch=None) -> int:
         print(report.summary())
         if args.json:
             print(f"wrote {args.json}")
+        _warn(sb)
     return 0
+
+
+def _warn(sb) -> None:
+    """What the isolation mode cannot stop, said after grading, not hidden (stderr: not the student's)."""
+    for c in sb.cannot_stop:
+        print(f"lab grade: WARNING: the {sb.kind} isolation mode cannot stop {c}", file=sys.stderr)
 
 
 def _check_batch(folder: Path, args) -> None:
@@ -113,6 +117,7 @@ def _batch(chosen: list[Assignment], folder: Path, args) -> int:
     csv_path = write_scores_csv(args.csv or folder / "scores.csv", rows)
     if not args.quiet:
         print(f"wrote {csv_path} ({len(rows)} students)")
+        _warn(choose_sandbox(getattr(args, "insecure", False)))
     return 0
 
 
