@@ -49,6 +49,7 @@ if [ -n "${LAB_AUTOGRADER_PYTHON:-}" ]; then
     echo "setup.sh: using $PY (LAB_AUTOGRADER_PYTHON); nothing installed"
 else
     export UV_PYTHON_INSTALL_DIR=/opt/lab-python  # not under /root: the uid mode's children run it
+    export UV_LINK_MODE=copy  # the venv's own files, not links into root's cache
     if ! command -v uv >/dev/null 2>&1; then
         python3 -m pip install --quiet uv 2>/dev/null \
             || python3 -m pip install --quiet --break-system-packages uv 2>/dev/null \
@@ -56,7 +57,8 @@ else
     fi
     uv venv --quiet --python 3.12 /opt/lab-venv
     uv pip install --quiet --python /opt/lab-venv/bin/python -r "$SRC/requirements.txt"
-    chmod -R a+rX /opt/lab-python /opt/lab-venv
+    chmod -R a+rX /opt/lab-venv
+    if [ -d /opt/lab-python ]; then chmod -R a+rX /opt/lab-python; fi
     PY=/opt/lab-venv/bin/python
 fi
 cd "$SRC"
