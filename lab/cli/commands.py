@@ -305,6 +305,13 @@ def _cmd_grade(args) -> int:
     return run_grade(args, batch=batch)
 
 
+def _cmd_check(args) -> int:
+    from lab.grading.assignments import get_assignment
+    from lab.grading.selfcheck import self_check
+
+    return self_check(get_assignment(args.assignment, args.assignments), args.folder)
+
+
 def _cmd_eval(args) -> int:
     from lab.eval.cli import run_eval
 
@@ -324,6 +331,7 @@ def _cmd_assignments(args) -> int:
 #: The function of each command.
 HANDLERS = {
     "assignments": _cmd_assignments,
+    "check": _cmd_check,
     "demo": _cmd_demo,
     "eval": _cmd_eval,
     "grade": _cmd_grade,

@@ -362,6 +362,18 @@ def build_parser() -> argparse.ArgumentParser:
         description="List the scene files in worlds/ with their named bodies.",
     )
 
+    ck = sub.add_parser(
+        "check",
+        help="students: run an assignment's public tests on your folder before submitting",
+        description="Run the public tests of ASSIGNMENT (the test_*.py you received) on the module in "
+        "FOLDER, on any OS, without the grader's sandbox or the graded tests: your grade may differ.",
+    )
+    ck.add_argument("assignment", help="assignment name (see `lab assignments list`), e.g. ekf")
+    ck.add_argument("folder", type=Path, help="the folder holding your module (e.g. ekf.py), or the file")
+    ck.add_argument(
+        "--assignments", type=Path, help="assignments folder (default: $LAB_ASSIGNMENTS or assignments/)"
+    )
+
     g = sub.add_parser(
         "grade",
         help="grade a submission of an assignment (Gradescope results.json)",
@@ -465,13 +477,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     a = sub.add_parser(
         "assignments",
-        help="list the assignments or write the student release",
+        help="list the assignments, write the student release or a Gradescope autograder zip",
         description="`list`: the assignments with their points. `release OUT_DIR [NAME ...]`: copy each "
         "assignment's student files into OUT_DIR/NAME with the solution blocks stripped and no graded tests, "
-        "and check that no solution code is left.",
+        "and check that no solution code is left. `gradescope NAME --out autograder.zip`: the autograder "
+        "bundle Gradescope builds its image from (setup.sh, run_autograder, the package, the versions of "
+        "uv.lock, the template in place of the reference solution; see assignments/README.md).",
     )
-    a.add_argument("action", choices=("list", "release"))
-    a.add_argument("out_dir", type=Path, nargs="?", help="release: the folder to write")
+    a.add_argument("action", choices=("list", "release", "gradescope"))
+    a.add_argument(
+        "out_dir", type=Path, nargs="?", help="release: the folder to write; gradescope: the assignment"
+    )
+    a.add_argument("--out", type=Path, help="gradescope: the zip to write (default autograder.zip)")
     a.add_argument("names", nargs="*", help="release: these assignments only (default: all)")
     a.add_argument("--force", action="store_true", help="release: replace existing assignment folders")
     a.add_argument(
