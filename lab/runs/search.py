@@ -357,6 +357,7 @@ def run_search(
     truth=None,
     emulator_setup: Callable | None = None,
     start=None,
+    view3d=None,
 ) -> SearchResult:
     """Run one search trial (in the simulator, a rehearsal or on the robot) and score it.
 
@@ -406,11 +407,18 @@ def run_search(
         ``place``); the run is then scored against it.
     emulator_setup : callable, optional
         A rehearsal's fault injection (:func:`lab.runs.rehearsal.rehearsal`).
+    view3d : path, optional
+        Write the recorded 3D view there (:mod:`lab.viz.view3d`: one HTML page, one step per event).
     """
     wall0 = time.perf_counter()
     strategy = Strategy.parse(strategy)
     scene = world if isinstance(world, Scene) else load_scene(world)
     recorder = _check_trial(scene, object, navigate, max_time, record)
+    viewer = None
+    if view3d is not None:  # a missing viewer library: one line before anything starts
+        from lab.viz.view3d import View3D
+
+        viewer = View3D(view3d)
     hw = load_robot_config(robot_config)  # a bad robot config is one clear line before anything starts
     kind = robot_kind(hw)
     # the landmark map (a bad landmark file is one line too) and where the robot's odometry starts
@@ -449,11 +457,15 @@ def run_search(
         robot = localize(run.robot, kind, room, start_pose, seed)
         t0 = 0.0 if kind is RobotKind.SIM else robot.now()
         hook = _with_progress(attach, t0) if progress else attach
+        if viewer is not None:  # the world's bodies for the 3D view: display only
+            viewer.world, hook = run.world, viewer.attach_search(hook)
         parts = (db, navigate, spec, cfg, seed, recorder, hook, (max_time, max_wall_time))
         out, truth_end, budget, odom, track, report_reloc = _search(robot, truth_of, *parts)
         profile, applies = run.sensing, tuple(run.sensing_applies_to)
         estimate = robot.pose_estimate()
         watchdog = None if kind is RobotKind.SIM else int(run.robot.watchdog_stops)
+    if viewer is not None:
+        viewer.save()
     if note is None and mode is LocalizationMode.LANDMARKS and estimate.n_updates == 0:
         note = "no landmark was seen: the pose is odometry alone"
     if note is not None:
