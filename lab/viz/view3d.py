@@ -27,7 +27,9 @@ and writes them with its client inlined. Algorithms never import this module.
 
 from __future__ import annotations
 
+import contextlib
 import html as html_module
+import io
 import math
 import os
 from dataclasses import dataclass, field
@@ -542,7 +544,9 @@ def _write_viser(steps: list[Step3D]) -> str:
     """Replay the log into a viser scene recorder (a local server on 127.0.0.1, never contacted) and
     return its standalone HTML."""
     viser = require_viser()
-    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    quiet = io.StringIO()  # viser announces its server on stdout, where `lab identify` writes its JSON
+    with contextlib.redirect_stdout(quiet):
+        server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
         scene = server.scene
         scene.set_up_direction("+z")
@@ -560,7 +564,8 @@ def _write_viser(steps: list[Step3D]) -> str:
                     _add(scene, name, node)
         return rec.as_html()
     finally:
-        server.stop()
+        with contextlib.redirect_stdout(quiet):
+            server.stop()
 
 
 def _add(scene, name: str, node: Node) -> None:
