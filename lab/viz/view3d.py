@@ -39,7 +39,7 @@ import numpy as np
 
 from lab.errors import ConfigError
 
-__all__ = ["INSTALL_HINT", "Node", "Step3D", "View3D", "ellipsoid_axes", "require_viser"]
+__all__ = ["INSTALL_HINT", "Node", "Step3D", "View3D", "ellipsoid_axes", "require_viser", "show_page"]
 
 #: The one line a user reads when the viewer library is missing.
 INSTALL_HINT = (
@@ -524,13 +524,23 @@ class View3D:
         return path
 
     def show(self, height: int = 520):
-        """The recording inline in a notebook (an iframe holding the page: no server, no web access)."""
-        from IPython.display import HTML
+        """The recording inline in a notebook (:func:`show_page`)."""
+        return _iframe(self.html(), height)
 
-        return HTML(
-            f'<iframe srcdoc="{html_module.escape(self.html(), quote=True)}" width="100%" '
-            f'height="{int(height)}" style="border:1px solid #ddd"></iframe>'
-        )
+
+def show_page(path, height: int = 520):
+    """A saved 3D view inline in a notebook: an iframe holding the page itself (no server, no web
+    access; the notebook keeps it in its output)."""
+    return _iframe(Path(path).read_text(encoding="utf-8"), height)
+
+
+def _iframe(page: str, height: int):
+    from IPython.display import HTML
+
+    return HTML(
+        f'<iframe srcdoc="{html_module.escape(page, quote=True)}" width="100%" '
+        f'height="{int(height)}" style="border:1px solid #ddd"></iframe>'
+    )
 
 
 def _wxyz(R: np.ndarray) -> np.ndarray:
