@@ -65,8 +65,8 @@ def identify_run(tmp_path_factory):
 
         def observer(a, frame):
             viewer(a, frame)
-            robot = [s for s in carrier.world.truth.shapes() if s.name == "robot"][0]
-            seen["robot"].append(robot.G_W.copy())
+            seen["shapes"] = {s.name: s.G_W.copy() for s in carrier.world.truth.shapes()}
+            seen["robot"].append(seen["shapes"]["robot"])
             G_WC = frame.odom.G() @ frame.G_RC
             ell = {}
             for i, e in enumerate(a.bank.estimates):
@@ -101,8 +101,19 @@ def test_identify_view_has_one_step_per_frame_and_the_files_poses_are_the_worlds
     assert duration == pytest.approx(t[-1] - t[0], abs=1e-6)  # the time slider spans the episode
     frustums = [m for _, m in messages if m["type"] == "CameraFrustumMessage"]
     assert len(frustums) == n  # one camera per frame
-    # the robot's body at the last step, as written into the file, is where the simulator had it
-    assert np.allclose(last_position(messages, "/world/robot"), seen["robot"][-1][:3, 3], atol=1e-4)
+    # every body at the last step, as written into the file, is where the simulator had it (the robot
+    # and the carrier moved; a table's legs are bodies of their own, posed in W)
+    from lab.viz.view3d import body_node_name
+
+    assert len(seen["shapes"]) >= 5 and "robot" in seen["shapes"]
+    for body, G_W in seen["shapes"].items():
+        assert np.allclose(last_position(messages, body_node_name(body)), G_W[:3, 3], atol=1e-4), body
+    # and is posed in W: no body's node is a child of another node (a child's pose is its parent's
+    # frame's in the viewer)
+    names = {m.get("name") for _, m in messages if m.get("name")}
+    for body in seen["shapes"]:
+        node = body_node_name(body)
+        assert not any(node.startswith(other + "/") for other in names - {"/world"}), node
 
 
 def test_identify_ellipsoids_are_three_sigma_of_each_models_covariance(identify_run):

@@ -39,7 +39,16 @@ import numpy as np
 
 from lab.errors import ConfigError
 
-__all__ = ["INSTALL_HINT", "Node", "Step3D", "View3D", "ellipsoid_axes", "require_viser", "show_page"]
+__all__ = [
+    "INSTALL_HINT",
+    "Node",
+    "Step3D",
+    "View3D",
+    "ellipsoid_axes",
+    "body_node_name",
+    "require_viser",
+    "show_page",
+]
 
 #: The one line a user reads when the viewer library is missing.
 INSTALL_HINT = (
@@ -48,7 +57,7 @@ INSTALL_HINT = (
 )
 
 N_SIGMA = 3.0  # the ellipses' and ellipsoids' size in standard deviations
-CHART_M_PER_S = 0.04  # the time series chart: metres of the chart per second of sim time
+CHART_LENGTH_M = 3.0  # the time series chart: its time axis spans the whole run
 MODEL_RGB = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75))
 
 
@@ -149,6 +158,12 @@ def _body_rgb(name: str, rgba) -> tuple[tuple[int, int, int], float]:
     return (230, 150, 60), 1.0
 
 
+def body_node_name(body: str) -> str:
+    """A world body's node: flat under ``/world`` (a "/" in a viewer's name makes a child node whose
+    pose is relative to its parent's, and ``table_a/leg0`` is a body of its own, posed in W)."""
+    return "/world/" + body.replace("/", ".")
+
+
 class View3D:
     """A recorder of a run as a 3D scene on a timeline, hooked onto an agent as its observer.
 
@@ -180,6 +195,7 @@ class View3D:
         self._n_globals = 0
         self._last_local = None
         self._chart_origin = None
+        self.camera = ((-1.0, -7.0, 6.5), (0.0, 0.0, 0.3))  # the page's first view: (position, look at) [m]
 
     # --- hooking ------------------------------------------------------------------------------------
     @classmethod
@@ -225,6 +241,11 @@ class View3D:
             nodes |= self._search_nodes(agent, item)
             label = f"{item.kind}: {item.detail}"[:100]
         t = float(item.t)
+        if len(self.steps) == 1 and self.kind == "identification":  # look at the robot and the box
+            o = agent.robot.odometry()
+            c, s_ = math.cos(o.theta), math.sin(o.theta)
+            at = np.array([o.x + 0.8 * c, o.y + 0.8 * s_, 0.3])
+            self.camera = (tuple(at + (-1.5 * c + 3.0 * s_, -1.5 * s_ - 3.0 * c, 2.4)), tuple(at))
         if len(self.steps) == 1:  # the start step shows the world as the first frame found it
             self.steps[0] = Step3D(t, self.steps[0].label, self.steps[0].nodes)
         self.steps.append(Step3D(t, label, nodes))
@@ -245,10 +266,11 @@ class View3D:
             self._poses[s.name] = s.G_W.copy()
             rgb, opacity = _body_rgb(s.name, s.rgba)
             props = {"G_W": s.G_W.copy(), "color": rgb, "opacity": opacity}
+            node = body_node_name(s.name)
             if s.shape == "box":
-                out[f"/world/{s.name}"] = Node("box", props | {"size": tuple(s.size)})
+                out[node] = Node("box", props | {"size": tuple(s.size)})
             else:
-                out[f"/world/{s.name}"] = Node("cylinder", props | {"radius": s.size[0], "height": s.size[1]})
+                out[node] = Node("cylinder", props | {"radius": s.size[0], "height": s.size[1]})
         return out
 
     def _robot_nodes(self, agent) -> dict:
@@ -381,18 +403,20 @@ class View3D:
             o = agent.robot.odometry()
             self._chart_origin = (t, np.array([o.x, o.y + 2.5, 1.0]))
         t0, o = self._chart_origin
-        x = o[0] + CHART_M_PER_S * (t - t0)
+        x = t - t0  # [s]: the page scales the time axis to CHART_LENGTH_M once the run's length is known
         vals = np.append(P, H)
         out = {}
         if self._last_P is not None:
             x0, v0 = self._last_P
             seg = np.array(
-                [[[x0, o[1], o[2] + a], [x, o[1], o[2] + b]] for a, b in zip(v0, vals, strict=True)]
+                [[[x0, o[1], o[2] + a], [x, o[1], o[2] + b]] for a, b in zip(v0, vals, strict=True)], float
             )
             colors = np.array([MODEL_RGB[i % len(MODEL_RGB)] for i in range(L)] + [(0, 0, 0)], np.uint8)
-            out[f"/chart/series/{len(self.steps)}"] = Node("lines", {"segments": seg, "colors": colors})
+            out[f"/chart/series/{len(self.steps)}"] = Node(
+                "lines", {"segments": seg, "colors": colors, "chart_x0": o[0]}
+            )
         else:
-            axes = np.array([[o, o + (0, 0, 1.0)], [o, o + (3.0, 0, 0)]])
+            axes = np.array([[o, o + (0, 0, 1.0)], [o, o + (CHART_LENGTH_M, 0, 0)]])
             out["/chart/axes"] = Node("lines", {"segments": axes, "color": (90, 90, 90)})
             out["/chart/title"] = Node(
                 "label",
@@ -510,7 +534,7 @@ class View3D:
     # --- the viewer --------------------------------------------------------------------------------------
     def html(self) -> str:
         """The recording as one self-contained HTML page (viser's client inlined)."""
-        return _write_viser(self.steps)
+        return _write_viser(self.steps, self.camera)
 
     def save(self, path=None) -> Path:
         """Write :meth:`html` to ``path`` (default: the recorder's) atomically; returns the path."""
@@ -550,7 +574,7 @@ def _wxyz(R: np.ndarray) -> np.ndarray:
     return np.array([w, x, y, z])
 
 
-def _write_viser(steps: list[Step3D]) -> str:
+def _write_viser(steps: list[Step3D], camera) -> str:
     """Replay the log into a viser scene recorder (a local server on 127.0.0.1, never contacted) and
     return its standalone HTML."""
     viser = require_viser()
@@ -560,8 +584,9 @@ def _write_viser(steps: list[Step3D]) -> str:
     try:
         scene = server.scene
         scene.set_up_direction("+z")
-        server.initial_camera.position = (-4.5, -4.5, 4.0)
-        server.initial_camera.look_at = (0.0, 0.0, 0.3)
+        server.initial_camera.position, server.initial_camera.look_at = camera
+        duration = steps[-1].t - steps[0].t if steps else 0.0
+        chart_scale = CHART_LENGTH_M / max(duration, 1e-6)  # [m/s] on the time series chart
         rec = server.get_scene_serializer()
         t_prev = steps[0].t if steps else 0.0
         for st in steps:
@@ -571,14 +596,14 @@ def _write_viser(steps: list[Step3D]) -> str:
                 if node is None:
                     scene.remove_by_name(name)
                 else:
-                    _add(scene, name, node)
+                    _add(scene, name, node, chart_scale)
         return rec.as_html()
     finally:
         with contextlib.redirect_stdout(quiet):
             server.stop()
 
 
-def _add(scene, name: str, node: Node) -> None:
+def _add(scene, name: str, node: Node, chart_scale: float = 1.0) -> None:
     p = node.props
     pose = {}
     if "G_W" in p:
@@ -598,7 +623,9 @@ def _add(scene, name: str, node: Node) -> None:
             name, radius=p["radius"], height=p["height"], color=p["color"], opacity=p.get("opacity"), **pose
         )
     elif k == "lines":
-        seg = np.asarray(p["segments"], np.float32)
+        seg = np.array(p["segments"], np.float32)
+        if "chart_x0" in p:  # a time series: x in seconds from the start, scaled to the chart's length
+            seg[..., 0] = p["chart_x0"] + chart_scale * seg[..., 0]
         colors = p["colors"] if "colors" in p else p["color"]
         if isinstance(colors, np.ndarray) and colors.ndim == 2:
             colors = np.repeat(colors[:, None, :], 2, axis=1)
