@@ -27,17 +27,16 @@ and writes them with its client inlined. Algorithms never import this module.
 
 from __future__ import annotations
 
-import contextlib
-import html as html_module
-import io
 import math
 import os
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from lab.errors import ConfigError
+from lab.viz.view3d_page import CHART_LENGTH_M, INSTALL_HINT, iframe, require_viser, show_page, write_page
 
 __all__ = [
     "INSTALL_HINT",
@@ -50,24 +49,8 @@ __all__ = [
     "show_page",
 ]
 
-#: The one line a user reads when the viewer library is missing.
-INSTALL_HINT = (
-    "the 3D view (--view3d) needs the optional package viser: pip install 'lab[view3d]' "
-    "(in a clone: uv sync --extra view3d)"
-)
-
 N_SIGMA = 3.0  # the ellipses' and ellipsoids' size in standard deviations
-CHART_LENGTH_M = 3.0  # the time series chart: its time axis spans the whole run
 MODEL_RGB = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75))
-
-
-def require_viser():
-    """The viser module, or :class:`ConfigError` with :data:`INSTALL_HINT` (one line)."""
-    try:
-        import viser
-    except ImportError:
-        raise ConfigError(INSTALL_HINT) from None
-    return viser
 
 
 @dataclass(frozen=True)
@@ -195,6 +178,8 @@ class View3D:
         self._n_globals = 0
         self._last_local = None
         self._chart_origin = None
+        self.recording_s = 0.0  # wall time spent recording during the run [s] (benchmarks/bench_view3d.py)
+        self.writing_s = 0.0  # wall time spent writing the page [s]
         self.camera = ((-1.0, -7.0, 6.5), (0.0, 0.0, 0.3))  # the page's first view: (position, look at) [m]
 
     # --- hooking ------------------------------------------------------------------------------------
@@ -233,6 +218,13 @@ class View3D:
     def __call__(self, agent, item) -> None:
         if self._prev is not None:
             self._prev(agent, item)
+        t_wall = time.perf_counter()
+        try:
+            self._record(agent, item)
+        finally:
+            self.recording_s += time.perf_counter() - t_wall
+
+    def _record(self, agent, item) -> None:
         nodes = self._bodies() | self._robot_nodes(agent)
         if self.kind == "identification":
             nodes |= self._identification_nodes(agent, item)
@@ -534,7 +526,11 @@ class View3D:
     # --- the viewer --------------------------------------------------------------------------------------
     def html(self) -> str:
         """The recording as one self-contained HTML page (viser's client inlined)."""
-        return _write_viser(self.steps, self.camera)
+        t_wall = time.perf_counter()
+        try:
+            return write_page(self.steps, self.camera)
+        finally:
+            self.writing_s += time.perf_counter() - t_wall
 
     def save(self, path=None) -> Path:
         """Write :meth:`html` to ``path`` (default: the recorder's) atomically; returns the path."""
@@ -549,113 +545,4 @@ class View3D:
 
     def show(self, height: int = 520):
         """The recording inline in a notebook (:func:`show_page`)."""
-        return _iframe(self.html(), height)
-
-
-def show_page(path, height: int = 520):
-    """A saved 3D view inline in a notebook: an iframe holding the page itself (no server, no web
-    access; the notebook keeps it in its output)."""
-    return _iframe(Path(path).read_text(encoding="utf-8"), height)
-
-
-def _iframe(page: str, height: int):
-    from IPython.display import HTML
-
-    return HTML(
-        f'<iframe srcdoc="{html_module.escape(page, quote=True)}" width="100%" '
-        f'height="{int(height)}" style="border:1px solid #ddd"></iframe>'
-    )
-
-
-def _wxyz(R: np.ndarray) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
-    x, y, z, w = Rotation.from_matrix(R).as_quat()
-    return np.array([w, x, y, z])
-
-
-def _write_viser(steps: list[Step3D], camera) -> str:
-    """Replay the log into a viser scene recorder (a local server on 127.0.0.1, never contacted) and
-    return its standalone HTML."""
-    viser = require_viser()
-    quiet = io.StringIO()  # viser announces its server on stdout, where `lab identify` writes its JSON
-    with contextlib.redirect_stdout(quiet):
-        server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    try:
-        scene = server.scene
-        scene.set_up_direction("+z")
-        server.initial_camera.position, server.initial_camera.look_at = camera
-        duration = steps[-1].t - steps[0].t if steps else 0.0
-        chart_scale = CHART_LENGTH_M / max(duration, 1e-6)  # [m/s] on the time series chart
-        rec = server.get_scene_serializer()
-        t_prev = steps[0].t if steps else 0.0
-        for st in steps:
-            rec.insert_sleep(max(0.0, st.t - t_prev))
-            t_prev = max(t_prev, st.t)
-            for name, node in st.nodes.items():
-                if node is None:
-                    scene.remove_by_name(name)
-                else:
-                    _add(scene, name, node, chart_scale)
-        return rec.as_html()
-    finally:
-        with contextlib.redirect_stdout(quiet):
-            server.stop()
-
-
-def _add(scene, name: str, node: Node, chart_scale: float = 1.0) -> None:
-    p = node.props
-    pose = {}
-    if "G_W" in p:
-        pose = {"wxyz": _wxyz(p["G_W"][:3, :3]), "position": p["G_W"][:3, 3]}
-    k = node.kind
-    if k == "box":
-        scene.add_box(
-            name,
-            color=p["color"],
-            dimensions=p["size"],
-            opacity=p.get("opacity"),
-            wireframe=p.get("wireframe", False),
-            **pose,
-        )
-    elif k == "cylinder":
-        scene.add_cylinder(
-            name, radius=p["radius"], height=p["height"], color=p["color"], opacity=p.get("opacity"), **pose
-        )
-    elif k == "lines":
-        seg = np.array(p["segments"], np.float32)
-        if "chart_x0" in p:  # a time series: x in seconds from the start, scaled to the chart's length
-            seg[..., 0] = p["chart_x0"] + chart_scale * seg[..., 0]
-        colors = p["colors"] if "colors" in p else p["color"]
-        if isinstance(colors, np.ndarray) and colors.ndim == 2:
-            colors = np.repeat(colors[:, None, :], 2, axis=1)
-        scene.add_line_segments(name, seg, colors, thickness=p.get("thickness", 0.015))
-    elif k == "points":
-        if len(p["points"]):
-            scene.add_point_cloud(
-                name,
-                np.asarray(p["points"], np.float32),
-                p["colors"],
-                point_size=p.get("size", 0.02),
-                point_shape="circle",
-            )
-        else:
-            scene.remove_by_name(name)
-    elif k == "frustum":
-        scene.add_camera_frustum(
-            name, fov=p["fov"], aspect=p["aspect"], scale=p["scale"], color=p["color"], **pose
-        )
-    elif k == "mesh":
-        scene.add_mesh_simple(
-            name,
-            np.asarray(p["vertices"], np.float32),
-            p["faces"],
-            color=p["color"],
-            opacity=p.get("opacity"),
-        )
-    elif k == "image":
-        scene.add_image(name, p["image"], p["width"], p["height"], format="png", **pose)
-    elif k == "label":
-        scene.add_label(name, p["text"], position=np.asarray(p["position"], float))
-    else:  # pragma: no cover - a kind this writer does not know is a bug of the recorder
-        raise ValueError(f"unknown node kind {k!r}")
+        return iframe(self.html(), height)
