@@ -244,3 +244,27 @@ def test_lab_search_view3d_flag_writes_the_page_and_keeps_stdout_json(tmp_path):
     assert f"wrote the 3D view to {page}" in r.stderr
     duration, messages = recording(page.read_text())
     assert any(m["type"] == "ImageMessage" for _, m in messages)
+
+
+def test_lab_demo_passes_view3d_to_its_episode_and_names_the_page_in_its_report(tmp_path, monkeypatch):
+    """``lab demo --view3d`` reaches the episode (the episode itself is the identify test's), and the
+    report tells where the page is."""
+    import lab.runs.identify as identify
+    from lab.cli.parser import build_parser
+    from lab.runs.demo import run_demo
+
+    args = build_parser().parse_args(["demo", "--out", str(tmp_path), "--view3d", str(tmp_path / "v.html")])
+    assert args.view3d == tmp_path / "v.html"
+    seen = {}
+
+    def fake_identify(*a, **kw):
+        seen.update(kw)
+        return {"true_model": 1, "identified_model": 1, "success": True, "actions": 0, "sim_time_s": 1.0,
+                "wall_time_s": 1.0, "final_posterior": [0.25] * 4, "planner": "lut", "seed": 0,
+                "view3d": str(kw["view3d"])}  # fmt: skip
+
+    monkeypatch.setattr(identify, "run_identify", fake_identify)
+    monkeypatch.setattr("lab.runs.demo.tables_missing", lambda: [])
+    report = run_demo(tmp_path, view3d=args.view3d, say=lambda s: None)
+    assert seen["view3d"] == tmp_path / "v.html"
+    assert f"`{tmp_path / 'v.html'}`" in report.read_text()
