@@ -268,3 +268,36 @@ def test_lab_demo_passes_view3d_to_its_episode_and_names_the_page_in_its_report(
     report = run_demo(tmp_path, view3d=args.view3d, say=lambda s: None)
     assert seen["view3d"] == tmp_path / "v.html"
     assert f"`{tmp_path / 'v.html'}`" in report.read_text()
+
+
+CHROMIUM = next(
+    (c for c in ("chromium", "chromium-browser", "google-chrome") if __import__("shutil").which(c)), None
+)
+
+
+def screenshot(page, png, budget_ms: int) -> np.ndarray:
+    """The page in headless Chromium with the network blocked (every host unresolvable, a dead proxy),
+    after ``budget_ms`` of virtual time (the recording plays from its start); the picture (RGB)."""
+    import cv2
+
+    subprocess.run(
+        [CHROMIUM, "--headless=new", "--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
+         "--proxy-server=127.0.0.1:9", "--host-resolver-rules=MAP * ~NOTFOUND", "--window-size=1024,700",
+         f"--virtual-time-budget={budget_ms}", f"--screenshot={png}", page.as_uri()],
+        capture_output=True, timeout=300,
+    )  # fmt: skip
+    img = cv2.imread(str(png))
+    assert img is not None, "Chromium wrote no screenshot"
+    return img[200:650, :, ::-1]  # the scene: below the software-WebGL notice, above the time bar
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium to open the page (apt install chromium)")
+def test_the_page_renders_offline_in_chromium_and_the_picture_moves(identify_run, tmp_path):
+    _, _, html = identify_run
+    page = tmp_path / "identify.html"
+    page.write_text(html)
+    early = screenshot(page, tmp_path / "early.png", 2500)
+    later = screenshot(page, tmp_path / "later.png", 6000)
+    assert early.std() > 10 and later.std() > 10  # a scene, not a blank canvas
+    moved = np.abs(early.astype(int) - later.astype(int)).max(axis=2) > 30
+    assert moved.mean() > 0.001  # the run plays: the head, its frustum and the features move

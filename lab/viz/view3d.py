@@ -27,6 +27,7 @@ and writes them with its client inlined. Algorithms never import this module.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import time
@@ -106,10 +107,15 @@ def _ellipsoid_mesh(centre, Sigma) -> Node:
     return Node("mesh", {"vertices": verts, "faces": _SPHERE[1], "axes": axes, "directions": V})
 
 
-def _rgb(cmap: str, x: float) -> tuple[int, int, int]:
+@functools.cache
+def _colormap(name: str):
     from matplotlib import colormaps
 
-    r, g, b, _ = colormaps[cmap](float(np.clip(x, 0.0, 1.0)))
+    return colormaps[name]  # a copy each time it is looked up: once per name
+
+
+def _rgb(cmap: str, x: float) -> tuple[int, int, int]:
+    r, g, b, _ = _colormap(cmap)(float(np.clip(x, 0.0, 1.0)))
     return int(255 * r), int(255 * g), int(255 * b)
 
 
@@ -359,8 +365,9 @@ class View3D:
 
     def _features(self, agent, G_WC) -> Node:
         """The frame's triangulated features in W, coloured by fate for the most probable model that
-        has an estimate (the live view's choice; matched again with the agent's own deterministic
-        matcher, as :func:`lab.viz.live.identification.identification_inliers` does)."""
+        has an estimate (the live view's choice): its matcher run again on the frame with the nearest
+        neighbours the agent's scorer found for it (the search the step shared, not repeated), as
+        :func:`lab.viz.live.identification.identification_inliers` does it."""
         f = getattr(agent, "last_features", None)
         obs = getattr(agent, "last_observation", None)
         if f is None or len(f) == 0:
@@ -376,7 +383,10 @@ class View3D:
         known = [i for i, e in enumerate(agent.bank.estimates) if e is not None]
         if known and obs is not None:
             i = max(known, key=lambda k: float(agent.P[k]))
-            corr = agent.matchers[i].match(f)
+            m, sc = agent.matchers[i], agent.scorers[i]
+            # the agent's own search of this frame, kept by its scorer (as the step shares it)
+            nb = sc.neighbours(f) if m.db is sc.db and m.k == sc.k_neighbours else None
+            corr = m.match(f, nb)
             if len(corr):
                 fate[np.unique(corr.idx_meas)] = 1
                 inl = np.asarray(getattr(obs.updates[i], "inliers", np.zeros(0, bool)), bool)
