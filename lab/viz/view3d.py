@@ -301,6 +301,16 @@ class View3D:
                 "color": (30, 160, 60),
             },
         )
+        if "robot" not in self._poses:  # no simulated body (a rehearsal, the real robot): the estimate's
+            G = np.eye(4)
+            G[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+            G[:3, 3] = (pose.x, pose.y, 0.15)
+            limits = getattr(robot, "base_limits", None)
+            radius = float(getattr(limits, "radius", 0.17))
+            out["/robot/body_estimate"] = Node(
+                "cylinder",
+                {"G_W": G, "radius": radius, "height": 0.3, "color": (30, 160, 60), "wireframe": True},
+            )
         if est is not None:
             out["/robot/ellipse"] = Node(
                 "lines",

@@ -75,14 +75,15 @@ def write_page(steps, camera) -> str:
         chart_scale = CHART_LENGTH_M / max(duration, 1e-6)  # [m/s] on the time series chart
         rec = server.get_scene_serializer()
         t_prev = steps[0].t if steps else 0.0
-        for st in steps:
-            rec.insert_sleep(max(0.0, st.t - t_prev))
-            t_prev = max(t_prev, st.t)
-            for name, node in st.nodes.items():
-                if node is None:
-                    scene.remove_by_name(name)
-                else:
-                    _add(scene, name, node, chart_scale)
+        with server.atomic():  # one batch for a server nobody connects to: no wake-up per message
+            for st in steps:
+                rec.insert_sleep(max(0.0, st.t - t_prev))
+                t_prev = max(t_prev, st.t)
+                for name, node in st.nodes.items():
+                    if node is None:
+                        scene.remove_by_name(name)
+                    else:
+                        _add(scene, name, node, chart_scale)
         return rec.as_html()
     finally:
         with contextlib.redirect_stdout(quiet):
@@ -106,7 +107,13 @@ def _add(scene, name: str, node, chart_scale: float = 1.0) -> None:
         )
     elif k == "cylinder":
         scene.add_cylinder(
-            name, radius=p["radius"], height=p["height"], color=p["color"], opacity=p.get("opacity"), **pose
+            name,
+            radius=p["radius"],
+            height=p["height"],
+            color=p["color"],
+            opacity=p.get("opacity"),
+            wireframe=p.get("wireframe", False),
+            **pose,
         )
     elif k == "lines":
         seg = np.array(p["segments"], np.float32)
