@@ -49,6 +49,27 @@ def last_position(messages, name: str) -> np.ndarray:
     return np.asarray(pos[-1], float)
 
 
+CHROMIUM = next(
+    (c for c in ("chromium", "chromium-browser", "google-chrome") if __import__("shutil").which(c)), None
+)
+
+
+def screenshot(page, png, budget_ms: int) -> np.ndarray:
+    """The page in headless Chromium with the network blocked (every host unresolvable, a dead proxy),
+    after ``budget_ms`` of virtual time (the recording plays from its start); the picture (RGB)."""
+    import cv2
+
+    subprocess.run(
+        [CHROMIUM, "--headless=new", "--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
+         "--proxy-server=127.0.0.1:9", "--host-resolver-rules=MAP * ~NOTFOUND", "--window-size=1024,700",
+         f"--virtual-time-budget={budget_ms}", f"--screenshot={png}", page.as_uri()],
+        capture_output=True, timeout=300,
+    )  # fmt: skip
+    img = cv2.imread(str(png))
+    assert img is not None, "Chromium wrote no screenshot"
+    return img[200:650, :, ::-1]  # the scene: below the software-WebGL notice, above the time bar
+
+
 @pytest.fixture(scope="module")
 def identify_run(tmp_path_factory):
     """One short identification episode recorded in 3D, with the truth and the agent's state at every
@@ -227,6 +248,8 @@ def test_search_view_has_one_step_per_event_and_the_heat_map_is_the_agents_map(t
     if peaks[-1]:
         clouds = [m for _, m in messages if m["type"] == "PointCloudMessage" and m["name"] == "/map/peaks"]
         assert np.asarray(clouds[-1]["props"]["points"]).size // 3 == peaks[-1]
+    if CHROMIUM is not None:  # the page opens offline and shows a scene (the room, the map)
+        assert screenshot(tmp_path / "s.html", tmp_path / "s.png", 4000).std() > 10
 
 
 def test_lab_search_view3d_flag_writes_the_page_and_keeps_stdout_json(tmp_path):
@@ -268,27 +291,6 @@ def test_lab_demo_passes_view3d_to_its_episode_and_names_the_page_in_its_report(
     report = run_demo(tmp_path, view3d=args.view3d, say=lambda s: None)
     assert seen["view3d"] == tmp_path / "v.html"
     assert f"`{tmp_path / 'v.html'}`" in report.read_text()
-
-
-CHROMIUM = next(
-    (c for c in ("chromium", "chromium-browser", "google-chrome") if __import__("shutil").which(c)), None
-)
-
-
-def screenshot(page, png, budget_ms: int) -> np.ndarray:
-    """The page in headless Chromium with the network blocked (every host unresolvable, a dead proxy),
-    after ``budget_ms`` of virtual time (the recording plays from its start); the picture (RGB)."""
-    import cv2
-
-    subprocess.run(
-        [CHROMIUM, "--headless=new", "--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
-         "--proxy-server=127.0.0.1:9", "--host-resolver-rules=MAP * ~NOTFOUND", "--window-size=1024,700",
-         f"--virtual-time-budget={budget_ms}", f"--screenshot={png}", page.as_uri()],
-        capture_output=True, timeout=300,
-    )  # fmt: skip
-    img = cv2.imread(str(png))
-    assert img is not None, "Chromium wrote no screenshot"
-    return img[200:650, :, ::-1]  # the scene: below the software-WebGL notice, above the time bar
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="no chromium to open the page (apt install chromium)")
