@@ -137,6 +137,18 @@ def test_identify_view_has_one_step_per_frame_and_the_files_poses_are_the_worlds
         assert not any(node.startswith(other + "/") for other in names - {"/world"}), node
 
 
+def test_identify_chart_ends_at_the_final_probabilities_and_entropy(identify_run):
+    from scipy.stats import entropy
+
+    res, seen, _ = identify_run
+    viewer = seen["viewer"]
+    series = [n for st in viewer.steps for k, n in st.nodes.items() if k.startswith("/chart/series/")]
+    assert len(series) == len(res["history"]) - 1  # one segment per frame after the first
+    P = np.asarray(res["final_posterior"], float)
+    z = series[-1].props["segments"][:, 1, 2] - viewer._chart_origin[1][2]
+    assert np.allclose(z[:-1], P) and z[-1] == pytest.approx(entropy(P) / np.log(len(P)))
+
+
 def test_identify_ellipsoids_are_three_sigma_of_each_models_covariance(identify_run):
     _, seen, html = identify_run
     _, messages = recording(html)

@@ -367,7 +367,7 @@ class View3D:
                 "label",
                 {"text": f"{name}  P = {P[i]:.2f}", "position": G_WO[:3, 3] + (0, 0, 0.25 + 0.12 * i)},
             )
-        out |= self._chart(agent, frame.t, P)
+        out |= self._model_chart(agent, frame.t, P)
         if len(agent.decisions) > self._n_decisions:
             self._n_decisions = len(agent.decisions)
             out |= self._ring(agent.decisions[-1])
@@ -406,39 +406,49 @@ class View3D:
         p_W = f.points_C @ G_WC[:3, :3].T + G_WC[:3, 3]
         return Node("points", {"points": p_W, "colors": colors, "fate": fate})
 
-    def _chart(self, agent, t: float, P: np.ndarray) -> dict:
-        """The model probabilities and the entropy (divided by log L, in [0, 1]) against sim time, as
-        new segments on a chart standing 2.5 m to the robot's left at the start, 1-2 m above the floor."""
-        L = len(P)
-        H = float(-np.sum(P * np.log(np.maximum(P, 1e-300)))) / math.log(L) if L > 1 else 0.0
+    def _chart(self, t: float, vals, colors, title: str, origin) -> dict:
+        """Time series as new segments on a chart standing at ``origin`` (its foot, the first time
+        [m]), values in [0, 1] up to 1 m above it; the page scales the time axis to the run's length."""
         if self._chart_origin is None:
-            o = agent.robot.odometry()
-            self._chart_origin = (t, np.array([o.x, o.y + 2.5, 1.0]))
+            self._chart_origin = (t, np.asarray(origin, float))
         t0, o = self._chart_origin
         x = t - t0  # [s]: the page scales the time axis to CHART_LENGTH_M once the run's length is known
-        vals = np.append(P, H)
+        vals = np.asarray(vals, float)
         out = {}
         if self._last_P is not None:
             x0, v0 = self._last_P
             seg = np.array(
                 [[[x0, o[1], o[2] + a], [x, o[1], o[2] + b]] for a, b in zip(v0, vals, strict=True)], float
             )
-            colors = np.array([MODEL_RGB[i % len(MODEL_RGB)] for i in range(L)] + [(0, 0, 0)], np.uint8)
             out[f"/chart/series/{len(self.steps)}"] = Node(
-                "lines", {"segments": seg, "colors": colors, "chart_x0": o[0]}
+                "lines", {"segments": seg, "colors": np.asarray(colors, np.uint8), "chart_x0": o[0]}
             )
         else:
             axes = np.array([[o, o + (0, 0, 1.0)], [o, o + (CHART_LENGTH_M, 0, 0)]])
             out["/chart/axes"] = Node("lines", {"segments": axes, "color": (90, 90, 90)})
-            out["/chart/title"] = Node(
-                "label",
-                {
-                    "text": "P(M_i | D) (model colours) and H / log L (black) vs time",
-                    "position": o + (0, 0, 1.15),
-                },
-            )
+            out["/chart/title"] = Node("label", {"text": title, "position": o + (0, 0, 1.15)})
         self._last_P = (x, vals)
         return out
+
+    def _model_chart(self, agent, t: float, P: np.ndarray) -> dict:
+        """The model probabilities and the entropy divided by log L (Eq. (5), in [0, 1]) against sim time,
+        on a chart standing 2.5 m to the robot's left at the start, 1-2 m above the floor."""
+        L = len(P)
+        H = float(-np.sum(P * np.log(np.maximum(P, 1e-300)))) / math.log(L) if L > 1 else 0.0
+        o = agent.robot.odometry()
+        colors = [MODEL_RGB[i % len(MODEL_RGB)] for i in range(L)] + [(0, 0, 0)]
+        title = "P(M_i | D) (model colours) and H / log L (black) vs time"
+        return self._chart(t, np.append(P, H), colors, title, (o.x, o.y + 2.5, 1.0))
+
+    def _map_chart(self, pmap, t: float) -> dict:
+        """The map's entropy divided by log N (black: 1 is uniform) and its peak's share on a log scale
+        over 4 decades (red) against sim time, on a chart along the room's north edge, above the walls."""
+        P = np.asarray(pmap.P, float)
+        H = float(-np.sum(P * np.log(np.maximum(P, 1e-300)))) / math.log(P.size)
+        peak = float(np.clip(1.0 + math.log10(max(P.max(), 1e-300)) / 4.0, 0.0, 1.0))
+        x0, _, _, y1 = pmap.spec.extent
+        title = "map M_p: H / log N (black) and log10 max P / 4 + 1 (red) vs time"
+        return self._chart(t, (H, peak), [(0, 0, 0), (220, 30, 30)], title, (x0, y1, 2.7))
 
     @staticmethod
     def _ring(d) -> dict:
@@ -465,7 +475,7 @@ class View3D:
 
     # --- search -----------------------------------------------------------------------------------------
     def _search_nodes(self, agent, event) -> dict:
-        out = {"/map/heat": self._heat_map(agent.pmap)}
+        out = {"/map/heat": self._heat_map(agent.pmap)} | self._map_chart(agent.pmap, float(event.t))
         globals_ = list(getattr(agent, "_globals", ()))
         if len(globals_) > self._n_globals:  # a new global scan: its views and its colour peaks
             self._n_globals = len(globals_)
