@@ -3,7 +3,7 @@
     nice .venv/bin/python benchmarks/bench_landmark_fits.py [--seeds 1-12] [--stands 4] \
         [--floor-deg 0.3,0.5,0.75,1.0,1.5] [--jsonl out/landmark_fits.jsonl]
 
-The localizer (:mod:`lab.navigation.localization`) takes each poster it fits as a measurement ``z`` of
+The localizer (:mod:`lab.localization`) takes each poster it fits as a measurement ``z`` of
 the poster's planar pose in the robot frame, with covariance ``Q`` = the fit's own plus
 ``LocalizerConfig.observation_floor(z)``. This benchmark scores those fits one by one, without the
 filter: per seed, ``--stands`` random collision-free stands in the lab room (a fresh world and
@@ -33,7 +33,7 @@ from lab.evaluation import parse_seeds
 def fits(seeds, stands: int):
     """One record per accepted fit: range, inliers, the error ``z - h(x_true)`` and the fit's and the
     floored standard deviations."""
-    import lab.navigation.localization as L
+    import lab.localization as L
     from lab.geometry import wrap_angle
     from lab.robot import Pose2D
     from lab.scene import load_scene

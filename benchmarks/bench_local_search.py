@@ -4,7 +4,7 @@ that is in view?
 For each object, surface and seed the object is placed as ``lab eval search`` places it
 (``random_placement`` with ``default_rng([seed, object_index, surface_index])``), and the robot is stood as
 the agent's approach stands it: at a seeded distance within ``LocalSearchConfig``'s band
-(``min_distance_m`` .. ``max_distance_m``; the agent's wider band, ``AgentConfig.wide_band_m`` further
+(``min_distance_m`` .. ``max_distance_m``; the agent's wider band, ``SearchAgentConfig.wide_band_m`` further
 out, when no spot of the band is free) from the centre of the probability-map cell holding the object,
 on a seeded free side of it, facing the cell's centre. Then :func:`lab.search.local_search` runs alone
 (no closed loop) under the ``realistic`` sensing profile, with 2x supersampled rendering as in
@@ -58,7 +58,7 @@ from lab.runs.placement import (
 )
 from lab.runs.search import SUCCESS_ORIENTATION_DEG, SUCCESS_POSITION_M, map_spec, pose_errors
 from lab.scene import load_scene
-from lab.search.agent import AgentConfig
+from lab.search.config import SearchAgentConfig
 from lab.search.local_search import LocalSearchConfig, local_search, make_matcher
 from lab.sim import RenderSettings, SimRobot, SimWorld
 from lab.training.search import search_database
@@ -252,7 +252,7 @@ def main():
     cfg = LocalSearchConfig()
     if args.paper:
         cfg = replace(cfg, second_look=None)
-    wide = AgentConfig().wide_band_m
+    wide = SearchAgentConfig().wide_band_m
     mode = "paper" if args.paper else "default"
     print(f"local search alone, {split_of(seeds)} seeds {args.seeds}, sensing realistic, {mode} config")
     rows = []

@@ -199,14 +199,15 @@ def within_line(rows, budgets=(90.0, 300.0)) -> str:
 
 def local_searches_at_object(d: dict) -> tuple[int, int]:
     """``(k, n)``: of the trial's ``n`` local searches, ``k`` answered for the object's true cell (a cell
-    within ``LocalSearchConfig.neighbour_radius_m`` of the searched one, as the map update counts it):
+    within ``LocalSearchConfig.detection.neighbour_radius_m`` of the searched one, as the map update
+    counts it):
     k > 0 on a miss means the local search looked at the object and did not find it."""
     from lab.runs.search import map_spec
     from lab.scene import load_scene
     from lab.search.local_search import LocalSearchConfig
 
     spec = map_spec(load_scene("lab_room"))
-    r = LocalSearchConfig().neighbour_radius_m
+    r = LocalSearchConfig().detection.neighbour_radius_m
     ox, oy = spec.cell_to_world(*spec.world_to_cell(*d["place"][:2]))
     cells = [e["cell"] for e in d.get("events") or [] if e["kind"] == "local" and e["cell"]]
     near = [c for c in cells if math.dist(spec.cell_to_world(*c), (ox, oy)) <= r + 1e-9]

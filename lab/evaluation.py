@@ -1,8 +1,8 @@
 """How results are reported: the seed splits, and success rates with their Wilson 95 % intervals.
 
 **Tune on one split, report on another.** Seeds below :data:`TUNING_SEEDS_END` (1000) are for tuning
-parameters; evaluations report on seeds from :data:`REPORT_SEEDS_START` (100000) on, far from them, so
-that a reported figure never comes from the seeds it was tuned on. The evaluation scripts default to
+parameters; evaluations report on seeds from :data:`REPORT_SEEDS_START` on, far above them, so that a
+reported figure never comes from the seeds it was tuned on. The evaluation scripts default to
 the report split and print the split they used (:func:`split_of`).
 
 **Success rates** are given with the Wilson score interval (:func:`wilson_interval`), which stays
@@ -26,7 +26,7 @@ __all__ = [
     "wilson_interval",
 ]
 
-TUNING_SEEDS_END = 1000  #: seeds 0 .. 999 are the tuning split
+TUNING_SEEDS_END = 1000  #: the tuning split is the seeds below this
 REPORT_SEEDS_START = 100000  #: the report split starts here
 
 
@@ -38,7 +38,8 @@ def report_seeds(n: int, start: int = REPORT_SEEDS_START) -> list[int]:
 
 
 def parse_seeds(text: str) -> list[int]:
-    """``"100000-100004,7"`` -> ``[100000, ..., 100004, 7]``: the evaluation scripts' ``--seeds``.
+    """``"3-6,9"`` -> ``[3, 4, 5, 6, 9]``: the evaluation scripts' ``--seeds`` (ranges ``A-B`` and single
+    numbers, comma-separated).
 
     Raises
     ------

@@ -275,7 +275,7 @@ class StereoFrame:
         The head's state at capture: ``camera.G_RC(pan_tilt.pan, pan_tilt.tilt)`` is ``G_RC``.
     odom : Pose2D
         The robot's pose at capture, in the world frame: the base's wheel odometry, or the localizer's
-        estimate behind :class:`lab.navigation.localization.LocalizedRobot`. Whatever is placed in the
+        estimate behind :class:`lab.localization.LocalizedRobot`. Whatever is placed in the
         world from this frame uses it (``G_WC = odom.G() @ G_RC``).
     wheel_odom : Pose2D or None
         The base's own wheel odometry at capture when ``odom`` is a localized estimate (None: ``odom``

@@ -179,17 +179,18 @@ from lab.scene import load_scene
 
 scene = load_scene("lab_room")           # the search paper's laboratory: 6 x 8 m, tables, a shelf, obstacles
 room = map_spec(scene)                   # M_p's grid: the room's floor in 20 cm cells
-gcfg = GlobalSearchConfig()              # alpha = 0.05, lambda = growth_m = 0.2 m, beta_min = 0.1
+gcfg = GlobalSearchConfig()              # gcfg.detection: alpha = 0.05, lambda = growth_m = 0.2 m, beta_min = beta = 0.1
 cell = room.world_to_cell(1.0, 1.0)
 X, Y = room.cell_centers()
 d = np.hypot(X - room.cell_to_world(*cell)[0], Y - room.cell_to_world(*cell)[1])   # distance from c_uv [m]
 
 fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
 for P_n in (0.9, 0.7, 0.5):
-    beta0 = max(gcfg.beta_min, 1 - P_n)
-    B = growing_beta_field(room, cell, gcfg.alpha, beta0, gcfg.growth_m)
-    reach = gcfg.growth_m * math.log((1 - gcfg.alpha) / beta0)
-    assert np.isclose(1 - B[cell], P_n) and np.allclose(1 - B[d > reach + 1e-9], gcfg.alpha)
+    det = gcfg.detection
+    beta0 = max(det.beta, 1 - P_n)
+    B = growing_beta_field(room, cell, det.alpha, beta0, det.growth_m)
+    reach = det.growth_m * math.log((1 - det.alpha) / beta0)
+    assert np.isclose(1 - B[cell], P_n) and np.allclose(1 - B[d > reach + 1e-9], det.alpha)
     order = np.argsort(d.ravel())
     ax[0].plot(d.ravel()[order], (1 - B).ravel()[order], ".-", label=f"P'_n = {P_n} (reach {reach:.2f} m)")
     if P_n == 0.9:
@@ -234,7 +235,7 @@ search for the cereal box.""",
         "code",
         """\
 from lab.geometry import Pose2D
-from lab.search import ProbabilityMap
+from lab.search import ColourPeakDetection, ProbabilityMap
 from lab.training import search_database
 from lab.search.global_search import object_likelihood_ratio, process_view, strongest_clusters, window_mean
 from lab.sim import RenderSettings, SimRobot, SimWorld
@@ -299,7 +300,7 @@ for p in view.peaks:
     where = "" if p.p_W is None else f"p_W = {np.round(p.p_W, 2)}"
     print(f"P'_n = {p.strength:.2f}  {where}  cell {p.cell}: {p.reason}")
     if p.used:
-        pmap.update_global(p.cell, p.strength, gcfg.alpha, gcfg.growth_m, gcfg.beta_min)
+        pmap.observe(ColourPeakDetection(p.cell, p.strength, gcfg.detection))   # Eqs. (1)-(3), growing beta
 
 true_xy = np.array(scene.body("cereal_box").pose[:2])        # the scene file's placement: for checking only
 best = max(view.peaks, key=lambda p: p.strength if p.used else -1)
@@ -494,8 +495,9 @@ else:
 
 1. Search for the `book` on the shelf, 1.2 m high (`run_search("book", seed=0, place=scene.body("book").pose,
    navigate=navigator_factory)`). Which tilt of the global scan sees it?
-2. Give the local search a larger $\beta$ (`from lab.search import AgentConfig, LocalSearchConfig`, then
-   `config=AgentConfig(local_search=LocalSearchConfig(beta=0.5))` in `run_search`) and search for the
+2. Give the local search a larger $\beta$ (`from lab.search import DetectionModel, LocalSearchConfig,
+   SearchAgentConfig`, then `config=SearchAgentConfig(local_search=LocalSearchConfig(detection=DetectionModel(0.05,
+   0.5, neighbour_radius_m=0.45)))` in `run_search`) and search for the
    glossy cup again: how does the sequence of snapshots change?
 
 ## Which cell next: the highest, or the best buy?
@@ -512,7 +514,7 @@ among the map's peaks (`lab.search.agent.detection_rates`). Check the claim on f
         "code",
         """\
 import itertools
-from lab.search.agent import detection_rates
+from lab.search import detection_rates
 
 P = np.array([0.30, 0.10, 0.25, 0.05, 0.20])                  # the peaks' probabilities
 centres = np.array([[4.0, 0.0], [0.5, 0.0], [0.0, -2.0], [1.0, 1.0], [0.0, 6.0]])   # [m], robot at (0, 0)

@@ -263,13 +263,13 @@ look take one view each (the same agent, fewer views).""",
         """\
 from lab.navigation.navigator import NavigatorConfig
 from lab.runs.search import navigator_factory, run_search
-from lab.search.agent import AgentConfig
+from lab.search import SearchAgentConfig
 from lab.search.global_search import GlobalSearchConfig
 
 config, navigate = None, navigator_factory        # the agent's and the navigator's defaults
 place = (0.0, -1.6, 0.0, -90.0)                   # the cereal box 1.4 m in front of the robot's start
 if FAST:
-    config = AgentConfig(global_search=GlobalSearchConfig(pans_deg=(0.0,), tilts_deg=(-30.0,)))
+    config = SearchAgentConfig(global_search=GlobalSearchConfig(pans_deg=(0.0,), tilts_deg=(-30.0,)))
     navigate = lambda robot, spec: navigator_factory(robot, spec, config=NavigatorConfig(scan_pans=(0.0,)))
     place = (0.0, -2.2, 0.0, -90.0)
 if EMULATED:

@@ -14,7 +14,7 @@ every wheel turn, and they never shrink: a base that drifts by 2 % of the distan
 10 m, and after a whole object search (70 m and more) it is metres off. Then the search cannot say where
 in the room it found the object, and the robot cannot drive back to a cell it has searched.
 
-The localizer (`lab/navigation/localization.py`) corrects the odometry with **landmarks**: posters on
+The localizer (`lab/localization/`) corrects the odometry with **landmarks**: posters on
 the room's walls whose poses are known. It is an extended Kalman filter over the robot's planar pose in
 the world W,
 
@@ -72,7 +72,7 @@ end point sideways by $\delta\theta$ times its length. A Jacobian must agree wit
         "code",
         """\
 from lab.geometry import Pose2D, wrap_angle
-from lab.navigation.localization import Localizer, LocalizerConfig, motion_jacobians, motion_model, odometry_increment
+from lab.localization import Localizer, LocalizerConfig, motion_jacobians, motion_model, odometry_increment
 
 a, b = Pose2D(0.5, -1.0, 2.8), Pose2D(0.62, -0.93, -3.1)    # two odometry readings; the heading wraps at pi
 u = odometry_increment(a, b)
@@ -305,7 +305,7 @@ own fitted orientation $h_3$ is poor.""",
     (
         "code",
         """\
-from lab.navigation.localization import measurement_jacobian, measurement_model
+from lab.localization import measurement_jacobian, measurement_model
 
 lm = landmarks.get("poster_north")
 l = lm.planar
@@ -380,7 +380,7 @@ error (in a search trial, 0.21 of a poster in view gave a fit 20 cm off that cla
         """\
 from lab.estimation.fit import ransac_pose
 from lab.geometry import pose6_to_G, se3_inv
-from lab.navigation.localization import face_share_in_image
+from lab.localization import face_share_in_image
 from lab.vision import Matcher, stereo_features
 
 r_lm, bearing = landmarks.bearing_in_robot(lm, loc.x)
@@ -435,7 +435,7 @@ $$Q = Q_{fit} + \begin{bmatrix} s_\parallel^2\, u u^T + s_\perp^2\, v v^T & 0 \\
     (
         "code",
         """\
-from lab.navigation.localization import observation_of
+from lab.localization import observation_of
 
 z, Q_fit = observation_of(frame.G_RC, G_CL, fit.Sigma_rv)
 Q = Q_fit + cfg.observation_floor(z)
@@ -445,7 +445,7 @@ print("h(truth)   =", measurement_model(truth.as_array(), l).round(4), "  (what 
 print("h(x_bar)   =", measurement_model(loc.x, l).round(4), "  (what the estimate expects)")
 print("sigma of Q_fit:", sd(Q_fit).round(2), " of Q:", sd(Q).round(2), " [cm, cm, deg]")
 # the library's observer does exactly these steps (same features, same matcher, same RANSAC seed)
-from lab.navigation.localization import LandmarkObserver
+from lab.localization import LandmarkObserver
 observer = LandmarkObserver(landmarks, cfg, np.random.default_rng(0))
 (obs,) = observer.observe(frame, observer.candidates(loc.x, frame))
 assert obs.landmark.name == lm.name and np.allclose(obs.z, z) and np.allclose(obs.Q, Q_fit)
@@ -622,7 +622,7 @@ rejecting forever?
 
 ## The filter on a drive
 
-`LocalizedRobot` (in `lab/navigation/localization.py`) puts this filter behind the `Robot` interface:
+`LocalizedRobot` (in `lab/localization/`) puts this filter behind the `Robot` interface:
 its `odometry()` and every frame's `odom` are the filter's estimate, so the navigator, the search's
 map and the object poses it reports use the localized pose without a change. Each step predicts with
 the wheels' increment; each captured frame in which a landmark should be visible (within

@@ -30,7 +30,7 @@ JUSTIFIED = "private-ok:"
 #: of trials.
 _TUNING = re.compile(
     r"\bseeds?\s+\d|\b\d{5,6}\s*[-–]\s*\d|\b10\d{4}\b"
-    r"|\b\d+\s+(?:of\s+\d+\s+)?(?:trials|episodes|placements|drives|seeded runs)\b",
+    r"|\b\d+\s+(?:of\s+\d+\s+)?(?:[a-z-]+\s+)?(?:trials|episodes|placements|drives|runs)\b",
     re.IGNORECASE,
 )
 
@@ -50,8 +50,10 @@ def private_imports(root: Path) -> list[str]:
     for path, text in _modules(root):
         lines = text.splitlines()
         for node in ast.walk(ast.parse(text)):
-            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("lab") or (
-                isinstance(node, ast.ImportFrom) and node.level
+            if (
+                isinstance(node, ast.ImportFrom)
+                and (node.module or "").startswith("lab")
+                or (isinstance(node, ast.ImportFrom) and node.level)
             ):
                 for alias in node.names:
                     if alias.name.startswith("_") and not alias.name.startswith("__"):
@@ -117,9 +119,7 @@ def long_functions(root: Path, limit: int = MAX_FUNCTION_LINES) -> list[str]:
 
 def long_modules(root: Path, limit: int = MAX_MODULE_LINES) -> dict[str, int]:
     """Modules longer than ``limit`` lines: ``{path: lines}``."""
-    return {
-        _rel(root, p): n for p, t in _modules(root) if (n := len(t.splitlines())) > limit
-    }
+    return {_rel(root, p): n for p, t in _modules(root) if (n := len(t.splitlines())) > limit}
 
 
 def _docstrings(tree: ast.AST):

@@ -13,7 +13,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 #: The algorithm packages: handed a Robot and their data, they never render, plot, train or run.
-ALGORITHMS = ("lab.estimation", "lab.vision", "lab.navigation", "lab.identification", "lab.search")
+ALGORITHMS = (
+    "lab.estimation",
+    "lab.vision",
+    "lab.localization",
+    "lab.navigation",
+    "lab.identification",
+    "lab.search",
+)
 
 
 @dataclass(frozen=True)
@@ -42,6 +49,7 @@ RULES = (
         "the two robots sit below the algorithms",
         ("lab.sim", "lab.hardware"),
         (
+            "lab.localization",
             "lab.navigation",
             "lab.identification",
             "lab.search",
@@ -51,6 +59,11 @@ RULES = (
             "lab.runs",
             "lab.cli",
         ),
+    ),
+    Rule(
+        "localization sits beside navigation, below the searches that use it",
+        ("lab.localization",),
+        ("lab.navigation", "lab.identification", "lab.search"),
     ),
     Rule("pictures never run experiments or train", ("lab.viz",), ("lab.training", "lab.runs", "lab.cli")),
     Rule("training runs no experiment", ("lab.training",), ("lab.runs", "lab.cli", "lab.viz")),

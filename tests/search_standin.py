@@ -19,7 +19,7 @@ from lab.geometry import Pose2D
 from lab.navigation import Costmap, GridSpec, astar_to_region, drive_to, heading_towards, simplify_path
 from lab.navigation.follower import DriveOutcome
 from lab.runs.placement import footprint
-from lab.search.agent import NavigationResult
+from lab.search.records import NavigationResult
 
 
 def _inside_convex(points: np.ndarray, poly: np.ndarray) -> np.ndarray:

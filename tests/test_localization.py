@@ -16,15 +16,15 @@ from scipy.stats import chi2
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D, Rz, pan_tilt_G_RC, relative_pose2d, se3, se3_inv, wrap_angle
-from lab.navigation.landmarks import Landmark
-from lab.navigation.localization import (
+from lab.localization import (
+    Landmark,
     LandmarkObservation,
     LandmarkObserver,
     LocalizationMode,
     LocalizedRobot,
     Localizer,
     LocalizerConfig,
-    PoseEstimate,
+    PlanarPoseEstimate,
     face_share_in_image,
     measurement_jacobian,
     measurement_model,
@@ -636,7 +636,7 @@ def test_point_sigma_matches_a_monte_carlo_of_the_pose():
     cs, sn = np.cos(x[:, 2]), np.sin(x[:, 2])
     pts = np.stack([x[:, 0] + cs * p_R[0] - sn * p_R[1], x[:, 1] + sn * p_R[0] + cs * p_R[1]], axis=1)
     mc = math.sqrt(np.linalg.eigvalsh(np.cov(pts.T))[-1])
-    est = PoseEstimate(pose, Sigma)
+    est = PlanarPoseEstimate(pose, Sigma)
     assert est.point_sigma_m(p_W) == pytest.approx(mc, rel=0.01)
     assert est.point_sigma_m([pose.x, pose.y]) == pytest.approx(est.sigma_xy_m, rel=1e-9)
 
@@ -821,13 +821,13 @@ def test_a_find_where_no_landmark_is_seen_is_reported_from_the_kept_pose_after_a
     10 seeds the reported object is within the search's 5 cm of the truth (from about 30 cm) and its
     position standard deviation says so (the error within 3 of them; the odometry of a 1.5 m drive
     leaves about 3 cm), and the robot is where the detour said it would go."""
-    from lab.runs.search import _relocalized_find
+    from lab.search.report_policy import ReportPolicy
 
     for seed in range(10):
         robot, base, found, G_WO_true = _found_far_from_landmarks(seed)
         p0 = robot.pose_estimate().pose
         navigate = _driving_navigate(robot, base)
-        res, info = _relocalized_find(found, robot, navigate)
+        res, info = ReportPolicy(robot, navigate, navigate.navigator).report(found)
         before = np.linalg.norm(found.G_WO[:3, 3] - G_WO_true[:3, 3])
         after = np.linalg.norm(res.G_WO[:3, 3] - G_WO_true[:3, 3])
         d = info["detour"]
@@ -844,29 +844,29 @@ def test_a_find_where_no_landmark_is_seen_is_reported_from_the_kept_pose_after_a
 def test_no_detour_without_a_place_to_go_and_the_find_is_reported_as_it_was():
     """Every place within reach blocked: the detour says so, the robot stays, the report is unchanged;
     with report_detour_m = 0 there is none at all."""
-    from lab.runs.search import _relocalized_find
+    from lab.search.report_policy import ReportPolicy
 
     robot, base, found, _ = _found_far_from_landmarks(0)
     here = base.odometry()
     navigate = _driving_navigate(robot, base, free=lambda x, y: math.hypot(x - here.x, y - here.y) < 0.3)
-    res, info = _relocalized_find(found, robot, navigate)
+    res, info = ReportPolicy(robot, navigate, navigate.navigator).report(found)
     assert info["detour"]["stopped"] == "no place within reach sees a landmark well"
     assert not info["detour"]["arrived"] and navigate.goals == []
     np.testing.assert_allclose(res.G_WO, found.G_WO)
     robot.config = replace(robot.config, report_detour_m=0.0)
-    res, info = _relocalized_find(found, robot, navigate)
+    res, info = ReportPolicy(robot, navigate, navigate.navigator).report(found)
     assert info["detour"] is None and navigate.goals == []
 
 
 def test_a_find_known_to_a_few_centimetres_makes_no_detour():
     """The point's sigma is above the report's 1.5 cm but below ``report_detour_above_m`` (a detour's own
     odometry would leave about as much): no detour, the robot stays."""
-    from lab.runs.search import _relocalized_find
+    from lab.search.report_policy import ReportPolicy
 
     robot, base, found, _ = _found_far_from_landmarks(0, offset=(0.01, -0.01, 0.002))
     robot.localizer.Sigma = np.diag([0.02**2, 0.02**2, math.radians(0.5) ** 2])
     navigate = _driving_navigate(robot, base)
-    res, info = _relocalized_find(found, robot, navigate)
+    res, info = ReportPolicy(robot, navigate, navigate.navigator).report(found)
     assert robot.config.report_sigma_m < info["point_sigma_after_m"] < robot.config.report_detour_above_m
     assert info["detour"] is None and navigate.goals == []
     np.testing.assert_allclose(res.G_WO, found.G_WO)

@@ -14,8 +14,8 @@ from scipy.stats import chi2
 
 from lab.errors import ConfigError
 from lab.geometry import wrap_angle
-from lab.navigation.landmarks import Landmark
-from lab.navigation.localization import (
+from lab.localization import (
+    Landmark,
     Localizer,
     LocalizerConfig,
     calibrated_motion_jacobians,

@@ -16,8 +16,7 @@ from localization_helpers import NO_FLOOR, num_jac
 from scipy.stats import chi2
 
 from lab.geometry import wrap_angle
-from lab.navigation.landmarks import Landmark
-from lab.navigation.localization import Localizer, LocalizerConfig, measurement_model, pose_from_observation
+from lab.localization import Landmark, Localizer, LocalizerConfig, measurement_model, pose_from_observation
 
 RNG = np.random.default_rng(20)
 NORTH = Landmark("poster_north", (0.0, 3.94, 1.5), 0.0, (1.4, 0.02, 1.0), (0.0, -1.0))

@@ -170,10 +170,10 @@ def test_rehearsed_search_corrects_a_start_measured_30cm_10deg_off(monkeypatch):
     start's 5 cm / 3 deg, would have rejected it), and the localized pose ends far closer to the rendered
     world's truth than the odometry placed at the told start."""
     from lab.navigation.navigator import NavigatorConfig
-    from lab.search.agent import AgentConfig
+    from lab.search.config import SearchAgentConfig
     from lab.search.global_search import GlobalSearchConfig
 
-    config = AgentConfig(global_search=GlobalSearchConfig(pans_deg=(0.0,), tilts_deg=(-30.0,)))
+    config = SearchAgentConfig(global_search=GlobalSearchConfig(pans_deg=(0.0,), tilts_deg=(-30.0,)))
     nav_config = NavigatorConfig(scan_pans=(0.0,))
     robots = []
     told = (0.25, -2.85, 100.0)  # the scene's start is (0, -3, 90 deg): 29 cm and 10 deg off

@@ -19,11 +19,13 @@ from lab.geometry import Pose2D
 from lab.navigation import GridSpec, drive_to
 from lab.runs.search import run_search
 from lab.scene import load_scene
-from lab.search.agent import AgentConfig, NavigationResult, SearchAgent, Strategy, detection_rates
-from lab.search.baselines import frontier_cells, lawnmower_targets
+from lab.search.agent import SearchAgent
 from lab.search.budget import BudgetedRobot
+from lab.search.config import SearchAgentConfig
 from lab.search.local_search import LocalSearchConfig, LocalSearchResult, ViewRecord
-from lab.search.probability_map import ProbabilityMap
+from lab.search.probability_map import ColourPeakDetection, LocalSearchDetection, ProbabilityMap
+from lab.search.records import NavigationResult
+from lab.search.strategies import Strategy, detection_rates, frontier_cells, lawnmower_targets
 
 SPEC = GridSpec.from_bounds(-3, -4, 3, 4, 0.2)
 
@@ -45,11 +47,12 @@ class Script:
         robot.step(self.global_time)
         # peaks: one list for every scan, or a list per scan (the last one repeats)
         peaks = self.peaks[min(self.globals, len(self.peaks)) - 1] if self.per_scan else self.peaks
-        for xy, strength in peaks:
-            pmap.update_global(pmap.cell_of(*xy), strength, config.alpha, config.growth_m, config.beta_min)
-        return type("G", (), {"used_peaks": self.peaks, "peaks": self.peaks})()
+        dets = tuple(
+            ColourPeakDetection(pmap.cell_of(*xy), strength, config.detection) for xy, strength in peaks
+        )
+        return type("G", (), {"used_peaks": self.peaks, "peaks": self.peaks, "detections": dets})()
 
-    def local_search(self, robot, db, target_xy, rng, config, matcher):
+    def local_search(self, robot, db, target_xy, rng, config, matcher, cell=None):
         self.local_cells.append(SPEC.world_to_cell(*target_xy))
         robot.step(self.local_time)
         # the 9 views see the hemisphere in front, out to about 1.2 m
@@ -63,7 +66,10 @@ class Script:
         G[:3, 3] = (*self.object_xy, 0.1)
         miss = () if found else (ViewRecord(0.0, 0.0, robot.now(), 200, 40, 3, "scripted"),)
         peaks = (G[:3, 3].copy(),) if self.colour and in_view and not found else ()
-        return LocalSearchResult(found, "scripted", G if found else None, views=miss, colour_peaks=peaks)
+        detection = LocalSearchDetection(cell, int(found), config.detection)
+        return LocalSearchResult(
+            found, "scripted", G if found else None, views=miss, colour_peaks=peaks, detection=detection
+        )
 
     def look_at_points(self, robot, db, points, rng, config, matcher):
         """The side look's second look at ``points``: finds the object when one of them is the object
@@ -121,7 +127,7 @@ def scripted_run(
     monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)
     nav = navigate(robot) if navigate else straight_navigator(robot, refuse)
     db = [None] * 823  # a stand-in with the book's size (the reason of a miss reads it); nothing else
-    config = replace(config or AgentConfig(), strategy=Strategy.parse(strategy))
+    config = replace(config or SearchAgentConfig(), strategy=Strategy.parse(strategy))
     agent = SearchAgent(robot, db, nav, ProbabilityMap(SPEC), config, rng=np.random.default_rng(0))
     return agent.run(), script, robot
 
@@ -237,22 +243,23 @@ def test_a_miss_that_saw_the_colours_looks_at_once_from_a_side_within_reach(monk
 
     # (the side look, on by default, would find it first: the second local search is tested alone)
     out, script, _ = run(
-        AgentConfig(second_side=True, revisit_turns_deg=(120.0, 60.0, 30.0), side_look_deg=0)
+        SearchAgentConfig(second_side=True, revisit_turns_deg=(120.0, 60.0, 30.0), side_look_deg=0)
     )
     assert out.found and script.local_cells == [SPEC.world_to_cell(*obj)] * 2 and out.global_searches == 1
     nav = [e for e in out.events if e.kind == "navigate"]
     assert nav[1].detail.startswith("second side, from another side (+60 deg)"), nav[1]
 
-    old, script, _ = run(AgentConfig(second_side=True, revisit_turns_deg=(120.0,), side_look_deg=0))
+    old, script, _ = run(SearchAgentConfig(second_side=True, revisit_turns_deg=(120.0,), side_look_deg=0))
     assert script.local_cells[:2] == [SPEC.world_to_cell(*obj)] * 2
     assert [e.detail for e in old.events if e.kind == "local"][:2] == ["scripted", "scripted"]  # two misses
     assert "another side" not in [e for e in old.events if e.kind == "navigate"][1].detail
 
-    off, _, _ = run(AgentConfig(side_look_deg=0))  # off by default: the map alone decides where to look next
+    # off by default: the map alone decides where to look next
+    off, _, _ = run(SearchAgentConfig(side_look_deg=0))
     assert not any(e.detail.startswith("second side") for e in off.events if e.kind == "navigate")
 
     with pytest.raises(ConfigError, match="revisit_turns_deg must be one or more turns in"):
-        AgentConfig(revisit_turns_deg=(0.0,))
+        SearchAgentConfig(revisit_turns_deg=(0.0,))
 
 
 def test_a_miss_that_saw_the_colours_steps_round_the_peak_and_looks_again(monkeypatch):
@@ -291,10 +298,10 @@ def test_a_miss_that_saw_the_colours_steps_round_the_peak_and_looks_again(monkey
     assert not out.found and len(script.looks) >= 2
     assert [e.detail for e in out.events if e.kind == "local"][1:3] == ["side look: scripted look"] * 2
     # off: no side look
-    out, script, _ = run(lambda p: p.x > obj[0] + 0.3, AgentConfig(side_look_deg=0))
+    out, script, _ = run(lambda p: p.x > obj[0] + 0.3, SearchAgentConfig(side_look_deg=0))
     assert script.looks == [] and len(script.local_cells) >= 2
     with pytest.raises(ConfigError, match="side_look_deg must be in"):
-        AgentConfig(side_look_deg=90)
+        SearchAgentConfig(side_look_deg=90)
 
 
 def test_a_side_look_out_of_reach_is_skipped_and_said(monkeypatch):
@@ -334,7 +341,7 @@ def test_a_distractor_two_searches_answered_for_is_not_searched_again(monkeypatc
         agent = SearchAgent(robot, db, nav, ProbabilityMap(SPEC), config, rng=np.random.default_rng(0))
         return agent.run(), script
 
-    out, script = run(AgentConfig())
+    out, script = run(SearchAgentConfig())
     assert not out.found and "budget" in out.reason and out.global_searches >= 3
     # the reason says what the local searches saw; a rich database is not blamed
     assert (
@@ -347,13 +354,13 @@ def test_a_distractor_two_searches_answered_for_is_not_searched_again(monkeypatc
     assert ex and ex[0].detail.startswith("21 cells answered for by 2 failed local searches")  # r 0.45 m
     assert out.local_searches > 2  # it went on searching elsewhere
 
-    thin, _ = run(AgentConfig(), n_features=11)  # the glossy cup's database
+    thin, _ = run(SearchAgentConfig(), n_features=11)  # the glossy cup's database
     assert thin.reason.endswith(
         "its database holds only 11 SIFT features (a glossy, featureless object, like the paper's "
         "penguin cup): too few to give a pose from one view"
     ), thin.reason
 
-    out_off, script_off = run(AgentConfig(max_local_misses=0))
+    out_off, script_off = run(SearchAgentConfig(max_local_misses=0))
     assert script_off.local_cells.count(dc) > 2 and not any(e.kind == "exclude" for e in out_off.events)
     print(f"\nlocal searches: {script.local_cells}; with the exclusion off: {script_off.local_cells}")
 
@@ -361,7 +368,7 @@ def test_a_distractor_two_searches_answered_for_is_not_searched_again(monkeypatc
 @pytest.mark.parametrize("bad", [-1, 1.5, True, "2"])
 def test_max_local_misses_must_be_a_whole_number(bad):
     with pytest.raises(ConfigError, match="max_local_misses must be a whole number >= 0"):
-        AgentConfig(max_local_misses=bad)
+        SearchAgentConfig(max_local_misses=bad)
 
 
 def test_unreachable_peak_is_skipped_with_a_reason(monkeypatch):
@@ -392,7 +399,7 @@ def test_a_cell_whose_band_is_blocked_is_approached_from_farther_out(monkeypatch
     assert out.found and script.local_cells == [SPEC.world_to_cell(*obj)]
     assert any("from 1.2 m (no path: UNREACHABLE)" in e.detail for e in out.events if e.kind == "navigate")
     with pytest.raises(ConfigError, match="wide_band_m"):
-        AgentConfig(wide_band_m=-0.1)
+        SearchAgentConfig(wide_band_m=-0.1)
 
 
 def test_a_robot_that_cannot_leave_its_cell_ends_the_run_as_stuck(monkeypatch):
@@ -411,10 +418,10 @@ def test_a_robot_that_cannot_leave_its_cell_ends_the_run_as_stuck(monkeypatch):
 
 
 def test_the_budget_holds_when_relocalization_looks_round_before_each_drive(monkeypatch):
-    """run_search's active re-localization looks round (20 s of views) on the robot beneath the budget
-    wrapper before every drive; with every drive failing at once (each cell unreachable) the run went
-    on to 768 s of a 300 s budget. The budget is now checked round it: the run ends within one look."""
-    from lab.runs.search import _relocalizing
+    """The report policy's active re-localization looks round (20 s of views) on the robot beneath the
+    budget wrapper before every drive; with every drive failing at once (each cell unreachable) the run
+    went on to 768 s of a 300 s budget. The budget is now checked round it: the run ends within one look."""
+    from lab.search.report_policy import ReportPolicy
 
     class LooksRound:  # the localized robot beneath the budget: its views step the base directly
         def __init__(self, base):
@@ -425,12 +432,36 @@ def test_the_budget_holds_when_relocalization_looks_round_before_each_drive(monk
 
     def unreachable(robot):
         nav = lambda target_xy, lo, hi: NavigationResult(False, "UNREACHABLE", robot.odometry())  # noqa: E731
-        return _relocalizing(nav, LooksRound(robot.base), robot)
+        return ReportPolicy(LooksRound(robot.base), nav, check=robot.check).relocalizing()
 
     peaks = [((x, y), 0.9) for x in (-2.0, -1.0, 1.0, 2.0) for y in (-1.0, 1.0, 2.5)]
     out, _, robot = scripted_run(monkeypatch, (2.5, 3.5), peaks, max_time=100.0, navigate=unreachable)
     assert not out.found and out.reason.startswith("time budget of 100 s used up")
     assert 100.0 <= robot.now() <= 120.0 + 1e-6, robot.now()
+
+
+def test_the_policy_relocalizes_between_two_budget_checks_before_each_drive_and_keeps_the_navigator():
+    """The agent's navigate is the search's own behind a re-localization: budget check, look round,
+    budget check, then the drive, with the same arguments and result; its navigator is the policy's."""
+    from lab.search.report_policy import ReportPolicy
+
+    calls = []
+
+    class Looks:
+        def relocalize(self):
+            calls.append("relocalize")
+
+    def drive(target_xy, lo, hi):
+        calls.append(("drive", target_xy, lo, hi))
+        return "result"
+
+    navigator = object()
+    policy = ReportPolicy(Looks(), drive, navigator, check=lambda: calls.append("check"))
+    navigate = policy.relocalizing()
+    assert navigate((1.0, 2.0), 0.5, 0.9) == "result"
+    assert calls == ["check", "relocalize", "check", ("drive", (1.0, 2.0), 0.5, 0.9)]
+    assert navigate.navigator is navigator and navigate.navigate is drive
+    assert ReportPolicy(Looks(), drive).relocalizing().navigator is None
 
 
 def test_all_peaks_failed_triggers_a_new_global_search(monkeypatch):
@@ -565,7 +596,7 @@ def test_bad_inputs_are_clear_errors():
     with pytest.raises(ConfigError, match="needs a navigator"):
         run_search("book", 0)
     with pytest.raises(ConfigError, match="travel_speed_m_s and look_time_s must be > 0, got 0.0, 8.5"):
-        AgentConfig(strategy="rate", travel_speed_m_s=0.0)
+        SearchAgentConfig(strategy="rate", travel_speed_m_s=0.0)
 
 
 def test_a_device_fault_ends_the_run_with_its_reason(monkeypatch):
@@ -583,3 +614,27 @@ def test_a_device_fault_ends_the_run_with_its_reason(monkeypatch):
     assert not out.found
     assert "DeviceTimeout" in out.reason and "pan-tilt" in out.reason
     assert out.events[-1].kind == "end"
+
+
+def test_each_strategy_is_a_target_strategy_and_the_agent_is_its_search_state(monkeypatch):
+    """The agent asks ``make_strategy(config)`` for the next target; it gives the strategy what
+    :class:`SearchState` names (public attributes only)."""
+    from lab.search.strategies import (
+        FrontierStrategy,
+        LawnmowerStrategy,
+        MapPeakStrategy,
+        SearchState,
+        make_strategy,
+    )
+
+    kinds = {"paper": MapPeakStrategy, "rate": MapPeakStrategy}
+    kinds |= {"lawnmower": LawnmowerStrategy, "frontier": FrontierStrategy}
+    for name, cls in kinds.items():
+        assert type(make_strategy(SearchAgentConfig(strategy=name))) is cls
+    monkeypatch.setattr(agent_mod, "make_matcher", lambda db: None)
+    robot = KinematicRobot(Pose2D(0.0, -3.0, math.pi / 2))
+    agent = SearchAgent(robot, [None], None, ProbabilityMap(SPEC), rng=np.random.default_rng(0))
+    for name in ("robot", "pmap", "global_searches", "local_since_global", "scan_points", "searched"):
+        assert hasattr(agent, name) and name in SearchState.__annotations__
+    assert agent.excluded.shape == agent.excluded_for_good.shape == SPEC.shape
+    assert callable(agent.global_search)

@@ -103,6 +103,8 @@ def _scan(name, place):
         robot.enable()
         pmap = ProbabilityMap.over(-3, -4, 3, 4, 0.2)
         res = global_search(robot, db, pmap)
+        for detection in res.detections:
+            pmap.observe(detection)
         truth = {
             b.name: w.truth.G_W(b.name)[:3, 3] for b in SCENE.bodies if b.role in ("object", "distractor")
         }
@@ -153,6 +155,8 @@ def test_peaks_are_recorded_with_their_fate(scans):
         if p.used:
             assert p.cell is not None and p.p_W is not None
     assert np.isclose(res.P_after.sum(), 1.0) and res.P_after.max() > res.P_before.max()
+    assert len(res.detections) == len(res.used_peaks)
+    np.testing.assert_array_equal(pmap.P, res.P_after)  # the caller's observe gives what the search says
 
 
 def test_a_peak_at_the_left_edge_of_a_view_gets_its_depth():

@@ -12,9 +12,12 @@ from hypothesis import strategies as st
 from lab.errors import ConfigError
 from lab.navigation import GridSpec
 from lab.search.probability_map import (
+    ColourPeakDetection,
     DetectionModel,
+    LocalSearchDetection,
     ProbabilityMap,
     bayes_update,
+    cells_within,
     constant_beta_field,
     detection_likelihood,
     growing_beta_field,
@@ -213,7 +216,7 @@ def test_region_prior_and_map_class():
     ex[2:, 2:] = True
     assert m.peak(exclude=ex, near_xy=(-1, -1)) == (0, 0)
     assert m.peak(exclude=np.ones(spec.shape, bool)) is None
-    m.update((3, 3), 0, 0.05, 0.1)
+    m.observe(LocalSearchDetection((3, 3), 0, DetectionModel(0.05, 0.1)))
     assert m.P.sum() == pytest.approx(1.0) and m.P[3, 3] < P0[3, 3]
     assert ProbabilityMap.over(-3, -4, 3, 4).spec.shape == (30, 40)
 
@@ -243,3 +246,28 @@ def test_map_peaks_are_local_maxima_in_order():
     assert map_peaks(P) == [(5, 6), (1, 1), (6, 2), (2, 6)]
     assert map_peaks(P, 2) == [(5, 6), (1, 1)]
     assert map_peaks(np.ones((3, 3))) == []  # a flat map has no peak
+
+
+def test_observe_applies_either_searchs_detection_as_the_update_functions_do():
+    """A colour peak's detection is :func:`update_global` with the model's alpha, growth and beta floor;
+    a local search's is :func:`update` of the cell and then each neighbour within the model's radius."""
+    spec = GridSpec.from_bounds(0, 0, 2.0, 1.6, 0.2)
+    rng = np.random.default_rng(3)
+    P0 = rng.uniform(0.5, 1.5, spec.shape)
+    pmap = ProbabilityMap(spec, P0)
+    P = pmap.P.copy()
+    colour = DetectionModel(alpha=0.05, beta=0.1, growth_m=0.2)
+    pmap.observe(ColourPeakDetection((3, 4), 0.8, colour))
+    P = update_global(P, spec, (3, 4), 0.8, 0.05, 0.2, 0.1)
+    np.testing.assert_array_equal(pmap.P, P)
+    local = DetectionModel(alpha=0.05, beta=0.1, neighbour_radius_m=0.45)
+    miss = LocalSearchDetection((5, 2), 0, local)
+    cells = miss.cells(spec)
+    assert cells[0] == (5, 2) and len(cells) == len(set(cells)) == 21  # the cell and 20 within 0.45 m
+    pmap.observe(miss)
+    for c in cells:
+        P = update(P, c, 0, 0.05, 0.1)
+    np.testing.assert_array_equal(pmap.P, P)
+    assert cells_within(spec, (0, 0), 0.0) == [(0, 0)]
+    with pytest.raises(ConfigError, match="neighbour_radius_m"):
+        DetectionModel(0.05, 0.1, neighbour_radius_m=-1.0)

@@ -226,10 +226,10 @@ def _quick_search_parts():
     """A search that drives within seconds: one view for the global search and for the navigator's first
     scan (the same agent and navigator; the faults are about the robot's path, not about the search)."""
     from lab.navigation.navigator import NavigatorConfig
-    from lab.search.agent import AgentConfig
+    from lab.search.config import SearchAgentConfig
     from lab.search.global_search import GlobalSearchConfig
 
-    config = AgentConfig(global_search=GlobalSearchConfig(pans_deg=(0.0,), tilts_deg=(-30.0,)))
+    config = SearchAgentConfig(global_search=GlobalSearchConfig(pans_deg=(0.0,), tilts_deg=(-30.0,)))
     nav_config = NavigatorConfig(scan_pans=(0.0,))
     return config, lambda robot, spec: navigator_factory(robot, spec, config=nav_config)
 

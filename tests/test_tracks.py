@@ -8,7 +8,7 @@ from nav_fakes import KinematicRobot
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
-from lab.navigation.localization import LocalizedRobot
+from lab.localization import LocalizedRobot
 from lab.robot import RobotWrapper
 from lab.runs.tracks import TrackedRobot
 

@@ -39,7 +39,7 @@ def _sensing_argument(p: argparse.ArgumentParser) -> None:
 
 
 def _localization_argument(p: argparse.ArgumentParser, default: str = "landmarks", why: str = "") -> None:
-    """``--localization``: where the robot's pose comes from (``lab/navigation/localization.py``)."""
+    """``--localization``: where the robot's pose comes from (``lab/localization/``)."""
     p.add_argument(
         "--localization",
         choices=("landmarks", "odometry"),

@@ -8,9 +8,21 @@ so updates are per model, and :meth:`EKFBank.update_all` batches their linear al
 * the whitening of every filter's matches at once: the 3x3 Cholesky factors ``L_j L_j^T = Sigma_j``
   written out (no LAPACK call per match) and ``L_j^-1 [y_j, C_j]`` by forward substitution, the
   filters' rows stacked;
-* the 6x6 information-form update of :mod:`lab.estimation.ekf` ((6 + m) x (6 + m) with the
+* the 6x6 information-form update of :mod:`lab.estimation.kernel` ((6 + m) x (6 + m) with the
   calibration error's m entries) stacked over the filters: one Cholesky factor of ``Sigma_bar`` and
   one of ``B`` per filter, solves instead of inverses.
+
+It drives each filter through :class:`PoseEKF`'s public steps, doing their shared work once:
+
+* prediction, Eqs. (1)-(2): :func:`~lab.estimation.kernel.checked_motion` (once), then per filter
+  :meth:`PoseEKF.predict_staged` (``mu_bar``, ``F``, ``Sigma_bar``), the health check of all of them
+  (:func:`~lab.estimation.health.health_many`), and :meth:`PoseEKF.commit_prediction`;
+* update, Eq. (3): the gate of all filters (:func:`~lab.estimation.gate.gate_rows_many`), per filter
+  :meth:`PoseEKF.begin_update` (checks, the prior with the calibration error), the batched
+  :func:`~lab.estimation.kernel.whitened` and :func:`~lab.estimation.kernel.information_update`
+  (``K y``, the Joseph-form covariance, the NIS and Eq. (9)'s likelihood; :meth:`PoseEKF.fail_update`
+  when a factorisation fails), :meth:`PoseEKF.corrected_state` (``mu = mu_bar + K y`` in the chart),
+  the health check of all of them, and :meth:`PoseEKF.finish_update`.
 
 The results are :meth:`PoseEKF.update`'s, filter by filter, to round-off (``tests/test_ekf_filter.py``
 checks them against it and against filterpy).
@@ -22,20 +34,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from lab.estimation.ekf import (
-    _LOG_2PI,
-    EKFConfig,
-    PoseEKF,
-    UpdateResult,
-    _checked_motion,
-    _health_many,
-    _information_update,
-    _whitened,
-)
+from lab.estimation.ekf import EKFConfig, PoseEKF, UpdateResult
 from lab.estimation.estimate import PoseEstimate
-from lab.estimation.fit import _check_matches, _valid_rows
-from lab.estimation.gate import _gate_many
-from lab.estimation.models import odometry_covariance
+from lab.estimation.fit import check_matches, valid_rows
+from lab.estimation.gate import gate_rows_many
+from lab.estimation.health import health_many
+from lab.estimation.kernel import LOG_2PI, checked_motion, information_update, whitened
+from lab.estimation.noise import odometry_covariance
 
 __all__ = ["EKFBank"]
 
@@ -75,22 +80,22 @@ class EKFBank:
         Same arguments as :meth:`PoseEKF.predict`; returns each model's ``(mu_bar, Sigma_bar)`` (None for
         a model whose filter is not initialised yet).
         """
-        motion = _checked_motion(G_RC_prev, G_RC, G_odom, dt, G_OO)  # once for the bank
+        motion = checked_motion(G_RC_prev, G_RC, G_odom, dt, G_OO)  # once for the bank
         if Sigma_odom is None and not motion.bad:  # the odometry's error: once for the bank too
             Sigma_odom = odometry_covariance(motion.mats["G_odom"], self.filters[0].config.process)
-        staged = [f._predict_staged(motion, Sigma_odom) for f in self.filters]
+        staged = [f.predict_staged(motion, Sigma_odom) for f in self.filters]
         live = [i for i, st in enumerate(staged) if st is not None]
         if live:  # every filter's health at once
             problems = self._health([staged[i][0] for i in live], [staged[i][2] for i in live])
             for i, problem in zip(live, problems, strict=True):
-                self.filters[i]._predict_commit(*staged[i], problem)
+                self.filters[i].commit_prediction(*staged[i], problem)
         return tuple(f.estimate for f in self.filters)
 
     def _health(self, mus, Sigmas) -> list:
-        """The divergence check of several filters' states at once (:func:`_health_many`; the filters
+        """The divergence check of several filters' states at once (:func:`health_many`; the filters
         share their config)."""
         f0 = self.filters[0]
-        return _health_many(f0.config.divergence, f0._euler, np.stack(mus), np.stack(Sigmas))
+        return health_many(f0.config.divergence, f0.euler_chart, np.stack(mus), np.stack(Sigmas))
 
     def update(self, i: int, d_C, b_O, Sigma_d) -> UpdateResult:
         """Update model ``i``'s filter with its matched pairs (same arguments as :meth:`PoseEKF.update`)."""
@@ -112,8 +117,8 @@ class EKFBank:
         for f, m in zip(self.filters, matches, strict=True):
             key = tuple(id(a) for a in m)
             if key not in valid:
-                checked[key] = _check_matches(*m)
-                valid[key] = _valid_rows(*checked[key])
+                checked[key] = check_matches(*m)
+                valid[key] = valid_rows(*checked[key])
             ok = valid[key]
             gates = f.mu is not None and f.divergence is None
             rows.append(np.flatnonzero(ok) if gates and ok.sum() >= f.config.gate.min_matches else None)
@@ -122,7 +127,7 @@ class EKFBank:
         if todo:  # every filter's gate at once, the matches' rows stacked
             f0 = self.filters[0]
             keys = [tuple(id(a) for a in matches[i]) for i in todo]
-            outs = _gate_many(
+            outs = gate_rows_many(
                 [self.filters[i].mu for i in todo],
                 [self.filters[i].P for i in todo],
                 *([checked[k][j][rows[i]] for i, k in zip(todo, keys, strict=True)] for j in range(3)),
@@ -132,7 +137,7 @@ class EKFBank:
             for i, out in zip(todo, outs, strict=True):
                 gated[i] = out
         pending = [
-            f._begin_update(*m, valid=valid[tuple(id(a) for a in m)], gated=g)
+            f.begin_update(*m, valid=valid[tuple(id(a) for a in m)], gated=g)
             for f, m, g in zip(self.filters, matches, gated, strict=True)
         ]
         ready = [i for i, p in enumerate(pending) if not isinstance(p, UpdateResult)]
@@ -143,17 +148,17 @@ class EKFBank:
             f, p = self.filters[i], pending[i]
             if out is None:  # the batch could not factorise: this filter alone, as update() does
                 try:
-                    out = _information_update(p.prior, *_whitened(p.r, p.C, p.S))
+                    out = information_update(p.prior, *whitened(p.r, p.C, p.S))
                 except np.linalg.LinAlgError:
-                    results[i] = f._update_failed(p)
+                    results[i] = f.fail_update(p)
                     continue
             dx, P, nis, loglik = out
-            corrected[i] = (*f._corrected_state(dx, P), nis, loglik)
+            corrected[i] = (*f.corrected_state(dx, P), nis, loglik)
         if corrected:  # every corrected state's health at once
             idx = list(corrected)
             problems = self._health([corrected[i][0] for i in idx], [corrected[i][1] for i in idx])
             for i, problem in zip(idx, problems, strict=True):
-                results[i] = self.filters[i]._end_update_checked(pending[i], *corrected[i], problem)
+                results[i] = self.filters[i].finish_update(pending[i], *corrected[i], problem)
         return tuple(results)
 
     @property
@@ -168,7 +173,7 @@ class EKFBank:
 
 
 def _batched_updates(pending) -> list:
-    """``_information_update(prior, *_whitened(r, C, S))`` of each pending update, batched (module
+    """``information_update(prior, *whitened(r, C, S))`` of each pending update, batched (module
     docstring); None for every one when a factorisation fails or the priors differ in size (each is then
     done alone)."""
     k = pending[0].prior.shape[0]
@@ -220,6 +225,6 @@ def _batched_updates(pending) -> list:
     for f, p in enumerate(pending):
         nis = float(yy[f] - g[f] @ dx[f])  # y^T S^-1 y (Woodbury)
         logdet_S = logdet_m[f] + 2.0 * float(np.sum(np.log(np.diag(L_B[f]))))  # log|Sigma_m| + log|B|
-        loglik = -0.5 * (nis + logdet_S + 3 * len(p.S) * _LOG_2PI)  # log N(y; 0, S), Eq. (9)
+        loglik = -0.5 * (nis + logdet_S + 3 * len(p.S) * LOG_2PI)  # log N(y; 0, S), Eq. (9)
         out.append((dx[f], P[f], nis, loglik))
     return out

@@ -241,8 +241,8 @@ def ransac_pose(
     InitResult
     """
     cfg = config or RansacConfig()
-    d, b, S = _check_matches(d_C, b_O, Sigma_d)
-    valid = _valid_rows(d, b, S)
+    d, b, S = check_matches(d_C, b_O, Sigma_d)
+    valid = valid_rows(d, b, S)
     inliers = np.zeros(d.shape[0], bool)
 
     def failed(why: str) -> InitResult:
@@ -343,8 +343,9 @@ def _initial_covariances(X, Lam, cfg: RansacConfig):
     return Sigma, Sigma_rv
 
 
-def _check_matches(d_C, b_O, Sigma_d):
-    """Shapes are the caller's responsibility: raise ValueError for them (values are checked later)."""
+def check_matches(d_C, b_O, Sigma_d):
+    """Matched features as float arrays ``(d (n, 3), b (n, 3), S (n, 3, 3))``. Shapes are the caller's
+    responsibility: raise ValueError for them (values are checked later, :func:`valid_rows`)."""
     d = np.asarray(d_C, dtype=float)
     b = np.asarray(b_O, dtype=float)
     S = np.asarray(Sigma_d, dtype=float)
@@ -357,7 +358,7 @@ def _check_matches(d_C, b_O, Sigma_d):
     return d, b, S
 
 
-def _valid_rows(d, b, S) -> np.ndarray:
+def valid_rows(d, b, S) -> np.ndarray:
     """Rows a filter can use: finite coordinates within ``_MAX_COORD_M`` and a symmetric covariance
     whose eigenvalues lie in [``_MIN_VAR_M2``, ``_MAX_VAR_M2``] (anything else is a broken feature)."""
     X = np.abs(np.concatenate([d, b, S.reshape(len(S), 9)], axis=1))  # (n, 15): one pass for all rows

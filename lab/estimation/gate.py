@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lab.estimation.fit import _check_matches, _valid_rows, chi2_quantile
+from lab.estimation.fit import check_matches, chi2_quantile, valid_rows
 from lab.estimation.models import (
     OrientationChart,
     euler_rate_matrix,
@@ -56,8 +56,11 @@ class GateConfig:
             raise ValueError(f"GateConfig.dist_max_m must be > 0, got {self.dist_max_m}")
 
 
-def _gate(mu_bar, Sigma_bar, d, b, S, gate: GateConfig, chart=OrientationChart.EULER):
-    """Per-match gate; returns (keep mask, r (n,3), C (n,3,6)). ``Sigma_bar`` is in ``chart``."""
+def gate_rows(mu_bar, Sigma_bar, d, b, S, gate: GateConfig, chart=OrientationChart.EULER):
+    """The gate of :func:`gate_matches` on usable rows (already checked: ``lab.estimation.fit.valid_rows``),
+    with what the update goes on with: ``(keep (n,), r (n, 3), C (n, 3, 6))``, the verdicts, the
+    residuals ``r_j = d_j - h_j(mu_bar)`` and the Jacobians ``C_j`` of Eq. (3). ``Sigma_bar`` is in
+    ``chart``."""
     n = d.shape[0]
     jac = measurement_jacobian if chart is OrientationChart.EULER else measurement_jacobian_rv
     C = jac(mu_bar, b).reshape(n, 3, 6)
@@ -72,11 +75,11 @@ def _gate(mu_bar, Sigma_bar, d, b, S, gate: GateConfig, chart=OrientationChart.E
     return keep, r, C
 
 
-def _gate_many(mus, Sigmas, ds, bs, Ss, gate: GateConfig, chart=OrientationChart.EULER) -> list:
-    """:func:`_gate` of several filters at once, their matches' rows stacked (a bank's update): the
+def gate_rows_many(mus, Sigmas, ds, bs, Ss, gate: GateConfig, chart=OrientationChart.EULER) -> list:
+    """:func:`gate_rows` of several filters at once, their matches' rows stacked (a bank's update): the
     residuals ``r_j = d_j - (x_r + R b_j)``, the Jacobians ``C_j = [I, -[R b_j]_x E]`` (``E = I`` in
     the rotation-vector chart) and both gates over all rows in one pass; ``[(keep, r, C), ...]``, one per
-    filter, as ``_gate(mus[i], Sigmas[i], ds[i], bs[i], Ss[i], gate, chart)`` gives to round-off."""
+    filter, as ``gate_rows(mus[i], Sigmas[i], ds[i], bs[i], Ss[i], gate, chart)`` gives to round-off."""
     counts = [len(d) for d in ds]
     fi = np.repeat(np.arange(len(counts)), counts)  # each row's filter
     d, b, S = np.concatenate(ds), np.concatenate(bs), np.concatenate(Ss)
@@ -122,11 +125,11 @@ def gate_matches(mu_bar, Sigma_bar, d_C, b_O, Sigma_d, gate: GateConfig | None =
     -------
     inliers : ndarray, shape (n,), bool
     """
-    d, b, S = _check_matches(d_C, b_O, Sigma_d)
-    valid = _valid_rows(d, b, S)
+    d, b, S = check_matches(d_C, b_O, Sigma_d)
+    valid = valid_rows(d, b, S)
     out = np.zeros(d.shape[0], bool)
     if np.any(valid):
-        keep, _, _ = _gate(
+        keep, _, _ = gate_rows(
             np.asarray(mu_bar, float),
             np.asarray(Sigma_bar, float),
             d[valid],

@@ -41,7 +41,6 @@ The ``*_rv`` variants of the Jacobians below are for the second chart; in it eve
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
@@ -49,14 +48,12 @@ import numpy as np
 from lab.geometry import G_to_pose6, R_to_euler_zyx, euler_zyx_to_R, se3, se3_inv
 
 __all__ = [
-    "ObjectNoiseKind",
     "OrientationChart",
     "euler_to_rv_jacobian",
     "rv_to_euler_jacobian",
     "rotvec_to_R",
     "retract_rv",
     "measurement_jacobian_rv",
-    "ProcessNoise",
     "euler_rate_matrix",
     "euler_rate_matrix_inv",
     "measurement_model",
@@ -64,9 +61,6 @@ __all__ = [
     "measurement_covariance",
     "motion_model",
     "motion_jacobian",
-    "motion_noise_jacobians",
-    "odometry_covariance",
-    "process_noise_covariance",
     "skew",
     "state_residual",
     "canonical_state",
@@ -116,7 +110,8 @@ def euler_rate_matrix_inv(alpha: float, beta: float) -> np.ndarray:
     return np.array([[sb / cb * ca, sb / cb * sa, 1.0], [-sa, ca, 0.0], [ca / cb, sa / cb, 0.0]])
 
 
-def _check_state(X) -> np.ndarray:
+def check_state(X) -> np.ndarray:
+    """The state ``X`` as a float array of shape (6,); ValueError for any other shape."""
     X = np.asarray(X, dtype=float)
     if X.shape != (6,):
         raise ValueError(f"state X must have shape (6,) = [x, y, z, alpha, beta, gamma], got {X.shape}")
@@ -130,7 +125,9 @@ def _check_points(b_O, name: str = "b_O") -> np.ndarray:
     return b
 
 
-def _check_G(G, name: str) -> np.ndarray:
+def check_G(G, name: str) -> np.ndarray:
+    """The homogeneous transform ``G`` (called ``name`` in the error) as a float (4, 4) array; ValueError
+    for any other shape."""
     G = np.asarray(G, dtype=float)
     if G.shape != (4, 4):
         raise ValueError(f"{name} must be a 4x4 homogeneous transform, got shape {G.shape}")
@@ -154,7 +151,7 @@ def measurement_model(X, b_O) -> np.ndarray:
     -------
     d_C : ndarray, shape (n, 3) [m]
     """
-    X = _check_state(X)
+    X = check_state(X)
     b = _check_points(b_O)
     R = euler_zyx_to_R(X[3], X[4], X[5])
     return b @ R.T + X[:3]
@@ -187,7 +184,7 @@ def measurement_jacobian(X, b_O) -> np.ndarray:
     C : ndarray, shape (3n, 6)
         Translation columns dimensionless, angle columns in m/rad.
     """
-    X = _check_state(X)
+    X = check_state(X)
     b = _check_points(b_O)
     n = b.shape[0]
     q = b @ euler_zyx_to_R(X[3], X[4], X[5]).T  # q_j = R b_j, shape (n, 3)
@@ -213,7 +210,7 @@ def euler_to_rv_jacobian(X) -> np.ndarray:
     Covariances convert as ``Sigma_rv = T Sigma T^T`` and ``Sigma = T^-1 Sigma_rv T^-T``
     (``T^-1 = diag(I, E^-1)``, :func:`rv_to_euler_jacobian`).
     """
-    X = _check_state(X)
+    X = check_state(X)
     T = np.eye(6)
     T[3:, 3:] = euler_rate_matrix(X[3], X[4])
     return T
@@ -221,7 +218,7 @@ def euler_to_rv_jacobian(X) -> np.ndarray:
 
 def rv_to_euler_jacobian(X) -> np.ndarray:
     """``T^-1 = diag(I, E(alpha, beta)^-1)``, shape (6, 6): ``[dx_r, phi]`` -> Euler-state differentials."""
-    X = _check_state(X)
+    X = check_state(X)
     T = np.eye(6)
     T[3:, 3:] = euler_rate_matrix_inv(X[3], X[4])
     return T
@@ -247,7 +244,7 @@ def rotvec_to_R(phi) -> np.ndarray:
 def retract_rv(X, delta) -> np.ndarray:
     """Apply a correction ``delta = [dx_r, phi]`` (rotation-vector chart): ``x_r + dx_r``,
     ``R <- Exp(phi) R``; returns the Euler state (canonical ranges)."""
-    X = _check_state(X)
+    X = check_state(X)
     delta = np.asarray(delta, dtype=float)
     R = rotvec_to_R(delta[3:]) @ euler_zyx_to_R(X[3], X[4], X[5])
     return np.concatenate([X[:3] + delta[:3], R_to_euler_zyx(R)])
@@ -261,7 +258,7 @@ def measurement_jacobian_rv(X, b_O) -> np.ndarray:
 
     (:func:`measurement_jacobian` times ``T^-1``: the ``E`` drops out.)
     """
-    X = _check_state(X)
+    X = check_state(X)
     b = _check_points(b_O)
     n = b.shape[0]
     q = b @ euler_zyx_to_R(X[3], X[4], X[5]).T
@@ -288,7 +285,7 @@ def measurement_covariance(Sigma_d) -> np.ndarray:
     return out
 
 
-def _camera_motion(G_RC_prev, G_RC, G_odom) -> np.ndarray:
+def camera_motion(G_RC_prev, G_RC, G_odom) -> np.ndarray:
     """``G_{C(k) C(k-1)} = G_RC(k)^-1 G_{R(k-1)R(k)}^-1 G_RC(k-1)``: the previous camera in the new one."""
     return se3_inv(G_RC) @ se3_inv(G_odom) @ G_RC_prev
 
@@ -322,7 +319,7 @@ def motion_model(X_prev, G_RC_prev, G_RC, G_odom, G_OO=None) -> np.ndarray:
     X : ndarray, shape (6,) [m, rad]
     """
     A, G_OO = _motion_inputs(G_RC_prev, G_RC, G_odom, G_OO)
-    return _predict(_check_state(X_prev), A, G_OO, jacobian=False)[0]
+    return motion_step(check_state(X_prev), A, G_OO, jacobian=False)[0]
 
 
 def motion_jacobian(
@@ -348,16 +345,17 @@ def motion_jacobian(
     ``F = [[R_A, -R_A [R p_o]_x], [0, R_A]]``.
     """
     A, G_OO = _motion_inputs(G_RC_prev, G_RC, G_odom, G_OO)
-    return _predict(_check_state(X_prev), A, G_OO, jacobian=True, chart=chart)[1]
+    return motion_step(check_state(X_prev), A, G_OO, jacobian=True, chart=chart)[1]
 
 
 def _motion_inputs(G_RC_prev, G_RC, G_odom, G_OO):
-    A = _camera_motion(_check_G(G_RC_prev, "G_RC_prev"), _check_G(G_RC, "G_RC"), _check_G(G_odom, "G_odom"))
-    return A, (None if G_OO is None else _check_G(G_OO, "G_OO"))
+    A = camera_motion(check_G(G_RC_prev, "G_RC_prev"), check_G(G_RC, "G_RC"), check_G(G_odom, "G_odom"))
+    return A, (None if G_OO is None else check_G(G_OO, "G_OO"))
 
 
-def _predict(X_prev, A, G_OO, jacobian: bool, chart: OrientationChart = OrientationChart.EULER):
-    """``X_k`` (Eq. (1)) and, if asked, ``F`` for the camera motion ``A = G_{C_k C_{k-1}}``."""
+def motion_step(X_prev, A, G_OO, jacobian: bool, chart: OrientationChart = OrientationChart.EULER):
+    """``X_k`` (Eq. (1)) and, if asked, ``F`` for the camera motion ``A = G_{C_k C_{k-1}}``
+    (:func:`camera_motion`): :func:`motion_model` and :func:`motion_jacobian` on checked inputs."""
     R = euler_zyx_to_R(X_prev[3], X_prev[4], X_prev[5])
     G = A @ se3(R, X_prev[:3])
     if G_OO is not None:
@@ -374,185 +372,6 @@ def _predict(X_prev, A, G_OO, jacobian: bool, chart: OrientationChart = Orientat
         F[:3, 3:] = -R_A @ skew(R @ G_OO[:3, 3]) @ E_prev
     F[3:, 3:] = (euler_rate_matrix_inv(X[3], X[4]) @ R_A @ E_prev) if euler else R_A
     return X, F
-
-
-def motion_noise_jacobians(
-    X, G_RC, chart: OrientationChart = OrientationChart.EULER
-) -> tuple[np.ndarray, np.ndarray]:
-    r"""How the object's and the robot's motion noise enter the predicted state ``X = X_k``.
-
-    Returns ``(L_O, L_R)``, each (6, 6), such that to first order
-
-    * ``G_{O(k-1)O(k)} = G_OO Exp(delta_O)`` (object twist ``delta_O = [rho, phi]`` in O(k): metres,
-      radians) moves ``X_k`` by ``L_O delta_O``, with
-
-      .. math:: L_O = \begin{bmatrix} R_k & 0 \\ 0 & E(x_o^k)^{-1} R_k \end{bmatrix};
-
-    * ``G_{R(k-1)R(k)} = G_odom Exp(delta_R)`` (odometry error twist in R(k)) moves ``X_k`` by
-      ``L_R delta_R``. It multiplies ``G_{C_k O_k}`` on the left by ``Exp(-Ad(G_CR) delta_R)``:
-
-      .. math::
-
-          L_R = -\begin{bmatrix} I & -[t_k]_\times \\ 0 & E(x_o^k)^{-1} \end{bmatrix}
-                 \mathrm{Ad}(G_{C R}), \qquad
-          \mathrm{Ad}(G) = \begin{bmatrix} R & [p]_\times R \\ 0 & R \end{bmatrix}
-
-    Twists are ordered ``[translation (3), rotation (3)]``. In the rotation-vector chart every
-    ``E^-1`` above is replaced by the identity.
-
-    Parameters
-    ----------
-    X : array_like, shape (6,)
-        The predicted state ``X_k`` (output of :func:`motion_model`).
-    G_RC : ndarray, shape (4, 4)
-        Camera in robot at step k.
-    chart : OrientationChart
-    """
-    X = _check_state(X)
-    G_CR = se3_inv(_check_G(G_RC, "G_RC"))
-    R_k = euler_zyx_to_R(X[3], X[4], X[5])
-    E_inv = euler_rate_matrix_inv(X[3], X[4]) if chart is OrientationChart.EULER else np.eye(3)
-    L_O = np.zeros((6, 6))
-    L_O[:3, :3] = R_k
-    L_O[3:, 3:] = E_inv @ R_k
-    R, p = G_CR[:3, :3], G_CR[:3, 3]
-    Ad = np.zeros((6, 6))
-    Ad[:3, :3] = R
-    Ad[:3, 3:] = skew(p) @ R
-    Ad[3:, 3:] = R
-    left = np.zeros((6, 6))  # d X_k / d (left twist on G_CO(k))
-    left[:3, :3] = np.eye(3)
-    left[:3, 3:] = -skew(X[:3])
-    left[3:, 3:] = E_inv
-    L_R = -left @ Ad
-    return L_O, L_R
-
-
-class ObjectNoiseKind(Enum):
-    """How the object's unknown velocity grows the covariance over a step of ``dt`` seconds."""
-
-    #: The object moves with an unknown velocity (std ``sigma_v`` [m/s], ``sigma_w`` [rad/s]) held
-    #: over the step: displacement std ``sigma_v * dt`` (variance grows with ``dt^2``). A random walk
-    #: perturbed at the velocity level, as the identification paper assumes. The default.
-    VELOCITY = "velocity"
-    #: Continuous white-noise velocity (Brownian motion) of spectral density ``sigma_v^2``
-    #: [m^2/s]: displacement variance ``sigma_v^2 * dt``. ``sigma_v`` is then in m/sqrt(s).
-    WIENER = "wiener"
-
-
-@dataclass(frozen=True)
-class ProcessNoise:
-    """The process noise ``eta`` of Eq. (2): object motion, odometry error and a small floor.
-
-    Attributes
-    ----------
-    kind : ObjectNoiseKind
-        How the object's velocity uncertainty scales with ``dt`` (see :class:`ObjectNoiseKind`).
-    sigma_v : float [m/s]
-        Std of the object's linear velocity along each of its axes (VELOCITY), or the square root
-        of the spectral density [m/sqrt(s)] (WIENER).
-    sigma_w : float [rad/s]
-        The same for its angular velocity [rad/s] (VELOCITY) or [rad/sqrt(s)] (WIENER).
-    eta_m, eta_rad : float
-        Per-step std added straight to the position [m] and the Euler angles [rad]: the search
-        paper's static model Eq. (4), ``X_k = X_{k-1} + eta``, which keeps the filter able to move
-        even with ``dt = 0``.
-    odom_trans_per_m : float [m/m]
-        Odometry translation error std (along and across the motion) per metre travelled.
-    odom_rot_per_rad : float [rad/rad]
-        Odometry heading error std per radian turned.
-    odom_rot_per_m : float [rad/m]
-        Odometry heading error std per metre travelled.
-    """
-
-    kind: ObjectNoiseKind = ObjectNoiseKind.VELOCITY
-    sigma_v: float = 0.15
-    sigma_w: float = 0.3
-    eta_m: float = 1e-3
-    eta_rad: float = 2e-3
-    odom_trans_per_m: float = 0.05
-    odom_rot_per_rad: float = 0.05
-    odom_rot_per_m: float = 0.02
-
-    def __post_init__(self):
-        for name in (
-            "sigma_v",
-            "sigma_w",
-            "eta_m",
-            "eta_rad",
-            "odom_trans_per_m",
-            "odom_rot_per_rad",
-            "odom_rot_per_m",
-        ):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v >= 0):
-                raise ValueError(f"ProcessNoise.{name} must be finite and >= 0, got {v!r}")
-        if not isinstance(self.kind, ObjectNoiseKind):
-            raise ValueError(f"ProcessNoise.kind must be an ObjectNoiseKind, got {self.kind!r}")
-
-
-def odometry_covariance(G_odom, noise: ProcessNoise) -> np.ndarray:
-    """Covariance (6, 6) of the odometry error twist ``delta_R`` (in R(k)) for one increment.
-
-    A basic wheel-odometry model for a planar robot: translation error std ``odom_trans_per_m * s``
-    along x and y, heading error std ``odom_rot_per_rad * |dtheta| + odom_rot_per_m * s`` about z,
-    ``s`` the distance travelled; nothing in z, roll or pitch. No motion, no error.
-    """
-    G_odom = _check_G(G_odom, "G_odom")
-    s = float(np.hypot(G_odom[0, 3], G_odom[1, 3]))
-    dtheta = float(np.arctan2(G_odom[1, 0], G_odom[0, 0]))
-    sig_t = noise.odom_trans_per_m * s
-    sig_r = noise.odom_rot_per_rad * abs(dtheta) + noise.odom_rot_per_m * s
-    return np.diag([sig_t**2, sig_t**2, 0.0, 0.0, 0.0, sig_r**2])
-
-
-def process_noise_covariance(
-    X,
-    G_RC,
-    G_odom,
-    dt: float,
-    noise: ProcessNoise,
-    Sigma_odom=None,
-    chart: OrientationChart = OrientationChart.EULER,
-) -> np.ndarray:
-    r"""``Q``, shape (6, 6): covariance of ``eta`` in Eq. (2) at the predicted state ``X = X_k``.
-
-    .. math::
-
-        Q = L_O \,\mathrm{diag}(\sigma_v^2 I, \sigma_\omega^2 I)\, s(dt)\, L_O^T
-          + L_R\, \Sigma_{odom}\, L_R^T + \mathrm{diag}(\eta_m^2 I, \eta_{rad}^2 I)
-
-    with ``s(dt) = dt^2`` (VELOCITY) or ``dt`` (WIENER), and ``L_O``, ``L_R`` from
-    :func:`motion_noise_jacobians`.
-
-    Parameters
-    ----------
-    X : array_like, shape (6,)
-        Predicted state ``X_k``.
-    G_RC : ndarray, shape (4, 4)
-        Camera in robot at step k.
-    G_odom : ndarray, shape (4, 4)
-        Odometry increment ``G_{R(k-1)R(k)}`` (for the default odometry covariance).
-    dt : float [s]
-    noise : ProcessNoise
-    Sigma_odom : ndarray, shape (6, 6), optional
-        Odometry error covariance (twist in R(k)); :func:`odometry_covariance` if omitted.
-    chart : OrientationChart
-        Coordinates of the result's orientation part (``eta_rad`` is added in those coordinates).
-    """
-    L_O, L_R = motion_noise_jacobians(X, G_RC, chart)
-    scale = dt * dt if noise.kind is ObjectNoiseKind.VELOCITY else dt
-    q_obj = np.array([noise.sigma_v**2] * 3 + [noise.sigma_w**2] * 3) * scale
-    if Sigma_odom is None:
-        Sigma_odom = odometry_covariance(G_odom, noise)
-    else:
-        Sigma_odom = np.asarray(Sigma_odom, dtype=float)
-        if Sigma_odom.shape != (6, 6):
-            raise ValueError(f"Sigma_odom must have shape (6, 6), got {Sigma_odom.shape}")
-    Q = (L_O * q_obj) @ L_O.T  # object's velocity-level random walk, mapped into X_k
-    Q += L_R @ Sigma_odom @ L_R.T  # odometry error, mapped into X_k
-    Q[np.diag_indices(6)] += np.array([noise.eta_m**2] * 3 + [noise.eta_rad**2] * 3)  # Eq. (4)'s eta
-    return 0.5 * (Q + Q.T)
 
 
 def _wrap(a: float) -> float:
@@ -595,8 +414,8 @@ def canonical_state(X, Sigma=None):
 
 def state_residual(X_a, X_b) -> np.ndarray:
     """``X_a - X_b`` with the angle components wrapped to (-pi, pi] (both brought to canonical form)."""
-    a, _ = canonical_state(_check_state(X_a))
-    b, _ = canonical_state(_check_state(X_b))
+    a, _ = canonical_state(check_state(X_a))
+    b, _ = canonical_state(check_state(X_b))
     r = a - b
     r[3:] = [_wrap(float(v)) for v in r[3:]]
     return r

@@ -49,6 +49,7 @@ __all__ = [
     "load_camera_calibration",
     "make_camera_source",
     "render_chessboard_view",
+    "wait_until_after",
 ]
 
 
@@ -82,7 +83,8 @@ class StereoSource(ABC):
         return False
 
 
-def _wait_until_after(after: float | None, timeout: float, clock: Callable[[], float]) -> None:
+def wait_until_after(after: float | None, timeout: float, clock: Callable[[], float]) -> None:
+    """Wait until ``clock()`` is past ``after`` (at once for None); DeviceTimeout after ``timeout`` [s]."""
     if after is None:
         return
     t_end = time.monotonic() + timeout
@@ -146,7 +148,7 @@ class SideBySideCamera(StereoSource):
             )
 
     def read(self, after: float | None = None, timeout: float = 2.0) -> RawStereo:
-        _wait_until_after(after, timeout, time.monotonic)
+        wait_until_after(after, timeout, time.monotonic)
         if after is not None:
             for _ in range(self.flush_grabs):
                 self._cap.grab()
@@ -199,7 +201,7 @@ class TwoDeviceCamera(StereoSource):
                 raise ConfigError(f"{name} camera {dev!r} delivers {got[0]}x{got[1]}, not {width}x{height}")
 
     def read(self, after: float | None = None, timeout: float = 2.0) -> RawStereo:
-        _wait_until_after(after, timeout, time.monotonic)
+        wait_until_after(after, timeout, time.monotonic)
         n = 1 + (self.flush_grabs if after is not None else 0)
         for _ in range(n):
             ok = [c.grab() for c in self._caps]
@@ -305,7 +307,7 @@ class ReplayStereoSource(StereoSource):
         return cls(pairs, **kw)
 
     def read(self, after: float | None = None, timeout: float = 2.0) -> RawStereo:
-        _wait_until_after(after, timeout, self.clock)
+        wait_until_after(after, timeout, self.clock)
         if self._k >= len(self._pairs):
             if not self.loop:
                 raise DeviceTimeout("replay source has no more image pairs")

@@ -42,8 +42,8 @@ def emulate(
 ) -> int:
     """Run both emulators until Ctrl-C (or until ``stop`` is set); returns the exit code 0."""
     with start_emulators(link_dir) as emu:
-        out(f"PTU-D46 emulator:  {emu.ptu_port}  -> {emu.ptu._slave_name}")
-        out(f"Create 2 emulator: {emu.base_port}  -> {emu.create._slave_name}")
+        out(f"PTU-D46 emulator:  {emu.ptu_port}  -> {emu.ptu.slave_name}")
+        out(f"Create 2 emulator: {emu.base_port}  -> {emu.create.slave_name}")
         out(
             "hardware/emulated.toml uses these ports; run: lab hardware check --config hardware/emulated.toml"
         )
@@ -198,7 +198,7 @@ def _check_base(cfg, line, in_process: bool = False) -> None:
         )
         batt = f"{s.battery_charge_mah}/{s.battery_capacity_mah} mAh" if s.battery_capacity_mah else "unknown"
         line(True, "Create 2 battery", batt)
-        hazard = Create2._hazard(s)
+        hazard = Create2.hazard(s)
         line(
             not hazard, "Create 2 sensors", hazard or "no cliff, no wheel drop", "put the robot on the floor"
         )

@@ -253,16 +253,29 @@ def load_config(path: str | Path) -> HardwareConfig:
 
 
 def _check_values(c: HardwareConfig, where: str) -> None:
+    """Check every section's values, in file order; the first bad one is a ConfigError naming ``where``."""
+
     def need(ok: bool, msg: str):
         if not ok:
             raise ConfigError(f"{where}: {msg}")
 
-    r, b, p, cam = c.robot, c.base, c.ptu, c.camera
+    _check_robot(c.robot, need)
+    _check_base(c.base, need)
+    _check_ptu(c.ptu, need)
+    _check_camera(c.camera, need)
+    _check_sim(c.sim, c.camera, need)
+    _check_room(c.room, need)
+
+
+def _check_robot(r: RobotConfig, need) -> None:
     need(
         0.05 <= r.cmd_timeout_s <= 2.0,
         f"[robot] cmd_timeout_s must be within [0.05, 2] s, got {r.cmd_timeout_s}",
     )
     need(5 <= r.servo_rate_hz <= 500, f"[robot] servo_rate_hz must be within [5, 500], got {r.servo_rate_hz}")
+
+
+def _check_base(b: BaseConfig, need) -> None:
     need(
         b.baudrate in CREATE_BAUDS,
         f"[base] baudrate {b.baudrate} is not a Create 2 rate; allowed: 115200 (default) or 19200",
@@ -299,6 +312,9 @@ def _check_values(c: HardwareConfig, where: str) -> None:
         not missing,
         f"[base] stream_packets must include {list(REQUIRED_STREAM)} (safety, odometry); missing {missing}",
     )
+
+
+def _check_ptu(p: PTUConfig, need) -> None:
     need(
         p.baudrate in PTU_BAUDS,
         f"[ptu] baudrate {p.baudrate} is not a PTU-D46 rate; allowed: {', '.join(map(str, PTU_BAUDS))} "
@@ -309,6 +325,9 @@ def _check_values(c: HardwareConfig, where: str) -> None:
     need(0 <= p.banner_wait_s <= 5, f"[ptu] banner_wait_s must be within [0, 5] s, got {p.banner_wait_s}")
     need(p.speed_deg_s > 0, f"[ptu] speed_deg_s must be > 0, got {p.speed_deg_s}")
     need(p.move_margin_s >= 0, f"[ptu] move_margin_s must be >= 0, got {p.move_margin_s}")
+
+
+def _check_camera(cam: CameraConfig, need) -> None:
     need(
         cam.source in CAMERA_SOURCES,
         f"[camera] source must be one of {', '.join(CAMERA_SOURCES)}; got {cam.source!r}",
@@ -329,7 +348,9 @@ def _check_values(c: HardwareConfig, where: str) -> None:
             f"[camera] {k} must be 3 numbers [m], got {list(v)}",
         )
     need(cam.source != "replay" or bool(cam.folder), '[camera] folder is required when source = "replay"')
-    sim = c.sim
+
+
+def _check_sim(sim: SimSceneConfig, cam: CameraConfig, need) -> None:
     for k in ("robot_start", "carrier_start"):
         v = getattr(sim, k)
         need(
@@ -342,8 +363,9 @@ def _check_values(c: HardwareConfig, where: str) -> None:
 
         worlds = list_worlds()
         need(sim.world in worlds, f"[sim] world {sim.world!r} is not a world; worlds: {', '.join(worlds)}")
-    room = c.room
 
+
+def _check_room(room: RoomConfig, need) -> None:
     def numbers(v, n: int) -> bool:
         ok = len(v) == n and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
         return ok and all(math.isfinite(x) for x in v)

@@ -310,7 +310,7 @@ class Create2:
             self._check_link()
             raise DeviceTimeout(f"no sensor stream from the Create 2 on {self.port} within {timeout:.1f} s")
         if s.wheel_drop_left or s.wheel_drop_right or any(s.cliff):
-            raise SafetyStop(f"cannot enable the Create 2: {self._hazard(s)}; put it on the floor first")
+            raise SafetyStop(f"cannot enable the Create 2: {self.hazard(s)}; put it on the floor first")
         self.safety_trip = None
         self._safe_confirmed = False
         want = OIMode.SAFE if self.mode == "safe" else OIMode.FULL
@@ -502,7 +502,8 @@ class Create2:
             self._request_stream()
 
     @staticmethod
-    def _hazard(s: BaseSensors) -> str:
+    def hazard(s: BaseSensors) -> str:
+        """What keeps the base from driving in sensor frame ``s`` (wheel drop, cliff, charger), or ``""``."""
         names = ("left", "front-left", "front-right", "right")
         parts = []
         if s.wheel_drop_left or s.wheel_drop_right:
@@ -544,7 +545,7 @@ class Create2:
             self.bump_count += 1
             self._emit("bump", "left" if s.bump_left else "right")
         if self._enabled and self.safety_trip is None:
-            reason = self._hazard(s)
+            reason = self.hazard(s)
             if not reason and self._safe_confirmed and s.oi_mode not in (OIMode.SAFE, OIMode.FULL):
                 reason = f"the robot left {self.mode} mode by itself (OI mode {s.oi_mode})"
             if reason:

@@ -260,12 +260,12 @@ class PTUD46:
             for ax in "PT":
                 self.target_steps[ax] = int(self._query_number(f"{ax}P"))
         except BaseException:
-            self._close_port()
+            self.release_port()
             raise
 
     def reconnect(self) -> None:
         """Release the port and connect again (re-reads everything from the unit)."""
-        self._close_port()
+        self.release_port()
         self.connect()
 
     def close(self) -> None:
@@ -275,9 +275,10 @@ class PTUD46:
                 self._transact("H", timeout=min(self.timeout_s, 0.5))
             except (DeviceTimeout, ProtocolError, CommandRejected, ConnectionLost):
                 pass
-        self._close_port()
+        self.release_port()
 
-    def _close_port(self) -> None:
+    def release_port(self) -> None:
+        """Release the serial port without a word to the unit (:meth:`close` halts the axes first)."""
         with self._lock:
             if self._ser is not None:
                 try:

@@ -231,7 +231,7 @@ class HardwareRobot(Robot):
     def _release_devices(self, send: bool, camera: bool = True) -> None:
         for dev in (self.base, self.ptu):
             try:
-                dev.close() if send else dev._close_port()
+                dev.close() if send else dev.release_port()
             except Exception:
                 pass
         if camera and self._source is not None:
@@ -527,8 +527,9 @@ class HardwareRobot(Robot):
         if kind in ("safety_stop", "connection_lost"):
             self._wake.set()
 
-    def _request_stop(self) -> None:
-        """From a signal handler: no I/O here, the servo thread sends the zero."""
+    def request_stop(self) -> None:
+        """Zero the velocity targets and wake the servo thread, which sends the zero: safe from a signal
+        handler (no I/O here)."""
         self._v_target = self._w_target = self._v_out = self._w_out = 0.0
         self._stop_requested = True
         self._wake.set()

@@ -33,7 +33,7 @@ def close_all_at_exit() -> None:
 def register(robot, *, sigint: bool) -> None:
     """Stop ``robot`` at interpreter exit and, with ``sigint``, on Ctrl-C (installs the hooks once).
 
-    ``robot`` needs ``close()`` and ``_request_stop()`` (no I/O: it runs inside a signal handler).
+    ``robot`` needs ``close()`` and ``request_stop()`` (no I/O: it runs inside a signal handler).
     """
     _LIVE.add(robot)
     _install_hooks(sigint)
@@ -54,7 +54,7 @@ def _install_hooks(sigint: bool) -> None:
         def _on_sigint(signum, frame):
             # never write to a port here: the interrupted code may hold its lock; the servo thread sends zero
             for r in list(_LIVE):
-                r._request_stop()
+                r.request_stop()
             if callable(prev):
                 prev(signum, frame)
             elif prev != signal.SIG_IGN:

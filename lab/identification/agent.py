@@ -26,15 +26,9 @@ the gained angle back. So once the robot has driven one way, the best goal ahead
 its gain is at least ``keep_direction`` (0.5) of the best
 (:func:`~lab.identification.planner.continue_direction`), and a goal across the ring is reached going
 the same way. The operator's lag puts the face ahead of a robot that keeps going, so a belief that puts
-it behind is usually a coin flip between two hidden faces. Measured with ``benchmarks/eval_identify.py``
-(lut, 8 actions), evasive mover, 4 models x seeds 0-19:
-
-* 1.0 (the plain argmax): 79/80. M2 seed 6 bounced across the box between two beliefs and ended at
-  P = 0.93. 253 actions in all.
-* 0.7: 80/80, at most 7 actions, 258 in all.
-* 0.5: 80/80, at most 6 actions, 247 in all.
-
-Random-walk mover, seeds 0-4: at most 6 actions with 1.0, 3 with 0.5. Static box: the same episodes.
+it behind is usually a coin flip between two hidden faces. With the plain argmax (1.0) the robot can
+bounce across the box between two beliefs; 0.5 identified every evasive episode it was measured on,
+with fewer actions than 0.7 or 1.0. How it was chosen: docs/tuning/keep-direction.md.
 
 **The box's look-alike turns.** Three faces carry the same page, so RANSAC can seat a model's filter
 on any quarter-turn of the box (measured: 3 of 4 filters start 90 degrees off). Each frame is scored
@@ -149,6 +143,26 @@ class IdentificationAgent:
         observer=None,
         floor_plan=None,
     ):
+        self._check_inputs(planner, databases, evaluator)
+        self.robot = robot
+        self.names = tuple(db.name for db in self.dbs)
+        self.config = config or AgentConfig()
+        self.scoring = (scoring or ScoringConfig()).for_camera(robot.camera)  # clutter density: this camera's
+        self.action_config = action_config or ActionConfig()
+        self.rng = np.random.default_rng(seed)
+        self._build_models(seed)
+        self.head = HeadController(robot.camera, robot.pan_tilt_limits)
+        self.follower = PathFollower(
+            robot.base_limits,
+            goal_tolerance_xy=self.config.arrive_xy * 0.6,
+            goal_tolerance_theta=math.radians(self.config.arrive_theta_deg * 0.6),
+        )
+        self.evaluator = evaluator
+        self._start_loop_state(observer, floor_plan)
+
+    def _check_inputs(self, planner, databases, evaluator) -> None:
+        """Set :attr:`planner` and :attr:`dbs`, or a ConfigError: an unknown planner, no databases, or
+        the ``lut`` / ``mc`` planner without an evaluator."""
         try:
             self.planner = PlannerChoice(planner) if isinstance(planner, str) else planner
         except ValueError:
@@ -166,12 +180,11 @@ class IdentificationAgent:
                 f"the {self.planner.value} planner needs an expected-entropy evaluator: build it with "
                 "lab.identification.make_evaluator (lab.runs.identify.build_agent does it all)"
             )
-        self.robot = robot
-        self.names = tuple(db.name for db in self.dbs)
-        self.config = config or AgentConfig()
-        self.scoring = (scoring or ScoringConfig()).for_camera(robot.camera)  # clutter density: this camera's
-        self.action_config = action_config or ActionConfig()
-        self.rng = np.random.default_rng(seed)
+
+    def _build_models(self, seed: int) -> None:
+        """The models' scoring (a joint index of the databases, one scorer and one matcher each) and their
+        EKF bank (seeded with ``seed``)."""
+        robot = self.robot
         # one exact search of every model's database a frame (the shared faces' features stored once)
         self.index = JointIndex(self.dbs, self.scoring.k_neighbours)
         self.scorers = [ModelScorer(db, self.scoring, self.index, i) for i, db in enumerate(self.dbs)]
@@ -190,13 +203,9 @@ class IdentificationAgent:
             ),
             rng=np.random.default_rng(seed),
         )
-        self.head = HeadController(robot.camera, robot.pan_tilt_limits)
-        self.follower = PathFollower(
-            robot.base_limits,
-            goal_tolerance_xy=self.config.arrive_xy * 0.6,
-            goal_tolerance_theta=math.radians(self.config.arrive_theta_deg * 0.6),
-        )
-        self.evaluator = evaluator
+
+    def _start_loop_state(self, observer, floor_plan) -> None:
+        """The loop's state before the first step: a uniform belief, no records, no goal, no track."""
         self.P = uniform(len(self.dbs))
         self.steps: list[StepRecord] = []
         self.decisions: list[DecisionRecord] = []
@@ -340,9 +349,10 @@ class IdentificationAgent:
 
         The probabilities score every model at the best of the filters' poses and their look-alike
         turns, so a model can be identified from its unique face while its own filter still sits a turn
-        off: measured 180 degrees off in 2 of 80 evasive episodes, where the turn evidence (one keyframe
-        a second) had not yet passed ``reseat_margin``. The frame that favoured the model most is the one
-        that saw the unique face; the turn it was scored at is where the unique face is.
+        off (180 degrees off in evasive episodes, where the turn evidence, one keyframe a second, had not
+        yet passed ``reseat_margin``). The frame that favoured the model most is the one that saw the
+        unique face; the turn it was scored at is where the unique face is. What it was measured on:
+        docs/tuning/identified-model-reseat.md.
         """
         rec = self._decisive[i]
         est = self.bank[i].estimate

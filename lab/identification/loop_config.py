@@ -78,19 +78,16 @@ class AgentConfig:
         hold its features' partners; the full frame otherwise. False: always the full frame.
     roi_n_sigma : float
         Each box corner is widened by this many standard deviations of its pixel position and depth
-        under the predicted pose's covariance ... Chosen on 8 tuning episodes (models 0-3, seeds 1 and
-        2, realistic profile) replayed frame for frame: against 3, the value 2 left every final model
-        probability and the true filter's final position unchanged (within 1e-3 and 2 mm) and moved no
-        probability by more than 0.053 on the way; the step was 15 % faster (19.2 against 22.5 ms
-        median), SIFT's crops being smaller. Under a Gaussian prediction error a corner lies more
-        than 2 standard deviations out on a given side 2.3 % of the time; the region then cuts a
-        sliver of the box's border.
+        under the predicted pose's covariance ... 2 gives the final probabilities and poses that 3
+        gives, and a faster step, SIFT's crops being smaller. Under a Gaussian prediction error a
+        corner lies more than 2 standard deviations out on a given side 2.3 % of the time; the region
+        then cuts a sliver of the box's border. How it was chosen:
+        docs/tuning/identification-roi-n-sigma.md.
     roi_margin_px : float [px]
         ... and the region by this margin (a keypoint centred just off the box can still describe it;
         SIFT's own context around the region is :attr:`~lab.vision.stereo.StereoParams.roi_pad_px`).
-        Chosen on 8 tuning episodes (models 0-3, seeds 1 and 2, realistic profile), replayed frame for
-        frame: 4 px and 10 px gave the same model probabilities (to 1e-3) and filter positions (to
-        0.1 mm), and 4 px the faster step.
+        4 px gives the results that 10 px gives, and a faster step. How it was chosen:
+        docs/tuning/identification-roi-margin.md.
     roi_max_fraction : float
         A region larger than this fraction of the image gives the full frame.
     """

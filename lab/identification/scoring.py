@@ -41,11 +41,10 @@ let the four models explain different numbers of the very same features.
 measured one only if it was seen in training from (about) the direction the pose puts the camera in:
 its ``seen_from`` ring viewpoints include one within ``visibility_deg`` of that direction. It is meant
 against a unique face's features near an edge explaining an oblique shared face's (the descriptor
-threshold is loose on purpose, the gate a few centimetres). Measured: on still frontal views of shared
-faces it takes the largest deviation from uniform from 0.045 to 0.001 (``tests/test_ident_sim.py``),
-but in closed-loop episodes with the evasive mover it left the drift on shared faces at about 0.1 (0.15
-without) and slowed identification (5-6 planning actions instead of 3-4, 3 episodes, since fewer of the
-unique face's features count at oblique views), so it is off by default.
+threshold is loose on purpose, the gate a few centimetres). It removes the drift on still frontal
+views of shared faces (``tests/test_ident_sim.py``), but in closed-loop episodes with the evasive mover
+it left most of the drift and slowed identification, since fewer of the unique face's features count
+at oblique views, so it is off by default. How it was chosen: docs/tuning/visibility-rule.md.
 
 **Clutter density.** Uniform over the volume in which the stereo rig can triangulate a feature: the
 image frustum between the nearest depth (largest disparity) and ``max_depth_m`` (see

@@ -113,8 +113,8 @@ def run_demo(
     out : Path
         Output folder: ``report.md``, ``identify.json`` and the figures.
     seed, true_model, planner, mover, max_actions, max_time_s
-        As ``lab identify`` (defaults: seed 0, the box M1, lookup tables, the evasive mover, 8 actions,
-        150 s of simulated time).
+        As ``lab identify`` (defaults as in the signature: the box M1, lookup tables, the evasive mover,
+        8 actions, 150 s of simulated time).
     record : Path, optional
         Write an animation of the live view (.gif, or .mp4 with ffmpeg).
     view3d : Path, optional

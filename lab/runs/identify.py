@@ -31,7 +31,7 @@ from lab.identification.agent import AgentConfig, IdentificationAgent, PlannerCh
 from lab.identification.evaluators import make_evaluator
 from lab.identification.scoring import ScoringConfig
 from lab.io import write_json_atomic
-from lab.navigation.localization import LocalizationMode, LocalizedRobot
+from lab.localization import LocalizationMode, LocalizedRobot
 from lab.robot import Robot
 from lab.runs.robots import PlacedRobot, RobotKind, RobotSession, load_robot_config, make_robot, robot_kind
 from lab.runs.room import RoomLandmarks, localize, robot_start, room_landmarks
@@ -146,7 +146,7 @@ def run_identify(
         or ideal), recorded as the JSON's ``sensing``; a rehearsal's rendered camera follows its camera
         section (the JSON's ``sensing_applies_to`` says which sections applied).
     localization : {"landmarks", "odometry"}
-        Where the robot's pose comes from (:class:`lab.navigation.localization.LocalizedRobot`); the
+        Where the robot's pose comes from (:class:`lab.localization.LocalizedRobot`); the
         landmark map on a robot is its config's ``[room] landmarks``, a rehearsal's by default the posters
         of the scene it renders (:mod:`lab.runs.room`).
     start : (x_m, y_m, heading_deg), optional
@@ -157,28 +157,16 @@ def run_identify(
         Write the recorded 3D view there (:mod:`lab.viz.view3d`, one HTML page, one step per frame);
         its path is the JSON's ``view3d``.
     """
-    from lab.sim import box_model
-
     if view3d is not None:
         from lab.viz.view3d import require_viser
 
         require_viser()  # the optional viewer missing: one line before anything starts
-
-    box_model(true_model)  # a clear error before anything starts
-    hw = load_robot_config(robot_config)
-    kind = robot_kind(hw)
-    room = room_landmarks(kind, hw, _scene_of(kind, hw), localization)  # a bad map: one line, first
-    start_pose = _start_of(kind, hw, room, start)
-    config = AgentConfig(max_actions=max_actions, max_time_s=max_time_s)
-    if keep_direction is not None:
-        config = dataclasses.replace(config, keep_direction=keep_direction)
+    hw, room, start_pose = _checked_setup(true_model, robot_config, localization, start)
+    config = _agent_config(max_actions, max_time_s, keep_direction)
     t_wall, t_cpu = time.perf_counter(), time.process_time()  # CPU: the episode's cost whatever the load
     with contextlib.ExitStack() as stack:
         session = _start(stack, hw, true_model, mover, seed, sensing)
-        world = session.world
-        plan = None
-        if session.kind is RobotKind.SIM and world.scene.room is not None:
-            plan = floor_plan(world.scene.room.size, session.robot.base_limits.radius)
+        plan = _known_floor_plan(session)
         robot, note = _localized(session, room, start_pose, seed)
         tracked = TrackedRobot(robot, _truth_pose(session))  # the robot's path, for Fig. 6
         agent = build_agent(tracked, planner, seed, config, floor_plan=plan)
@@ -187,44 +175,89 @@ def run_identify(
         if view3d is not None:  # the world's bodies for display only; the agent never sees them
             from lab.viz.view3d import View3D
 
-            viewer = View3D.for_identification(agent, view3d, world)
+            viewer = View3D.for_identification(agent, view3d, session.world)
         if attach is not None:
             attach(agent, session.carrier)
         truth = _record_truth(agent, session)
         t0 = 0.0 if session.kind is RobotKind.SIM else session.robot.now()
-        sim_t0, loop_wall0, loop_cpu0 = session.robot.now(), time.perf_counter(), time.process_time()
-        interrupted = False
-        try:
-            if robot.mode is LocalizationMode.LANDMARKS and session.kind is not RobotKind.SIM:
-                # a robot's start was measured by hand: look for a poster first (the first sighting may
-                # correct it), then put the head back; the agent tracks the box, not the walls
-                robot.enable()
-                robot.relocalize()
-            identified = agent.run()  # stops the robot on its way out
-        except KeyboardInterrupt:  # Ctrl-C: the motors are stopped; the record so far is the result
-            interrupted, identified = True, agent.identified
-        loop = {  # the loop alone: no start-up (databases, tables, scene), no figures
-            "sim": session.robot.now() - sim_t0,
-            "wall": time.perf_counter() - loop_wall0,
-            "cpu": time.process_time() - loop_cpu0,
-        }
-        tracked.record(force=True)  # where the episode ended
+        identified, interrupted, loop = _run_loop(agent, robot, session, tracked)
         error = _final_pose_error(agent, session, truth, true_model)
         elapsed = session.robot.now() - t0
-        extra = _robot_fields(session)
-        extra.update(_localization_fields(robot, session, note))
+        extra = {**_robot_fields(session), **_localization_fields(robot, session, note)}
     wall, cpu = time.perf_counter() - t_wall, time.process_time() - t_cpu
     result = _episode_json(agent, session, true_model, identified, planner, seed, mover, t0)
     result.update(sim_time_s=elapsed, wall_time_s=wall, pose_error=error, **extra)
-    result["reason"] = _reason(agent, identified, interrupted)
-    if session.kind is RobotKind.SIM:
-        result.update(_speed_fields(elapsed, wall, cpu, loop))
+    _add_reason_and_speed(result, agent, session, identified, interrupted, (elapsed, wall, cpu, loop))
     _finish_recording(recorder, result, progress)
     if viewer is not None:
         result["view3d"] = str(viewer.save())
     true_poses = [G_WO for _, G_WO in truth]
     _write(result, json_path, out if figures else None, agent, session, true_poses, tracked.track())
     return result
+
+
+def _checked_setup(true_model: int, robot_config, localization, start):
+    """The robot config, the room's landmarks and the robot's start in the room, each checked before
+    anything starts (a bad model, config or map: one clear error)."""
+    from lab.sim import box_model
+
+    box_model(true_model)  # a clear error before anything starts
+    hw = load_robot_config(robot_config)
+    kind = robot_kind(hw)
+    room = room_landmarks(kind, hw, _scene_of(kind, hw), localization)  # a bad map: one line, first
+    return hw, room, _start_of(kind, hw, room, start)
+
+
+def _agent_config(max_actions: int, max_time_s: float, keep_direction: float | None) -> AgentConfig:
+    """The agent's config: the defaults with the episode's budgets (and ``keep_direction`` if given)."""
+    config = AgentConfig(max_actions=max_actions, max_time_s=max_time_s)
+    if keep_direction is not None:
+        config = dataclasses.replace(config, keep_direction=keep_direction)
+    return config
+
+
+def _known_floor_plan(session: RobotSession):
+    """The room's floor plan handed to the agent in a simulated room (:func:`floor_plan`); else None."""
+    world = session.world
+    plan = None
+    if session.kind is RobotKind.SIM and world.scene.room is not None:
+        plan = floor_plan(world.scene.room.size, session.robot.base_limits.radius)
+    return plan
+
+
+def _run_loop(
+    agent: IdentificationAgent, robot: LocalizedRobot, session: RobotSession, tracked: TrackedRobot
+):
+    """Run the agent, then record where the episode ended on ``tracked``: ``(identified, interrupted,
+    loop)``, ``loop`` the loop's own sim, wall and CPU time [s] (no start-up: databases, tables, scene;
+    no figures)."""
+    sim_t0, loop_wall0, loop_cpu0 = session.robot.now(), time.perf_counter(), time.process_time()
+    interrupted = False
+    try:
+        if robot.mode is LocalizationMode.LANDMARKS and session.kind is not RobotKind.SIM:
+            # a robot's start was measured by hand: look for a poster first (the first sighting may
+            # correct it), then put the head back; the agent tracks the box, not the walls
+            robot.enable()
+            robot.relocalize()
+        identified = agent.run()  # stops the robot on its way out
+    except KeyboardInterrupt:  # Ctrl-C: the motors are stopped; the record so far is the result
+        interrupted, identified = True, agent.identified
+    loop = {  # the loop alone: no start-up (databases, tables, scene), no figures
+        "sim": session.robot.now() - sim_t0,
+        "wall": time.perf_counter() - loop_wall0,
+        "cpu": time.process_time() - loop_cpu0,
+    }
+    tracked.record(force=True)  # where the episode ended
+    return identified, interrupted, loop
+
+
+def _add_reason_and_speed(result: dict, agent, session: RobotSession, identified, interrupted, times) -> None:
+    """Add ``reason`` to ``result`` and, in the simulator, the speed fields; ``times`` is ``(elapsed,
+    wall, cpu, loop)`` (:func:`_speed_fields`)."""
+    elapsed, wall, cpu, loop = times
+    result["reason"] = _reason(agent, identified, interrupted)
+    if session.kind is RobotKind.SIM:
+        result.update(_speed_fields(elapsed, wall, cpu, loop))
 
 
 #: The ``reason`` of an episode ended by Ctrl-C (SIGINT, a notebook's "interrupt kernel").

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lab.geometry import wrap_angle
-from lab.navigation.localization import LocalizationMode, LocalizedRobot, LocalizerConfig
+from lab.localization import LocalizationMode, LocalizedRobot, LocalizerConfig
 from lab.training.landmarks import trained_landmark_map
 
 __all__ = ["DriveResult", "drive_loop_waypoints", "run_localization_drive"]
@@ -123,7 +123,6 @@ def run_localization_drive(
     corners = drive_loop_waypoints(rng, length_m)
     scene = load_scene(world)
     landmarks = trained_landmark_map(scene, progress=False) if mode is LocalizationMode.LANDMARKS else None
-    rows, ellipses, nees = [], [], []
     with (
         SimWorld(scene, RenderSettings(supersample=supersample)) as w,
         make_robot(world=w, seed=seed, sensing=sensing) as run,
@@ -133,82 +132,12 @@ def run_localization_drive(
         robot = LocalizedRobot(
             base, mode, landmarks, config, rng=np.random.default_rng([seed, 21]), log=lambda m: None
         )
-        dt = 0.05
-        travelled = 0.0
-        last_truth = w.truth.robot_pose()
-        next_frame = 0.0
-
-        def record():
-            t = w.truth.robot_pose()
-            o = base.odometry()
-            e = robot.odometry()
-            rows.append((robot.now(), t.x, t.y, t.theta, o.x, o.y, o.theta, e.x, e.y, e.theta))
-
-        def look():
-            n0 = len(robot.localizer.history)
-            robot.capture_stereo()
-            t = w.truth.robot_pose().as_array()
-            for rec in robot.localizer.history[n0:]:
-                if rec.accepted:
-                    err = rec.x - t
-                    err[2] = wrap_angle(err[2])
-                    nees.append(float(err @ np.linalg.solve(rec.Sigma, err)))
-
-        def point_head(x):
-            if mode is LocalizationMode.LANDMARKS:
-                head = _best_landmark_head(robot, x)
-                if head is not None:
-                    robot.command_pan_tilt(*head)
-
-        def advance():
-            nonlocal travelled, last_truth
-            robot.step(dt)
-            t = w.truth.robot_pose()
-            travelled += math.hypot(t.x - last_truth.x, t.y - last_truth.y)
-            last_truth = t
-
-        record()
+        drive = _LoopDrive(w, base, robot, mode)
+        drive.record()
         for goal in corners:
-            # turn in place towards the corner
-            for _ in range(400):
-                p = robot.odometry()
-                err = wrap_angle(math.atan2(goal[1] - p.y, goal[0] - p.x) - p.theta)
-                if abs(err) < math.radians(2.0):
-                    break
-                robot.drive(0.0, float(np.clip(2.0 * err, -1.0, 1.0)))
-                advance()
-            # drive, correcting the heading, with the head on the best landmark
-            for _ in range(4000):
-                p = robot.odometry()
-                dx, dy = goal[0] - p.x, goal[1] - p.y
-                dist = math.hypot(dx, dy)
-                if dist < 0.05:
-                    break
-                err = wrap_angle(math.atan2(dy, dx) - p.theta)
-                v = speed * max(0.0, math.cos(err)) * min(1.0, dist / 0.3 + 0.2)
-                robot.drive(v, float(np.clip(2.0 * err, -1.0, 1.0)))
-                advance()
-                if mode is LocalizationMode.LANDMARKS and travelled >= next_frame:
-                    point_head(robot.localizer.x)
-                    look()
-                    next_frame = travelled + frame_every_m
-                if len(rows) == 0 or robot.now() - rows[-1][0] >= 0.5:
-                    record()
-            robot.stop()
-            for _ in range(4):
-                advance()
-            if mode is LocalizationMode.LANDMARKS:
-                n0 = len(robot.localizer.history)
-                robot.relocalize()
-                t = w.truth.robot_pose().as_array()
-                for rec in robot.localizer.history[n0:]:
-                    if rec.accepted:
-                        err = rec.x - t
-                        err[2] = wrap_angle(err[2])
-                        nees.append(float(err @ np.linalg.solve(rec.Sigma, err)))
-            est = robot.pose_estimate()
-            ellipses.append((est.pose.as_array(), est.Sigma))
-            record()
+            drive.turn_towards(goal)
+            drive.drive_to(goal, speed, frame_every_m)
+            drive.relocalize_at_corner()
         truth = w.truth.robot_pose()
         odom = base.odometry()
         est = robot.pose_estimate()
@@ -216,15 +145,107 @@ def run_localization_drive(
     return DriveResult(
         seed=int(seed),
         mode=mode.value,
-        path_length_m=travelled,
+        path_length_m=drive.travelled,
         odometry_error_m=math.hypot(odom.x - truth.x, odom.y - truth.y),
         odometry_heading_error_deg=abs(math.degrees(wrap_angle(odom.theta - truth.theta))),
         localization_error_m=math.hypot(est.pose.x - truth.x, est.pose.y - truth.y),
         localization_heading_error_deg=abs(math.degrees(wrap_angle(est.pose.theta - truth.theta))),
-        nees=np.array(nees),
+        nees=np.array(drive.nees),
         n_updates=sum(r.accepted for r in hist),
         n_rejected=sum(not r.accepted for r in hist),
-        trajectory=np.array(rows),
-        ellipses=ellipses,
+        trajectory=np.array(drive.rows),
+        ellipses=drive.ellipses,
         sigma_xy_m=est.sigma_xy_m,
     )
+
+
+class _LoopDrive:
+    """One localization drive under way: the robot, the simulator's truth it is scored against (and only
+    scored), the distance travelled and what was recorded (trajectory rows, corner ellipses, NEES)."""
+
+    dt = 0.05  # [s] per control step
+
+    def __init__(self, w, base, robot: LocalizedRobot, mode: LocalizationMode):
+        self.w, self.base, self.robot, self.mode = w, base, robot, mode
+        self.rows, self.ellipses, self.nees = [], [], []
+        self.travelled = 0.0
+        self.last_truth = w.truth.robot_pose()
+        self.next_frame = 0.0
+
+    def record(self) -> None:
+        """One trajectory row: the time, the true pose, the odometry and the estimate."""
+        t = self.w.truth.robot_pose()
+        o = self.base.odometry()
+        e = self.robot.odometry()
+        self.rows.append((self.robot.now(), t.x, t.y, t.theta, o.x, o.y, o.theta, e.x, e.y, e.theta))
+
+    def _score_updates(self, n0: int) -> None:
+        """The NEES of each update accepted since the localizer's ``n0``-th, against the true pose now."""
+        t = self.w.truth.robot_pose().as_array()
+        for rec in self.robot.localizer.history[n0:]:
+            if rec.accepted:
+                err = rec.x - t
+                err[2] = wrap_angle(err[2])
+                self.nees.append(float(err @ np.linalg.solve(rec.Sigma, err)))
+
+    def look(self) -> None:
+        n0 = len(self.robot.localizer.history)
+        self.robot.capture_stereo()
+        self._score_updates(n0)
+
+    def point_head(self, x) -> None:
+        if self.mode is LocalizationMode.LANDMARKS:
+            head = _best_landmark_head(self.robot, x)
+            if head is not None:
+                self.robot.command_pan_tilt(*head)
+
+    def advance(self) -> None:
+        self.robot.step(self.dt)
+        t = self.w.truth.robot_pose()
+        self.travelled += math.hypot(t.x - self.last_truth.x, t.y - self.last_truth.y)
+        self.last_truth = t
+
+    def turn_towards(self, goal) -> None:
+        """Turn in place towards the corner ``goal``."""
+        robot = self.robot
+        for _ in range(400):
+            p = robot.odometry()
+            err = wrap_angle(math.atan2(goal[1] - p.y, goal[0] - p.x) - p.theta)
+            if abs(err) < math.radians(2.0):
+                break
+            robot.drive(0.0, float(np.clip(2.0 * err, -1.0, 1.0)))
+            self.advance()
+
+    def drive_to(self, goal, speed: float, frame_every_m: float) -> None:
+        """Drive to ``goal``, correcting the heading, with the head on the best landmark."""
+        robot = self.robot
+        for _ in range(4000):
+            p = robot.odometry()
+            dx, dy = goal[0] - p.x, goal[1] - p.y
+            dist = math.hypot(dx, dy)
+            if dist < 0.05:
+                break
+            err = wrap_angle(math.atan2(dy, dx) - p.theta)
+            v = speed * max(0.0, math.cos(err)) * min(1.0, dist / 0.3 + 0.2)
+            robot.drive(v, float(np.clip(2.0 * err, -1.0, 1.0)))
+            self.advance()
+            if self.mode is LocalizationMode.LANDMARKS and self.travelled >= self.next_frame:
+                self.point_head(robot.localizer.x)
+                self.look()
+                self.next_frame = self.travelled + frame_every_m
+            if len(self.rows) == 0 or robot.now() - self.rows[-1][0] >= 0.5:
+                self.record()
+
+    def relocalize_at_corner(self) -> None:
+        """Stop, re-localize actively (landmarks mode), keep the estimate's ellipse and record a row."""
+        robot = self.robot
+        robot.stop()
+        for _ in range(4):
+            self.advance()
+        if self.mode is LocalizationMode.LANDMARKS:
+            n0 = len(robot.localizer.history)
+            robot.relocalize()
+            self._score_updates(n0)
+        est = robot.pose_estimate()
+        self.ellipses.append((est.pose.as_array(), est.Sigma))
+        self.record()

@@ -64,7 +64,7 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D, se3, se3_inv
-from lab.hardware.camera import RawStereo, StereoSource, _wait_until_after, load_camera_calibration
+from lab.hardware.camera import RawStereo, StereoSource, load_camera_calibration, wait_until_after
 from lab.hardware.config import HardwareConfig, load_config
 from lab.hardware.emulators import Create2Emulator, EmulatorSet, PTUEmulator, start_emulators
 from lab.robot import StereoCamera
@@ -203,8 +203,7 @@ class SimRenderedStereoSource(StereoSource):
     # --- the emulators' truth ----------------------------------------------------------------------
     def base_pose_W(self) -> Pose2D:
         """The base's true pose in the world: ``robot_start`` composed with the emulator's true pose."""
-        with self.create._lock:
-            x, y, th = self.create.x, self.create.y, self.create.theta
+        x, y, th = self.create.true_pose()
         s = self.robot_start
         c, sn = math.cos(s.theta), math.sin(s.theta)
         return Pose2D(
@@ -215,8 +214,7 @@ class SimRenderedStereoSource(StereoSource):
 
     def pan_tilt_true(self) -> tuple[float, float]:
         """The head's true (pan, tilt) [rad] from the PTU emulator's axis positions."""
-        with self.ptu._lock:
-            pos, res = dict(self.ptu.pos), dict(self.ptu.res)
+        pos, res = self.ptu.axis_positions()
         pan, tilt = (self._sign[a] * (pos[a] * res[a] * ARCSEC - self._zero[a]) for a in "PT")
         return pan, tilt
 
@@ -233,7 +231,7 @@ class SimRenderedStereoSource(StereoSource):
 
     def read(self, after: float | None = None, timeout: float = 2.0) -> RawStereo:
         """Render the pair the cameras see now (or first after ``after``), stamped with that instant."""
-        _wait_until_after(after, timeout, self.clock)
+        wait_until_after(after, timeout, self.clock)
         t = self.clock()
         base_W = self.base_pose_W()
         pan, tilt = self.pan_tilt_true()
@@ -399,10 +397,15 @@ def rehearsal(
         robot = HardwareRobot(cfg, camera_source=source, on_event=on_event)
         yield Rehearsal(robot, emu, cfg, world, carrier, true_model if carrier is not None else None, source)
     finally:
-        if robot is not None:
-            robot.close()
-        emu.close()
-        if world is not None:
-            world.close()
-        if tmp is not None:
-            shutil.rmtree(tmp, ignore_errors=True)
+        _stop_all(robot, emu, world, tmp)
+
+
+def _stop_all(robot, emu: EmulatorSet, world, tmp: str | None) -> None:
+    """Close the robot, then the emulators, then the world; then remove the temporary link folder."""
+    if robot is not None:
+        robot.close()
+    emu.close()
+    if world is not None:
+        world.close()
+    if tmp is not None:
+        shutil.rmtree(tmp, ignore_errors=True)

@@ -1,5 +1,5 @@
 """The robot in the room: where a run's robot starts, the landmark map it localizes against, and the
-localizer around it (:class:`~lab.navigation.localization.LocalizedRobot`), on every kind of robot.
+localizer around it (:class:`~lab.localization.LocalizedRobot`), on every kind of robot.
 
 * **the simulator**: the scene's posters; the start is the true one (its odometry starts there);
 * **a rehearsal**: the robot config's ``[room] landmarks`` file, else the posters of the scene it
@@ -12,7 +12,7 @@ On a robot the wheel odometry reads (0, 0, 0) where the base was switched on;
 :class:`~lab.runs.robots.PlacedRobot` puts it at the start in W. The start is a pose someone measured
 (a tape measure from the room's origin), so the localizer starts with the covariance ``[room]
 start_sigma`` says and lets the first landmark it sees correct it
-(:meth:`~lab.navigation.localization.Localizer.first_sighting`): a start 30 cm off its mark is corrected
+(:meth:`~lab.localization.Localizer.first_sighting`): a start 30 cm off its mark is corrected
 at the first poster, not locked out by the gate. The simulator's odometry starts at the true pose: there
 the localizer starts certain, as before.
 """
@@ -29,8 +29,7 @@ import numpy as np
 from lab.errors import ConfigError, LabError
 from lab.geometry import Pose2D
 from lab.hardware.config import HardwareConfig, RoomConfig
-from lab.navigation.landmarks import LandmarkMap
-from lab.navigation.localization import LocalizationMode, LocalizedRobot
+from lab.localization import LandmarkMap, LocalizationMode, LocalizedRobot
 from lab.robot import Robot
 from lab.runs.robots import PlacedRobot, RobotKind
 
@@ -246,7 +245,7 @@ def localize(
 
     In the simulator (or without a start) the localizer starts at the robot's odometry with its default
     covariance; on a robot at ``start`` with ``start.Sigma0``, the first landmark sighting allowed to
-    correct it (:meth:`~lab.navigation.localization.Localizer.first_sighting`).
+    correct it (:meth:`~lab.localization.Localizer.first_sighting`).
     """
     rng = np.random.default_rng([seed, 20])
     if kind is RobotKind.SIM or start is None:

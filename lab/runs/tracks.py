@@ -1,7 +1,7 @@
 """The robot's path through a run, three ways: wheel odometry, the pose estimate, and the truth.
 
 A run's figures draw the path the robot's wheels measured beside the one its localizer estimated
-(:class:`~lab.navigation.localization.LocalizedRobot`) and, where it is known, the true one.
+(:class:`~lab.localization.LocalizedRobot`) and, where it is known, the true one.
 :class:`TrackedRobot` records them while the run goes: it wraps the localized robot the agent drives and,
 at every ``step`` (no more often than ``record_every_s``), samples
 
@@ -25,7 +25,7 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
-from lab.navigation.localization import LocalizedRobot
+from lab.localization import LocalizedRobot
 from lab.robot import RobotWrapper
 
 __all__ = ["RobotTrack", "TrackedRobot"]
@@ -46,7 +46,7 @@ class RobotTrack:
     truth : ndarray, shape (n, 3) [m, m, rad], or None
         The true base pose (scoring and figures only); None where there is no truth (the real robot).
     localization : str
-        ``odometry`` or ``landmarks`` (:class:`~lab.navigation.localization.LocalizationMode`).
+        ``odometry`` or ``landmarks`` (:class:`~lab.localization.LocalizationMode`).
     landmark_updates : int
         Landmark observations the localizer used by the end (0 with ``landmarks``: none was seen, and
         the estimate is dead reckoning from the start).

@@ -22,11 +22,13 @@ hemisphere (:func:`scan_configurations`). In each view:
    :func:`lab.vision.dense.checked_disparity` (SGBM over the full image width, left-right checked); the
    pixel and disparity triangulate to ``p_C`` (:func:`lab.vision.triangulate`'s formulas), and
    ``p_W = G_WR(odometry) G_RC(pan, tilt) p_C``.
-5. **Map update.** A peak whose point is on the map, at a height where an object can stand
+5. **Detections.** A peak whose point is on the map, at a height where an object can stand
    (``[min_height_m, max_height_m]``), within ``max_range_m`` of the camera and not on the robot's own
    base, and the strongest of its view in its cell, is a positive detection of that cell with
    ``P(y_uv = 1 | h_uv = 1) = P'_n`` (its strength) and the growing beta of
-   :func:`lab.search.probability_map.update_global`.
+   :func:`lab.search.probability_map.update_global`: a
+   :class:`~lab.search.probability_map.ColourPeakDetection`, which the caller applies to its map with
+   :meth:`~lab.search.probability_map.ProbabilityMap.observe`, in the order given.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ import numpy as np
 from lab.errors import ConfigError
 from lab.geometry import transform_points
 from lab.robot import Robot, StereoCamera, StereoFrame
-from lab.search.probability_map import ProbabilityMap
+from lab.search.probability_map import ColourPeakDetection, DetectionModel, ProbabilityMap, observe
 from lab.vision.colour import back_project, colour_histogram
 from lab.vision.database import FeatureDatabase
 from lab.vision.dense import checked_disparity
@@ -71,8 +73,7 @@ class GlobalSearchConfig:
         of view cover the full circle but for the 40 degrees behind the robot the PTU cannot reach;
         the two tilts with the 60 degree vertical field of view cover -60 to +40 degrees of elevation:
         from the lab room's 1.1 m mast, the floor from 0.65 m out, and the far floor, tables and shelf
-        near the horizon inside both views rather than at an edge (with -35 and +20, tuned for a 0.7 m
-        mast, an object on the floor 5.5 m away fell between the views' edges and was missed).
+        near the horizon inside both views rather than at an edge (docs/tuning/global-search-scan-tilts.md).
     window_px : int [px]
         Side of the fixed scanning window (box filter).
     n_hist : int
@@ -81,14 +82,12 @@ class GlobalSearchConfig:
         Smallest window mean kept as a peak.
     suppression_px : int [px]
         Non-maximum suppression radius around a kept cluster.
-    alpha : float
-        False-alarm probability of a colour peak (Eq. (2)). A peak of strength ``P'_n`` multiplies its
-        cell's odds against the rest of the map by about ``P'_n / alpha``: 18 for the strongest.
-    growth_m : float [m]
-        Growth length of the variable beta.
-    beta_min : float
-        Smallest missed-detection probability at a peak's cell (``P'_n`` above ``1 - beta_min`` counts
-        as ``1 - beta_min``).
+    detection : DetectionModel
+        The colour peak's detector (Eq. (2)): ``alpha`` its false-alarm probability (a peak of strength
+        ``P'_n`` multiplies its cell's odds against the rest of the map by about ``P'_n / alpha``: 18
+        for the strongest); ``beta`` the smallest missed-detection probability at a peak's cell
+        (``P'_n`` above ``1 - beta`` counts as ``1 - beta``); ``growth_m`` the growth length of the
+        variable beta.
     min_height_m, max_height_m : float [m]
         Heights at which an object can stand (floor to the top of a shelf object); peaks elsewhere
         (a poster on a wall, the ceiling) are not used.
@@ -99,10 +98,8 @@ class GlobalSearchConfig:
     num_disparities : int
         SGBM disparity range (48 px: down to 0.52 m at f = 208 px, b = 0.12 m). Plain SGBM gives no
         disparity in the left ``num_disparities`` columns, and the neighbouring pan's view (15 degrees
-        of overlap, about 42 px) does not make up for it. Measured for a thin book on the shelf (4
-        placements, 9 spots across the room each): its peak was used from 11 of the 36 spots with plain
-        SGBM, most of the others dropped as "no stereo disparity", and from 28 with the full-width
-        disparity used now.
+        of overlap, about 42 px) does not make up for it, so the peaks take the full-width disparity
+        (:func:`lab.vision.dense.checked_disparity`; docs/tuning/global-search-full-width-disparity.md).
     ratio_eps : float
         ``epsilon`` of :func:`object_likelihood_ratio`.
     """
@@ -113,9 +110,9 @@ class GlobalSearchConfig:
     n_hist: int = 3
     min_strength: float = 0.15
     suppression_px: int = 20
-    alpha: float = 0.05
-    growth_m: float = 0.2
-    beta_min: float = 0.1
+    detection: DetectionModel = field(
+        default_factory=lambda: DetectionModel(alpha=0.05, beta=0.1, growth_m=0.2)
+    )
     min_height_m: float = -0.1
     max_height_m: float = 1.5
     max_range_m: float = 7.0
@@ -190,13 +187,16 @@ class GlobalSearchResult:
     peaks : tuple of ColourPeak
         All clusters of all views.
     P_before, P_after : ndarray, shape (nx, ny)
-        The map before and after the search.
+        The map before the search, and after its ``detections`` (what the caller's
+        :meth:`~lab.search.probability_map.ProbabilityMap.observe` of them gives).
     background_hist : ndarray
         The scan's own colour histogram (the ratio histogram's denominator).
     colour_model : ndarray
         The histogram that was back-projected (:func:`object_likelihood_ratio`).
     t_start, t_end : float [s]
         Robot time at the start and the end of the scan.
+    detections : tuple of ColourPeakDetection
+        One per used peak, in scan order: for the caller's map.
     """
 
     views: tuple[ScanView, ...] = field(repr=False)
@@ -207,6 +207,7 @@ class GlobalSearchResult:
     colour_model: np.ndarray = field(repr=False)
     t_start: float = 0.0
     t_end: float = 0.0
+    detections: tuple[ColourPeakDetection, ...] = field(default=(), repr=False)
 
     @property
     def used_peaks(self) -> tuple[ColourPeak, ...]:
@@ -363,10 +364,11 @@ def process_view(
 def global_search(
     robot: Robot, db: FeatureDatabase, pmap: ProbabilityMap, config: GlobalSearchConfig | None = None
 ) -> GlobalSearchResult:
-    """Scan, find the colour peaks and update ``pmap`` in place (see the module docstring).
+    """Scan and find the colour peaks (see the module docstring); ``pmap`` is read, not changed.
 
     The robot must be enabled and standing still; it stays where it is, only the head moves. The views
     are captured first, so that the ratio histogram's background is the whole scan's colour histogram.
+    The result's ``detections`` are for the caller's ``pmap.observe``, in order.
     """
     config = config or GlobalSearchConfig()
     t_start = robot.now()
@@ -381,13 +383,24 @@ def global_search(
     colour_model = object_likelihood_ratio(db.histogram, background, config.ratio_eps)
     P_before = pmap.P.copy()
     views = []
+    detections = []
+    P_after = P_before.copy()
     for k, f in enumerate(frames):
         view = process_view(f, colour_model, space, pmap, config, k)
         for p in view.peaks:
             if p.used:
-                pmap.update_global(p.cell, p.strength, config.alpha, config.growth_m, config.beta_min)
+                detections.append(ColourPeakDetection(p.cell, p.strength, config.detection))
+                P_after = observe(P_after, pmap.spec, detections[-1])
         views.append(view)
     peaks = tuple(p for v in views for p in v.peaks)
     return GlobalSearchResult(
-        tuple(views), peaks, P_before, pmap.P.copy(), background, colour_model, t_start, robot.now()
+        tuple(views),
+        peaks,
+        P_before,
+        P_after.copy(),
+        background,
+        colour_model,
+        t_start,
+        robot.now(),
+        tuple(detections),
     )

@@ -34,15 +34,15 @@ back-projected over the 9 views (the ratio histogram of the global search agains
 colours, :func:`lab.search.global_search.object_likelihood_ratio`), the strongest window means whose
 stereo point lies near the searched cell are aimed at, one at a time, and each new frame's region around
 the peak is enlarged ``upsample`` times (:func:`lab.vision.stereo.upsampled_pair`) before SIFT. The
-start, refinement and "found" are the same as above, the refinement on enlarged regions too. Measured on
-the tuning seeds (``benchmarks/bench_local_search.py``): the misses of objects in view were mostly an
-object on the floor, seen 1.1-1.3 m away from 40-50 degrees above (the 1.1 m mast), spanning 25-40 px
-on a side at 320 x 240: SIFT found 7-23 features on it and 0-3 right matches, too few for a start; on
-the 2x enlarged region the same view gave up to 10 right matches and a start.
+start, refinement and "found" are the same as above, the refinement on enlarged regions too. It is for
+small objects far below the camera (an object on the floor seen from the 1.1 m mast spans a few tens of
+pixels at 320 x 240, too few SIFT matches for a start), which the enlarged region gives enough
+matches. How this was measured: docs/tuning/search-second-look-upsample.md.
 ``second_look=None`` is the paper's local search.
 
-and when no view finds it, the caller updates the searched cell as a negative detection with the
-local search's constant ``alpha`` and ``beta`` (:class:`LocalSearchConfig`).
+The result is a detection of the searched cell (:class:`~lab.search.probability_map.LocalSearchDetection`,
+with the config's constant ``alpha`` and ``beta`` and its neighbourhood) that the caller applies to its
+map: when no view finds the object, a negative one.
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ from lab.estimation import (
     ProcessNoise,
 )
 from lab.geometry import se3, se3_inv, transform_points, wrap_angle
-from lab.robot import Robot, StereoCamera, StereoFrame, frame_motion
+from lab.robot import Robot, StereoFrame
 from lab.search.global_search import (
     GlobalSearchConfig,
     object_likelihood_ratio,
@@ -71,13 +71,15 @@ from lab.search.global_search import (
     strongest_clusters,
     window_mean,
 )
-from lab.search.pose_check import PoseCheckConfig, check_pose, rest_tilt_deg
+from lab.search.pose_check import PoseCheckConfig
+from lab.search.probability_map import DetectionModel, LocalSearchDetection
+from lab.search.tracking import Track, aim_at, refine_track, region_features
 from lab.vision.colour import back_project, colour_histogram
 from lab.vision.database import FeatureDatabase
 from lab.vision.dense import checked_disparity
 from lab.vision.matching import Matcher
 from lab.vision.roi import object_roi
-from lab.vision.stereo import sift, stereo_features, triangulate, upsampled_pair
+from lab.vision.stereo import sift, stereo_features, triangulate
 
 __all__ = [
     "LocalSearchConfig",
@@ -101,16 +103,15 @@ class SecondLookConfig:
     ----------
     upsample : int
         Enlargement of the region around a colour peak before SIFT (bicubic;
-        :func:`lab.vision.stereo.upsampled_pair`). Chosen on the tuning seeds (0-5, the misses of
-        ``benchmarks/bench_local_search.py`` with a 0-inlier start, regions around the true object):
-        2x raised the right matches of the best view from 2 to 10, 2 to 6 and 2 to 3 on three of
-        four floor misses (RANSAC starts of 24, 14 and 5 inliers); 3x did worse than 2x on all four.
+        :func:`lab.vision.stereo.upsampled_pair`): 2x gave the floor misses' best views enough right
+        matches for a RANSAC start, and 3x did worse than 2x. How it was chosen:
+        docs/tuning/search-second-look-upsample.md.
     n_looks : int
         At most this many peaks are looked at, strongest first.
     max_offset_m : float [m]
         A peak counts when its stereo point lies within this horizontal distance of the searched
         cell's centre: the reach of the failed search's negative update
-        (``LocalSearchConfig.neighbour_radius_m``), the cells this search answers for.
+        (``LocalSearchConfig.detection.neighbour_radius_m``), the cells this search answers for.
     min_separation_m : float [m]
         Peaks closer than this to a stronger one are the same object seen in two views.
     margin_px : int [px]
@@ -164,23 +165,22 @@ class LocalSearchConfig:
         "Found" needs at least ``confirm_updates`` refinement updates that each used at least
         ``confirm_matches`` gated matches.
     dither_deg : float [deg]
-        Head offset between refinement frames (see :func:`_refine`).
+        Head offset between refinement frames (see :func:`lab.search.tracking.refine_track`).
     max_position_std_m : float [m]
     max_rotation_std_deg : float [deg]
         "Small covariance": bounds on the largest position and rotation standard deviations.
     roi_margin_px : int [px]
         Margin around the projected object's bounding box for the ROI.
-    alpha, beta : float
-        The constant detection errors of Eq. (2) for the negative update after a failed search
-        (false alarm and missed detection at close range).
-    neighbour_radius_m : float [m]
-        A failed search is a negative detection of the searched cell *and* of every cell whose centre
-        lies within this distance of it (one Bayes update per cell): the 9 views look at the searched
-        cell's neighbours as closely as at the cell. The default is the reach of the strongest colour
-        peak's growing beta (``lambda ln((1 - alpha) / beta_min)`` = 0.45 m, see the probability map).
-        0 is the paper's update of the one cell, which sends the robot on to each of the neighbours
-        that the global search's growing beta raised with the peak (the paper's Fig. 6 shows such a
-        revisit).
+    detection : DetectionModel
+        The search's detector, for the map update of its result's ``detection``: ``alpha``, ``beta``
+        the constant detection errors of Eq. (2) (false alarm and missed detection at close range);
+        ``neighbour_radius_m``: a search is a detection of the searched cell *and* of every cell whose
+        centre lies within this distance of it (one Bayes update per cell), since the 9 views look at
+        the searched cell's neighbours as closely as at the cell. The default radius is the reach of
+        the strongest colour peak's growing beta (``lambda ln((1 - alpha) / beta_min)`` = 0.45 m, see
+        the probability map). 0 is the paper's update of the one cell, which sends the robot on to
+        each of the neighbours that the global search's growing beta raised with the peak (the
+        paper's Fig. 6 shows such a revisit).
     process : ProcessNoise
         The EKF's static-object process noise (Eq. (4): ``X_k = X_{k-1} + eta``).
     pose_check : PoseCheckConfig or None
@@ -208,9 +208,9 @@ class LocalSearchConfig:
     max_position_std_m: float = 0.01
     max_rotation_std_deg: float = 3.0
     roi_margin_px: int = 20
-    alpha: float = 0.05
-    beta: float = 0.1
-    neighbour_radius_m: float = 0.45
+    detection: DetectionModel = field(
+        default_factory=lambda: DetectionModel(alpha=0.05, beta=0.1, neighbour_radius_m=0.45)
+    )
     process: ProcessNoise = field(
         default_factory=lambda: ProcessNoise(sigma_v=0.0, sigma_w=0.0, eta_m=2e-3, eta_rad=5e-3)
     )
@@ -273,6 +273,10 @@ class LocalSearchResult:
     colour_peaks : tuple of ndarray, shape (3,) [m]
         The world points of the object's colour near the searched cell that the second look aimed at
         (odometry frame): on a miss, the object's colours were there but no pose came of them.
+    detection : LocalSearchDetection or None
+        The search as a detection of its map cell (``y = 1`` found, ``y = 0`` not) with the config's
+        :class:`~lab.search.probability_map.DetectionModel`, for the caller's
+        :meth:`~lab.search.probability_map.ProbabilityMap.observe`; None when no cell was given.
     """
 
     found: bool
@@ -287,6 +291,7 @@ class LocalSearchResult:
     t_start: float = 0.0
     t_end: float = 0.0
     colour_peaks: tuple[np.ndarray, ...] = field(default=(), repr=False)
+    detection: LocalSearchDetection | None = field(default=None, repr=False)
 
 
 def local_views(config: LocalSearchConfig, bearing: float = 0.0, limits=None) -> list[tuple[float, float]]:
@@ -308,17 +313,6 @@ def local_views(config: LocalSearchConfig, bearing: float = 0.0, limits=None) ->
     return out
 
 
-def aim_at(p_R: np.ndarray, camera: StereoCamera, limits=None) -> tuple[float, float]:
-    """Pan and tilt [rad] that point the head at the point ``p_R`` (robot frame), clamped to ``limits``."""
-    m = camera.mount_R
-    dx, dy, dz = p_R[0] - m[0], p_R[1] - m[1], p_R[2] - m[2]
-    pan, tilt = math.atan2(dy, dx), math.atan2(dz, math.hypot(dx, dy))
-    if limits is not None:
-        pan = min(max(pan, limits.pan_min), limits.pan_max)
-        tilt = min(max(tilt, limits.tilt_min), limits.tilt_max)
-    return pan, tilt
-
-
 #: Database features closer than this [m] in the object frame are one physical point for the ratio
 #: test (:class:`lab.vision.Matcher`'s ``alias_radius``): the search's several training rings see a
 #: point from directions far apart, with descriptors too different to merge.
@@ -332,13 +326,6 @@ def make_matcher(db: FeatureDatabase) -> Matcher:
     return Matcher(db, method="flann" if len(db) >= 64 else "brute", alias_radius=ALIAS_RADIUS_M)
 
 
-def _stds(ekf: PoseEKF) -> tuple[float, float]:
-    S = ekf.object_estimate.Sigma_rv  # with the database's own error: where the object is
-    pos = math.sqrt(max(0.0, float(np.linalg.eigvalsh(S[:3, :3])[-1])))
-    rot = math.degrees(math.sqrt(max(0.0, float(np.linalg.eigvalsh(S[3:, 3:])[-1]))))
-    return pos, rot
-
-
 def local_search(
     robot: Robot,
     db: FeatureDatabase,
@@ -346,6 +333,8 @@ def local_search(
     rng: np.random.Generator,
     config: LocalSearchConfig | None = None,
     matcher: Matcher | None = None,
+    *,
+    cell: tuple[int, int] | None = None,
 ) -> LocalSearchResult:
     """Look for the object from where the robot stands, facing (roughly) ``target_xy`` [m] (world).
 
@@ -362,13 +351,15 @@ def local_search(
     config : LocalSearchConfig, optional
     matcher : Matcher, optional
         Reuse a matcher (its index is built once per database).
+    cell : (i, j), optional
+        The searched map cell: the result's ``detection`` is of it.
 
     Returns
     -------
     LocalSearchResult
     """
     cfg = config or LocalSearchConfig()
-    return _LocalSearch(robot, db, rng, cfg, matcher or make_matcher(db)).run(target_xy)
+    return _LocalSearch(robot, db, rng, cfg, matcher or make_matcher(db)).run(target_xy, cell)
 
 
 def look_at_points(
@@ -382,7 +373,7 @@ def look_at_points(
     """The second look alone: aim the head at each world point of ``points_W`` [m] in turn (the colour
     peaks an earlier local search found near its cell) and start and track on the enlarged region around
     it, as :class:`SecondLookConfig` says, until one finds the object. The search agent's side look
-    calls it after stepping round the peak (``AgentConfig.side_look_deg``).
+    calls it after stepping round the peak (``SearchAgentConfig.side_look_deg``).
 
     Parameters
     ----------
@@ -426,9 +417,10 @@ class _LocalSearch:
         self.frames: list[StereoFrame] = []  # the views' frames, for the second look's colour peaks
         self.best_reason, self.best_rank = "no view had enough matches", (-1, -1)
 
-    def run(self, target_xy) -> LocalSearchResult:
+    def run(self, target_xy, cell=None) -> LocalSearchResult:
         """Search the views centred on the bearing of ``target_xy`` [m] (world) from the robot, then,
-        before giving up, take the second look at the colour peaks near it."""
+        before giving up, take the second look at the colour peaks near it; a detection of ``cell``
+        when it is given."""
         robot = self.robot
         t_start = robot.now()
         odom = robot.odometry()
@@ -436,14 +428,14 @@ class _LocalSearch:
         for pan, tilt in local_views(self.cfg, bearing, robot.pan_tilt_limits):
             track = self._search_view(pan, tilt)
             if track is not None and track.found:
-                return self._found(track, t_start)
+                return self._found(track, t_start, self._detection(cell, 1))
         peaks = []
         if self.cfg.second_look is not None:
             peaks = self._colour_peaks(target_xy, self.cfg.second_look)
             for p_W in peaks:
                 track = self._second_look(p_W, self.cfg.second_look)
                 if track is not None and track.found:
-                    return self._found(track, t_start)
+                    return self._found(track, t_start, self._detection(cell, 1))
         return LocalSearchResult(
             False,
             f"not found in {len(self.records)} views: {self.best_reason}",
@@ -451,7 +443,11 @@ class _LocalSearch:
             t_start=t_start,
             t_end=robot.now(),
             colour_peaks=tuple(peaks),
+            detection=self._detection(cell, 0),
         )
+
+    def _detection(self, cell, y: int) -> LocalSearchDetection | None:
+        return None if cell is None else LocalSearchDetection(tuple(cell), y, self.cfg.detection)
 
     def look(self, points_W: list[np.ndarray]) -> LocalSearchResult:
         """The second look at each of ``points_W`` [m] (world) in turn (:func:`look_at_points`)."""
@@ -470,7 +466,7 @@ class _LocalSearch:
             colour_peaks=tuple(points_W),
         )
 
-    def _search_view(self, pan: float, tilt: float) -> _Track | None:
+    def _search_view(self, pan: float, tilt: float) -> Track | None:
         """Look at ``(pan, tilt)`` [rad], match, start the EKF by RANSAC and track; record the view.
         None when the view has too few matches or too weak a start."""
         robot = self.robot
@@ -481,7 +477,7 @@ class _LocalSearch:
         f = stereo_features(frame.left, frame.right, frame.camera, t=frame.t, detector=self.detector)
         return self._start_and_track(frame, f, self.matcher.match(f), pan, tilt, upsample=1)
 
-    def _start_and_track(self, frame, f, corr, pan: float, tilt: float, upsample: int) -> _Track | None:
+    def _start_and_track(self, frame, f, corr, pan: float, tilt: float, upsample: int) -> Track | None:
         """The RANSAC start from one frame's matches and, when it is strong enough, the track; records
         the view (``upsample`` > 1: the features are of the region enlarged that many times)."""
         cfg = self.cfg
@@ -499,7 +495,7 @@ class _LocalSearch:
             self.records.append(ViewRecord(**rec, n_inliers=n_start, outcome=outcome, upsample=upsample))
             self._came_closer((0, n_start), f"{look}best start had {n_start} inliers < {cfg.min_inliers}")
             return None
-        track = _refine(self.robot, self.db, self.matcher, self.detector, ekf, frame, cfg, upsample)
+        track = refine_track(self.robot, self.db, self.matcher, self.detector, ekf, frame, cfg, upsample)
         self.records.append(
             ViewRecord(**rec, n_inliers=n_start, outcome=look + track.reason, upsample=upsample)
         )
@@ -547,7 +543,7 @@ class _LocalSearch:
                 break
         return chosen
 
-    def _second_look(self, p_W: np.ndarray, sl: SecondLookConfig) -> _Track | None:
+    def _second_look(self, p_W: np.ndarray, sl: SecondLookConfig) -> Track | None:
         """Aim the head at the colour peak's point ``p_W`` [m], and start and track on the region around
         it (an object-sized square at its depth) enlarged ``sl.upsample`` times."""
         robot = self.robot
@@ -561,14 +557,14 @@ class _LocalSearch:
         roi = object_roi(se3(np.eye(3), p_C), (side, side, side), frame.camera, sl.margin_px)
         if roi is None:
             return None
-        f, _, _ = _features(frame, roi, sl.upsample, self.detector)
+        f, _, _ = region_features(frame, roi, sl.upsample, self.detector)
         return self._start_and_track(frame, f, self.matcher.match(f), pan, tilt, sl.upsample)
 
     def _came_closer(self, rank: tuple[int, int], reason: str) -> None:
         if rank > self.best_rank:
             self.best_reason, self.best_rank = reason, rank
 
-    def _found(self, track: _Track, t_start: float) -> LocalSearchResult:
+    def _found(self, track: Track, t_start: float, detection=None) -> LocalSearchResult:
         return LocalSearchResult(
             True,
             track.reason,
@@ -581,103 +577,5 @@ class _LocalSearch:
             tuple(self.records),
             t_start,
             self.robot.now(),
+            detection=detection,
         )
-
-
-def _features(frame: StereoFrame, roi, upsample: int, detector):
-    """The frame's stereo features inside ``roi`` (x, y, w, h) [px], of the pair enlarged ``upsample``
-    times (:func:`lab.vision.stereo.upsampled_pair`; 1: as captured); also the camera model and region
-    in the pixels of the features (``f.uv``)."""
-    left, right, camera, params = upsampled_pair(frame.left, frame.right, frame.camera, upsample)
-    if roi is not None and upsample > 1:
-        roi = tuple(int(v) * upsample for v in roi)
-    f = stereo_features(left, right, camera, params, roi=roi, t=frame.t, detector=detector)
-    return f, camera, roi
-
-
-def _refine(
-    robot, db, matcher, detector, ekf: PoseEKF, frame: StereoFrame, cfg: LocalSearchConfig, upsample: int = 1
-):
-    """Centre the object and track it over ``cfg.refine_frames`` frames with ROI-restricted SIFT (on
-    the region enlarged ``upsample`` times for a second look).
-
-    The head aims at the estimated object centre before each frame, offset by a small dither
-    (``cfg.dither_deg``, alternating directions): a simulated camera that has not moved renders the very
-    same image again, which would add no information while the filter counted it as new (on the robot,
-    sensor noise makes successive frames differ).
-    """
-    prev = frame
-    confirmed, last_used = 0, 0
-    dither = math.radians(cfg.dither_deg)
-    offsets = [(0.0, 0.0), (dither, 0.0), (-dither, dither), (0.0, -dither), (dither, dither)]
-    for k in range(cfg.refine_frames):
-        p_R = transform_points(prev.G_RC, ekf.estimate.mu[:3])  # estimated object centre in R
-        pan, tilt = aim_at(p_R, robot.camera)
-        dp, dt = offsets[k % len(offsets)]
-        lim = robot.pan_tilt_limits
-        robot.command_pan_tilt(
-            min(max(pan + dp, lim.pan_min), lim.pan_max), min(max(tilt + dt, lim.tilt_min), lim.tilt_max)
-        )
-        robot.wait_pan_tilt()
-        cur = robot.capture_stereo()
-        ekf.predict(prev.G_RC, cur.G_RC, frame_motion(prev, cur), max(0.0, cur.t - prev.t))
-        roi = object_roi(ekf.estimate.G_CO, db.extent, cur.camera, cfg.roi_margin_px)
-        f, camera, roi = _features(cur, roi, upsample, detector)
-        corr = matcher.match(f)
-        res = ekf.update(*corr.pairs(f, db))  # gated by the geometric feasibility check
-        last_used = res.n_used if res.applied else 0
-        if res.applied and res.n_used >= cfg.confirm_matches:
-            confirmed += 1
-        prev = cur
-    pos_std, rot_std = _stds(ekf)
-    G_WO = prev.odom.G() @ prev.G_RC @ ekf.estimate.G_CO
-    base = {
-        "estimate": ekf.object_estimate,
-        "frame": prev,
-        "n_inliers": last_used,
-        "position_std_m": pos_std,
-        "rotation_std_deg": rot_std,
-        "G_WO": G_WO,
-    }
-    if ekf.divergence is not None:
-        return _Track(False, f"track diverged: {ekf.divergence}", **base)
-    if confirmed < cfg.confirm_updates:
-        return _Track(
-            False,
-            f"not confirmed: {confirmed} of {cfg.refine_frames} refinement updates had >= "
-            f"{cfg.confirm_matches} matches (need {cfg.confirm_updates})",
-            **base,
-        )
-    if pos_std > cfg.max_position_std_m or rot_std > cfg.max_rotation_std_deg:
-        return _Track(False, f"pose too uncertain: std {pos_std * 100:.1f} cm, {rot_std:.1f} deg", **base)
-    tilt = rest_tilt_deg(G_WO[:3, :3])
-    if cfg.max_rest_tilt_deg is not None and tilt > cfg.max_rest_tilt_deg:
-        return _Track(
-            False,
-            f"pose not confirmed: tilted {tilt:.0f} deg from resting on a face "
-            f"(at most {cfg.max_rest_tilt_deg:g})",
-            **base,
-        )
-    check = ""
-    if cfg.pose_check is not None:  # does the pose explain the last frame? (lab.search.pose_check)
-        pc = check_pose(f, corr, db, ekf.estimate.G_CO, camera, cfg.pose_check, roi)
-        if not pc.confirmed:
-            return _Track(False, f"pose not confirmed: {pc.reason}", **base)
-        check = f"; {pc.reason}"
-    return _Track(
-        True,
-        f"found: {confirmed} confirming updates, std {pos_std * 100:.2f} cm, {rot_std:.2f} deg{check}",
-        **base,
-    )
-
-
-@dataclass(frozen=True)
-class _Track:
-    found: bool
-    reason: str
-    estimate: PoseEstimate
-    frame: StereoFrame
-    n_inliers: int
-    position_std_m: float
-    rotation_std_deg: float
-    G_WO: np.ndarray

@@ -65,13 +65,17 @@ from lab.errors import ConfigError
 from lab.navigation.grid import GridSpec
 
 __all__ = [
+    "ColourPeakDetection",
     "DetectionModel",
+    "LocalSearchDetection",
     "ProbabilityMap",
     "bayes_update",
+    "cells_within",
     "constant_beta_field",
     "detection_likelihood",
     "growing_beta_field",
     "map_peaks",
+    "observe",
     "region_prior",
     "uniform_prior",
     "update",
@@ -81,21 +85,65 @@ __all__ = [
 
 @dataclass(frozen=True)
 class DetectionModel:
-    """Error probabilities of a detector, Eq. (2).
+    """Error probabilities of a detector, Eq. (2), and how far one detection reaches.
+
+    The local search's detector has a constant ``beta`` and answers for a neighbourhood of
+    ``neighbour_radius_m``; the global search's colour peaks have a variable beta that grows with the
+    distance from the measured cell every ``growth_m`` metres (:func:`growing_beta_field`), floored at
+    ``beta``.
 
     Attributes
     ----------
     alpha : float
         False alarm: ``P(y_uv = 1 | object in another cell)``.
     beta : float
-        Missed detection: ``P(y_uv = 0 | object in c_uv)``.
+        Missed detection: ``P(y_uv = 0 | object in c_uv)``. With ``growth_m`` (a colour peak of
+        strength ``P'_n``): the smallest missed-detection probability at the peak's cell, ``beta_0 =
+        max(beta, 1 - P'_n)`` (a peak never claims certainty).
+    neighbour_radius_m : float [m]
+        A detection is one of the measured cell *and* of every cell whose centre lies within this
+        distance of the measured cell's (one Bayes update per cell, the measured cell first); 0: the
+        measured cell alone.
+    growth_m : float or None [m]
+        The growth length ``lambda`` of the variable beta; None: the constant beta of Eq. (2).
     """
 
     alpha: float
     beta: float
+    neighbour_radius_m: float = 0.0
+    growth_m: float | None = None
 
     def __post_init__(self):
         _check_alpha_beta(self.alpha, self.beta)
+        if not self.neighbour_radius_m >= 0:
+            raise ConfigError(f"neighbour_radius_m must be >= 0 m, got {self.neighbour_radius_m!r}")
+        if self.growth_m is not None and not (math.isfinite(self.growth_m) and self.growth_m > 0):
+            raise ConfigError(f"growth_m must be a finite number > 0 m or None, got {self.growth_m!r}")
+
+
+@dataclass(frozen=True)
+class ColourPeakDetection:
+    """A global search's colour peak of strength ``P'_n`` projected into ``cell``: a positive detection
+    (``y = 1``) with the growing beta of ``model`` (:func:`update_global`)."""
+
+    cell: tuple[int, int]
+    strength: float
+    model: DetectionModel
+
+
+@dataclass(frozen=True)
+class LocalSearchDetection:
+    """A local search facing ``cell``: ``y = 0`` searched and not found, ``y = 1`` found; with the
+    constant ``alpha``, ``beta`` of ``model``, for ``cell`` and its neighbours within
+    ``model.neighbour_radius_m`` (:meth:`cells`)."""
+
+    cell: tuple[int, int]
+    y: int
+    model: DetectionModel
+
+    def cells(self, spec: GridSpec) -> list[tuple[int, int]]:
+        """The cells this detection measures (:func:`cells_within`)."""
+        return cells_within(spec, self.cell, self.model.neighbour_radius_m)
 
 
 def _check_alpha_beta(alpha: float, beta: float) -> None:
@@ -275,6 +323,26 @@ def update_global(
     return bayes_update(P, detection_likelihood(1, B))
 
 
+def cells_within(spec: GridSpec, cell, radius_m: float) -> list[tuple[int, int]]:
+    """The cell first, then the cells whose centres lie within ``radius_m`` [m] of its centre (C order)."""
+    X, Y = spec.cell_centers()
+    cx, cy = spec.cell_to_world(*cell)
+    near = np.argwhere(np.hypot(X - cx, Y - cy) <= radius_m + 1e-9)
+    return [tuple(cell)] + [(int(i), int(j)) for i, j in near if (i, j) != tuple(cell)]
+
+
+def observe(P: np.ndarray, spec: GridSpec, detection) -> np.ndarray:
+    """The map ``P`` after one detection (a new array); see :meth:`ProbabilityMap.observe`."""
+    m = detection.model
+    if isinstance(detection, ColourPeakDetection):
+        return update_global(P, spec, detection.cell, detection.strength, m.alpha, m.growth_m, m.beta)
+    if isinstance(detection, LocalSearchDetection):
+        for c in detection.cells(spec):
+            P = update(P, c, detection.y, m.alpha, m.beta)
+        return P
+    raise ConfigError(f"not a detection the map knows: {type(detection).__name__}")
+
+
 def map_peaks(P: np.ndarray, n: int | None = None) -> list[tuple[int, int]]:
     """Local maxima of the map (cells at least as probable as their 8 neighbours and above the
     smallest value), most probable first: the places a search would visit, in order.
@@ -357,10 +425,24 @@ class ProbabilityMap:
         return ProbabilityMap(self.spec, self.P.copy())
 
     # -- writing ---------------------------------------------------------------------------------
-    def update(self, cell, y: int, alpha: float, beta: float) -> None:
-        """Eqs. (1)-(3) with constant ``alpha``, ``beta`` (:func:`update`)."""
-        self.P = update(self.P, cell, y, alpha, beta)
+    def observe(self, detection: ColourPeakDetection | LocalSearchDetection) -> None:
+        r"""Update the map with one detection of either search: Eq. (1) with the denominator Eq. (3),
 
-    def update_global(self, cell, P_n: float, alpha: float, growth_m: float, beta_min: float = 0.1) -> None:
-        """A colour peak's positive detection with the growing beta (:func:`update_global`)."""
-        self.P = update_global(self.P, self.spec, cell, P_n, alpha, growth_m, beta_min)
+        .. math::
+
+            P(h_{ij} = 1 \mid Y_{1:k}) = \frac{P(y_{uv} \mid h_{ij} = 1)\; P(h_{ij} = 1 \mid Y_{1:k-1})}
+                {\sum_{m,n} P(y_{uv} \mid h_{mn} = 1)\; P(h_{mn} = 1 \mid Y_{1:k-1})}
+
+        and the detection model of Eq. (2), ``P(y_uv = 0 | h_ij = 1) = B_ij``,
+        ``P(y_uv = 1 | h_ij = 1) = 1 - B_ij``, with the beta field ``B`` of the detection's
+        :class:`DetectionModel`:
+
+        * a :class:`LocalSearchDetection` ``y`` of cell ``(u, v)``: ``B_uv = beta`` and ``B_ij = 1 -
+          alpha`` on every other cell (:func:`constant_beta_field`); one such update for the cell and
+          then for each of its neighbours within ``neighbour_radius_m`` (:meth:`LocalSearchDetection.cells`);
+        * a :class:`ColourPeakDetection` of strength ``P'_n`` in cell ``(u, v)``: ``y = 1`` with
+          ``B_ij = min(1 - alpha, beta_0 e^{d_ij / lambda})``, ``beta_0 = max(beta, 1 - P'_n)`` and
+          ``lambda = growth_m`` (:func:`update_global`; a peak no stronger than a false alarm changes
+          nothing).
+        """
+        self.P = observe(self.P, self.spec, detection)

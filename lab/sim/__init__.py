@@ -2,7 +2,8 @@
 
 ``SimWorld`` loads a scene file (``worlds/*.toml``) into its own headless PyBullet client and renders
 stereo views; ``SimRobot`` is the simulated robot behind the :class:`lab.robot.Robot` interface; ground
-truth is reached only through ``SimWorld.truth``.
+truth, for tests and scoring only, is reached through the read-only views ``SimWorld.truth`` and
+``SimRobot.truth`` (which the world's reads).
 """
 
 from lab.scene import Scene, list_worlds, load_scene

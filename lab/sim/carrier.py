@@ -42,9 +42,9 @@ class Carrier:
             pybullet.GEOM_CYLINDER, radius=self.RADIUS, length=self.HEIGHT, rgbaColor=(0.15, 0.15, 0.18, 1)
         )
         self.base_id = pb.createMultiBody(0, base_col, base_vis, (pose.x, pose.y, self.HEIGHT / 2))
-        self.box_id = world._textured_box(model.size, model.atlas, "atlas")
-        world._register(f"{name}/base", self.base_id)
-        world._register(name, self.box_id)
+        self.box_id = world.create_textured_box(model.size, model.atlas, "atlas")
+        world.register(f"{name}/base", self.base_id)
+        world.register(name, self.box_id)
         self._place()
 
     def set_velocity(self, v: float, omega: float) -> None:

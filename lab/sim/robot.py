@@ -37,7 +37,7 @@ from lab.robot import (
 from lab.sim.sensing import EpisodeSensing, SensingProfile, backlash, sensing_profile
 from lab.sim.world import SimWorld, pybullet
 
-__all__ = ["OdometryNoise", "SimRobot"]
+__all__ = ["OdometryNoise", "RobotTruth", "SimRobot"]
 
 
 @dataclass(frozen=True)
@@ -61,6 +61,36 @@ class OdometryNoise:
     @classmethod
     def none(cls) -> OdometryNoise:
         return cls(0.0, 0.0, 0.0)
+
+
+class RobotTruth:
+    """Ground truth of a :class:`SimRobot`: for tests and scoring only, never for the robot's algorithms.
+
+    A read-only view (``robot.truth``); :class:`lab.sim.truth.Truth` (``world.truth``) reads it.
+    """
+
+    __slots__ = ("_robot",)
+
+    def __init__(self, robot: SimRobot):
+        self._robot = robot
+
+    def pose(self) -> Pose2D:
+        """The base's true pose in the world."""
+        return self._robot._true_pose
+
+    def G_WC(self) -> np.ndarray:
+        """The left camera's true pose in the world: the true base, the pan-tilt axes' true angles."""
+        return self._robot._true_G_WC()
+
+    @property
+    def sensing(self) -> EpisodeSensing:
+        """The sensing draws of this episode (the renders' cameras, light, odometry errors, zeros)."""
+        return self._robot._episode
+
+    @property
+    def collisions(self) -> int:
+        """Number of times the base ran into something."""
+        return self._robot._collisions
 
 
 class SimRobot(Robot):
@@ -165,7 +195,7 @@ class SimRobot(Robot):
         )
         self._mast = pb.createMultiBody(0, -1, mvis, (0, 0, 0))
         self._mast_h = mast_h
-        self.world._register("robot", self._body)
+        self.world.register("robot", self._body)
         self._place(self._true_pose)
 
     def _place(self, pose: Pose2D):
@@ -180,10 +210,16 @@ class SimRobot(Robot):
     def _collides(self, margin: float = 0.0) -> bool:
         """Whether the base's footprint touches (or comes within ``margin`` [m] of) any other body."""
         pb = self.world.p
-        skip = (self._body, self.world._ids.get("floor"))
+        skip = (self._body, self.world.body_ids.get("floor"))
         # every registered body (carriers' bases included), also those added after the robot
-        others = [b for b in self.world._ids.values() if b not in skip]
+        others = [b for b in self.world.body_ids.values() if b not in skip]
         return any(pb.getClosestPoints(self._body, b, margin) for b in others)
+
+    @property
+    def truth(self) -> RobotTruth:
+        """Ground truth (true pose, camera pose, sensing draws): for tests and scoring only, never for
+        the robot's algorithms, which see only the :class:`lab.robot.Robot` interface."""
+        return RobotTruth(self)
 
     # --- Robot interface ------------------------------------------------------------------------
     @property

@@ -244,12 +244,11 @@ class OdometryErrors:
 
     Borenstein and Feng's UMBmark splits them into systematic errors, drawn once per episode here
     because they do not average out, and non-systematic ones (floor, slip). The defaults give a median
-    position error of about 3 % of the distance (3.3 % over the test's 1500 episodes) after 30 m: three
-    laps of a 2.5 m square, turning in place at the corners, UMBmark's test path
-    (``tests/test_sensing.py``). 3 % is the middle of the 2-5 % the issue asks for and of the 1-5 % a
-    Create 2 drifts on a classroom floor; the 1 % radius and track errors are the issue's figures, the
-    ratio, noise and slip were set to reach it, with the systematic errors dominating as UMBmark finds
-    (alone they give 3.3 %, the random wheel error alone 0.6 %).
+    position error of about 3 % of the distance after 30 m: three laps of a 2.5 m square, turning in
+    place at the corners, UMBmark's test path (``tests/test_sensing.py``). 3 % is the middle of the 2-5 %
+    the issue asks for and of the 1-5 % a Create 2 drifts on a classroom floor; the 1 % radius and track
+    errors are the issue's figures, the ratio, noise and slip were set to reach it, with the systematic
+    errors dominating as UMBmark finds. How it was chosen: docs/tuning/odometry-errors.md.
 
     Attributes
     ----------

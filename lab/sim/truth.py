@@ -50,14 +50,14 @@ class Truth:
         r = self._w.robot
         if r is None:
             raise ConfigError("this world has no robot")
-        return r._true_pose
+        return r.truth.pose()
 
     def G_WC(self) -> np.ndarray:
         """True pose of the robot's left camera frame C in the world (the pan-tilt axes' true angles)."""
         r = self._w.robot
         if r is None:
             raise ConfigError("this world has no robot")
-        return r._true_G_WC()
+        return r.truth.G_WC()
 
     @property
     def sensing(self):
@@ -66,12 +66,12 @@ class Truth:
         r = self._w.robot
         if r is None:
             raise ConfigError("this world has no robot")
-        return r._episode
+        return r.truth.sensing
 
     @property
     def collisions(self) -> int:
         r = self._w.robot
-        return 0 if r is None else r._collisions
+        return 0 if r is None else r.truth.collisions
 
     def shapes(self) -> list[BodyShape]:
         """Every body of the world as simple solids with their true poses (for display only: the
@@ -130,8 +130,9 @@ class Truth:
         h = 0.5 * r
         eps = 1e-6
         occ = np.zeros((nx, ny), dtype=bool)
-        skip = {w._ids[n] for n in exclude if n in w._ids}
-        for body in sorted(set(w._ids.values()) - skip):
+        ids = w.body_ids
+        skip = {ids[n] for n in exclude if n in ids}
+        for body in sorted(set(ids.values()) - skip):
             pos, q = w.p.getBasePositionAndOrientation(body)
             R = quat_xyzw_to_R(q)
             for shape in w.p.getCollisionShapeData(body, -1):

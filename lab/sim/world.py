@@ -18,7 +18,9 @@ from __future__ import annotations
 import math
 import os
 import pkgutil
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import cv2
 import numpy as np
@@ -128,6 +130,7 @@ class SimWorld:
         self.t = 0.0
         self._ids: dict[str, int] = {}
         self._names: dict[int, str] = {}
+        self._ids_view = MappingProxyType(self._ids)
         self.carriers: dict[str, Carrier] = {}
         self.robot = None  # set by SimRobot
         self.truth = Truth(self)
@@ -136,7 +139,12 @@ class SimWorld:
         self._build()
 
     # --- construction ---------------------------------------------------------------------------
-    def _register(self, name: str, body_id: int) -> None:
+    def register(self, name: str, body_id: int) -> None:
+        """Give the PyBullet body ``body_id`` the unique ``name`` (``body_id(name)``, ``body_name(id)``).
+
+        Every registered body counts for the robot's collision check and the true occupancy; a name
+        used twice is a ConfigError.
+        """
         if name in self._ids:
             raise ConfigError(f"a body named {name!r} already exists in world {self.scene.name!r}")
         self._ids[name] = body_id
@@ -157,7 +165,20 @@ class SimWorld:
     def names(self) -> list[str]:
         return sorted(self._ids)
 
-    def _textured_box(self, size, texture, uv_mode, tile_m=1.0, mass=0.0, pos=(0, 0, 0), yaw=0.0) -> int:
+    @property
+    def body_ids(self) -> Mapping[str, int]:
+        """Every registered body's PyBullet id by name, in the order registered (a read-only view)."""
+        return self._ids_view
+
+    def create_textured_box(
+        self, size, texture, uv_mode, tile_m=1.0, mass=0.0, pos=(0, 0, 0), yaw=0.0
+    ) -> int:
+        """Create a box body with a textured mesh (not registered: see :meth:`register`); its PyBullet id.
+
+        ``size`` is (sx, sy, sz) [m]; ``texture`` an image file; ``uv_mode`` and ``tile_m`` say how the
+        texture is laid on the faces (:func:`lab.sim.assets.box_mesh`); ``pos`` is its centre and
+        ``yaw`` [rad] its turn about z.
+        """
         obj = box_mesh(size, texture, uv_mode, tile_m)
         vis = self.p.createVisualShape(pybullet.GEOM_MESH, fileName=str(obj), meshScale=(1, 1, 1))
         col = self.p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[0.5 * s for s in size])
@@ -171,7 +192,7 @@ class SimWorld:
 
     def _box(self, size, b: BodySpec | None, pos, yaw, uv="tiled", tile_m=0.5) -> int:
         if b is not None and b.texture is not None:
-            return self._textured_box(size, b.texture, uv, tile_m, pos=pos, yaw=yaw)
+            return self.create_textured_box(size, b.texture, uv, tile_m, pos=pos, yaw=yaw)
         return self._plain_box(size, b.color if b else (0.7, 0.7, 0.7), pos, yaw)
 
     def _build(self):
@@ -181,11 +202,11 @@ class SimWorld:
             floor_tex = room.floor_texture
             floor = (sx + 2 * room.wall_thickness, sy + 2 * room.wall_thickness, 0.02)
             fid = (
-                self._textured_box(floor, floor_tex, "tiled", room.tile_m, pos=(0, 0, -0.01))
+                self.create_textured_box(floor, floor_tex, "tiled", room.tile_m, pos=(0, 0, -0.01))
                 if floor_tex
                 else self._plain_box(floor, (0.6, 0.6, 0.6), (0, 0, -0.01))
             )
-            self._register("floor", fid)
+            self.register("floor", fid)
             h, t = room.wall_height, room.wall_thickness
             walls = {
                 "wall_north": ((sx + 2 * t, t, h), (0, sy / 2 + t / 2, h / 2)),
@@ -195,19 +216,21 @@ class SimWorld:
             }
             for name, (size, pos) in walls.items():
                 wid = (
-                    self._textured_box(size, room.wall_texture, "tiled", room.tile_m, pos=pos)
+                    self.create_textured_box(size, room.wall_texture, "tiled", room.tile_m, pos=pos)
                     if room.wall_texture
                     else self._plain_box(size, (0.85, 0.85, 0.8), pos)
                 )
-                self._register(name, wid)
+                self.register(name, wid)
         else:
             # a bare floor, 12 x 12 m, for scenes without a room (the training ring)
             from lab.paths import worlds_dir
 
             tex = worlds_dir() / "textures" / "floor.png"
-            self._register("floor", self._textured_box((12, 12, 0.02), tex, "tiled", 1.0, pos=(0, 0, -0.01)))
+            self.register(
+                "floor", self.create_textured_box((12, 12, 0.02), tex, "tiled", 1.0, pos=(0, 0, -0.01))
+            )
         for b in self.scene.bodies:
-            self._register(b.name, self._build_body(b))
+            self.register(b.name, self._build_body(b))
 
     def _build_body(self, b: BodySpec) -> int:
         x, y, z, _ = b.pose
@@ -221,9 +244,9 @@ class SimWorld:
             col = self.p.createCollisionShape(pybullet.GEOM_CYLINDER, radius=r, height=h)
             return self.p.createMultiBody(0, col, vis, (cx, cy, cz))
         if b.shape == "textured_box":
-            return self._textured_box(b.size, b.atlas, "atlas", pos=(cx, cy, cz), yaw=yaw)
+            return self.create_textured_box(b.size, b.atlas, "atlas", pos=(cx, cy, cz), yaw=yaw)
         if b.shape == "poster":
-            return self._textured_box(b.size, b.texture, "stretch", pos=(cx, cy, cz), yaw=yaw)
+            return self.create_textured_box(b.size, b.texture, "stretch", pos=(cx, cy, cz), yaw=yaw)
         if b.shape == "table":
             return self._table(b)
         return self._box(b.size, b, (cx, cy, cz), yaw)  # box, shelf
@@ -240,7 +263,7 @@ class SimWorld:
         for i, (ax, ay) in enumerate(((1, 1), (1, -1), (-1, 1), (-1, -1))):
             off = R @ np.array([ax * (sx / 2 - leg), ay * (sy / 2 - leg), 0.0])
             lid = self._box((leg, leg, legs_h), b, (x + off[0], y + off[1], z + legs_h / 2), b.yaw)
-            self._register(f"{b.name}/leg{i}", lid)
+            self.register(f"{b.name}/leg{i}", lid)
         return top
 
     def add_carrier(
@@ -294,10 +317,10 @@ class SimWorld:
         if texture is not None:
             from lab.paths import worlds_dir
 
-            bid = self._textured_box(size, worlds_dir() / texture, "tiled", 0.5, pos=pos, yaw=yaw)
+            bid = self.create_textured_box(size, worlds_dir() / texture, "tiled", 0.5, pos=pos, yaw=yaw)
         else:
             bid = self._plain_box(size, color, pos, yaw)
-        self._register(name, bid)
+        self.register(name, bid)
         return bid
 
     def set_body_pose(self, name: str, G_W: np.ndarray) -> None:
@@ -350,10 +373,7 @@ class SimWorld:
         """
         s = self.settings.supersample if supersample is None else supersample
         W, H = camera.width * s, camera.height * s
-        eye = G_WC[:3, 3]
-        fwd = G_WC[:3, 2]
-        up = -G_WC[:3, 1]
-        view = self.p.computeViewMatrix(eye.tolist(), (eye + fwd).tolist(), up.tolist())
+        view = self._view_matrix(G_WC)
         proj = self.projection_matrix(camera, s)
         flags = 0 if want_seg else pybullet.ER_NO_SEGMENTATION_MASK
         renderer = (
@@ -382,6 +402,21 @@ class SimWorld:
             self.n_renders_reused += 1
             self._renders[key] = self._renders.pop(key)  # most recent last
             return tuple(None if a is None else a.copy() for a in kept)
+        out = self._render_images(camera, s, view, proj, flags, renderer, light, want_depth, want_seg)
+        self._keep_render(key, out)
+        return out
+
+    def _view_matrix(self, G_WC: np.ndarray) -> list[float]:
+        """OpenGL view matrix (16 floats) of the optical frame C at ``G_WC`` (z forward, y down)."""
+        eye = G_WC[:3, 3]
+        fwd = G_WC[:3, 2]
+        up = -G_WC[:3, 1]
+        return self.p.computeViewMatrix(eye.tolist(), (eye + fwd).tolist(), up.tolist())
+
+    def _render_images(self, camera, s, view, proj, flags, renderer, light, want_depth, want_seg):
+        """One call of the renderer at ``s`` times ``camera``'s size: ``(rgb, depth, seg)`` as
+        :meth:`render` returns them (rgb downsampled to the camera's size)."""
+        W, H = camera.width * s, camera.height * s
         _, _, rgba, depth_buf, seg = self.p.getCameraImage(
             W,
             H,
@@ -403,11 +438,13 @@ class SimWorld:
         segm = np.asarray(seg, dtype=np.int32).reshape(H, W) if want_seg else None
         if segm is not None:
             segm = np.where(segm >= 0, segm & ((1 << 24) - 1), -1)
-        out = (np.ascontiguousarray(rgb), depth, segm)
+        return (np.ascontiguousarray(rgb), depth, segm)
+
+    def _keep_render(self, key: tuple, out: tuple) -> None:
+        """Keep copies of a render's images under ``key``, dropping the oldest beyond RENDERS_KEPT."""
         self._renders[key] = tuple(None if a is None else a.copy() for a in out)
         while len(self._renders) > self.RENDERS_KEPT:
             self._renders.pop(next(iter(self._renders)))  # the oldest
-        return out
 
     #: Renders kept for a view that did not change (a stereo pair is two).
     RENDERS_KEPT = 2

@@ -40,6 +40,8 @@ __all__ = [
     "TrainingParams",
     "database_path",
     "get_database",
+    "merge_view_features",
+    "object_world",
     "train_database",
     "trainable_objects",
 ]
@@ -145,7 +147,7 @@ def _asset_hash(obj: _Trainable, params: TrainingParams) -> str:
     return h.hexdigest()[:32]
 
 
-def _object_world(obj: _Trainable, supersample: int):
+def object_world(obj: _Trainable, supersample: int):
     """A bare-floor world with the object alone, its centre at (0, 0, 0.49): returns (world, G_WO)."""
     from lab.sim import RenderSettings, SimWorld  # the simulator only when rendering: a cached
     # database loads without it
@@ -221,7 +223,7 @@ def train_database(
     seen: list[set[int]] = []
     counts: list[int] = []
     hist = None
-    world, G_WO = _object_world(obj, params.supersample)
+    world, G_WO = object_world(obj, params.supersample)
     it = range(len(views))
     if progress:
         from tqdm import tqdm
@@ -248,7 +250,7 @@ def train_database(
             interior = cv2.erode(silhouette, np.ones((2 * params.edge_px + 1,) * 2, np.uint8))
             u = np.clip(np.round(f.uv).astype(int), 0, [cam.width - 1, cam.height - 1])
             keep = _on_surface(p_O, obj, params.bounds_margin) & (interior[u[:, 1], u[:, 0]] > 0)
-            _merge(points, descs, seen, counts, p_O[keep], f.descriptors[keep], v, params)
+            merge_view_features(points, descs, seen, counts, p_O[keep], f.descriptors[keep], v, params)
     V = len(views)
     N = len(points)
     seen_from = np.zeros((N, V), bool)
@@ -276,8 +278,12 @@ def train_database(
     )
 
 
-def _merge(points, descs, seen, counts, p_O, d, view, params: TrainingParams) -> None:
-    """Merge one view's features into the growing database (a running mean of positions)."""
+def merge_view_features(points, descs, seen, counts, p_O, d, view, params: TrainingParams) -> None:
+    """Merge one view's features into the growing database (a running mean of positions).
+
+    ``points``, ``descs``, ``seen`` and ``counts`` are the database's growing lists (changed in place);
+    ``p_O`` and ``d`` the view's points and descriptors, ``view`` its index among the views.
+    """
     n_before = len(points)  # match against the database as it was before this view
     if n_before:
         tree = cKDTree(np.asarray(points))

@@ -39,11 +39,11 @@ import numpy as np
 
 from lab.errors import AssetError, ConfigError
 from lab.geometry import Rz, se3, se3_inv, transform_points
-from lab.navigation.landmarks import Landmark, LandmarkMap, inward_normal
+from lab.localization import Landmark, LandmarkMap, inward_normal
 from lab.paths import cache_dir
 from lab.robot import SIM_CAMERA, StereoCamera
 from lab.scene import BodySpec, Scene, load_scene
-from lab.training.databases import TrainingParams, _merge
+from lab.training.databases import TrainingParams, merge_view_features
 from lab.vision.database import FORMAT_VERSION, FeatureDatabase, load_database, save_database
 from lab.vision.stereo import StereoParams, sift, stereo_features
 
@@ -262,7 +262,7 @@ def train_landmark_database(
                 np.abs(np.delete(p_L, thin, axis=1)) <= np.delete(half, thin) - params.face_margin_m, axis=1
             )
             keep = on_face & inside
-            _merge(points, descs, seen, counts, p_L[keep], f.descriptors[keep], v, tp)
+            merge_view_features(points, descs, seen, counts, p_L[keep], f.descriptors[keep], v, tp)
     N, V = len(points), len(views)
     seen_from = np.zeros((N, V), bool)
     for i, s in enumerate(seen):

@@ -44,7 +44,7 @@ from lab.identification.tables import (
 from lab.paths import cache_dir
 from lab.robot import SIM_CAMERA, StereoCamera
 from lab.scene import load_scene
-from lab.training.databases import _object_world, get_database, trainable_objects
+from lab.training.databases import get_database, object_world, trainable_objects
 from lab.vision import FeatureDatabase
 from lab.vision.stereo import StereoParams, sift, stereo_features
 
@@ -218,7 +218,7 @@ def build_model_tables(
     det = sift(StereoParams().n_features, StereoParams().contrast_threshold)
     Sigma_gate = params.gate_covariance()
     name_seed = zlib.crc32(true_model.encode())
-    world, G_WO = _object_world(trainable_objects()[true_model], params.supersample)
+    world, G_WO = object_world(trainable_objects()[true_model], params.supersample)
     centre = G_WO[:3, 3]
     it = _progress([(v, t) for v in rows for t in range(params.repeats)], f"tables {true_model}", progress)
 

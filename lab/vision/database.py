@@ -27,12 +27,9 @@ FORMAT_VERSION = 1
 
 #: Standard deviation [m] of each axis of a trained database point's own error (the training's
 #: stereo error, the same in every frame): the EKF's :class:`lab.estimation.ModelUncertainty`.
-#: Chosen on the NEES of the static-box scenes (``benchmarks/bench_nees.py``, tuning seeds 0-7,
-#: ``realistic``: NEES in its band on 86.1 % of frames without it, 86.8 / 88.0 / 86.3 % with 1.5 / 2 /
-#: 2.5 mm). The trained boxes' points lie 2.4 mm (median) off their faces, 8.8 mm at the 90th
-#: percentile: a heavier tail than the filter models. With the calibration error as the stereo pair's
-#: own (focal lengths and baseline, ``lab.estimation.ekf``) 2 mm stays at the top on the same seeds
-#: (89.8 / 90.5 / 91.5 / 91.7 / 89.8 % at 1 / 1.5 / 2 / 2.5 / 3 mm).
+#: Chosen where the static-box scenes' NEES lies in its band most often; the trained boxes' points lie
+#: 2.4 mm (median) off their faces, 8.8 mm at the 90th percentile: a heavier tail than the filter
+#: models. How it was chosen: docs/tuning/database-point-std.md.
 POINT_STD_M = 0.002
 
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.vision.database import FeatureDatabase
-from lab.vision.stereo import Features3D, _small_integers
+from lab.vision.stereo import Features3D, small_integer_descriptors
 
 __all__ = ["Correspondences", "JointIndex", "Matcher"]
 
@@ -97,7 +97,8 @@ def _k_smallest(d2: np.ndarray, k: int):
     equal (a database stores some descriptors twice, and SIFT's integer-valued descriptors give integer
     squared distances, so ties are common: ~20 % of the rows on the box databases), the order among
     them is ``argpartition``'s, which no other method reproduces: those rows are recomputed by it, row
-    for row as before. So the result equals the old one, bit for bit (``tests/test_vision_matching.py``).
+    for row. So the result equals :func:`_k_smallest_by_partition`'s, bit for bit
+    (``tests/test_vision_matching.py``).
     """
     n, N = d2.shape
     if not (k < N and np.isfinite(d2).all()):
@@ -158,7 +159,7 @@ class JointIndex:
             raise ConfigError(f"k must be a positive integer, got {k}")
         self.k = [min(int(k), len(db)) for db in self.dbs]
         D = [np.ascontiguousarray(db.descriptors, dtype=np.float32) for db in self.dbs]
-        self.exact = all(_small_integers(d) for d in D)
+        self.exact = all(small_integer_descriptors(d) for d in D)
         if self.exact:
             stacked = np.concatenate(D) if sum(len(d) for d in D) else np.zeros((0, 128), np.float32)
             self.descriptors, inverse = np.unique(stacked, axis=0, return_inverse=True)
@@ -185,7 +186,7 @@ class JointIndex:
         if c is not None and c[0] is descriptors:
             return c[1]
         q = np.ascontiguousarray(descriptors, dtype=np.float32)
-        if not self.exact or not _small_integers(q):
+        if not self.exact or not small_integer_descriptors(q):
             out = [
                 Matcher(db, method="brute", k=k).neighbours(q) for db, k in zip(self.dbs, self.k, strict=True)
             ]
@@ -274,7 +275,7 @@ class Matcher:
             return np.linalg.norm(self._D[idx] - self._D[idx[:, :1]], axis=2) < self.alias_distance
         if self._alias_table is None:
             D = self._D
-            if _small_integers(D):
+            if small_integer_descriptors(D):
                 sq = np.einsum("ij,ij->i", D, D)
                 d2 = np.maximum(sq[:, None] + sq[None, :] - 2.0 * D @ D.T, 0.0)
                 self._alias_table = np.sqrt(d2) < self.alias_distance

@@ -47,13 +47,10 @@ __all__ = [
 
 #: Pixels of image kept around a region of interest when SIFT runs on it alone (the default of
 #: :attr:`StereoParams.roi_pad_px`): a keypoint's descriptor window at the first octaves (and the blur
-#: before it) reaches beyond the region. Measured on the 84 frames of an identification episode
-#: (model 2, seed 0, realistic profile; the agent's regions): of the keypoints found inside a region,
-#: 71.5 / 74.9 / 82.6 / 92.0 / 95.3 % are the full image's (same position, size and descriptor) with
-#: 0 / 4 / 8 / 16 / 32 px; those that differ lie near the region's border, which the region's own
-#: margin keeps off the tracked box. On 8 tuning episodes (models 0-3, seeds 1 and 2) 8 px and 16 px gave
-#: the same model probabilities (to 1e-3) and filter positions (to 0.1 mm) frame for frame, and 8 px
-#: made the perception step 12 % faster (SIFT's cost grows with the crop's area).
+#: before it) reaches beyond the region. Keypoints that differ from the full image's lie near the
+#: region's border, which the region's own margin keeps off the tracked box; 8 px gave the same model
+#: probabilities and filter positions as 16 px and a faster perception step (SIFT's cost grows with the
+#: crop's area). How it was chosen: docs/tuning/roi-pad.md.
 ROI_PAD_PX = 8
 
 
@@ -220,7 +217,7 @@ def _epipolar_matches(kp_l, des_l, kp_r, des_r, params: StereoParams):
     """
     if len(kp_l) == 0 or len(kp_r) == 0:
         return np.zeros(0, int), np.zeros(0, int)
-    if not _small_integers(des_l) or not _small_integers(des_r):
+    if not small_integer_descriptors(des_l) or not small_integer_descriptors(des_r):
         return _epipolar_matches_dense(kp_l, des_l, kp_r, des_r, params)
     ul, ur = _uv(kp_l), _uv(kp_r)
     n_l = len(ul)
@@ -271,9 +268,11 @@ def _epipolar_matches(kp_l, des_l, kp_r, des_r, params: StereoParams):
     return left[ok], j[ok]
 
 
-def _small_integers(des) -> bool:
-    """All descriptor entries are integers within [0, 255] (OpenCV's SIFT), so that their squared
-    distances are exact in float32."""
+def small_integer_descriptors(des) -> bool:
+    """Are all descriptor entries integers within [0, 255] (OpenCV's SIFT)? Then their squared
+    distances are integers below 2^24, exact in float32 whichever way they are summed, and the fast
+    exact matchers (the epipolar matching here, :class:`lab.vision.matching.JointIndex`) give the dense
+    computation's result; other descriptors take the dense path."""
     des = np.asarray(des)
     return bool(des.size == 0 or (des.min() >= 0 and des.max() <= 255 and np.array_equal(des, np.rint(des))))
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lab.navigation.landmarks import LandmarkMap
+from lab.localization import LandmarkMap
 
 __all__ = ["PATH_STYLES", "draw_track", "drive_figure", "trajectories_axes"]
 

@@ -144,6 +144,11 @@ class Create2Emulator(PtyDevice):
         with self._lock:
             return self.right_mm_s, self.left_mm_s
 
+    def true_pose(self) -> tuple[float, float, float]:
+        """The base's true pose (x [m], y [m], theta [rad]) in its start frame, read under the lock."""
+        with self._lock:
+            return self.x, self.y, self.theta
+
     def drives(self) -> list[DriveRecord]:
         with self._lock:
             return list(self.drive_log)
@@ -158,9 +163,7 @@ class Create2Emulator(PtyDevice):
 
     def opcode_names(self, since: float = -math.inf) -> list[str]:
         with self._lock:
-            return [
-                Op(o).name if o in Op._value2member_map_ else str(o) for t, o, _ in self.opcodes if t >= since
-            ]
+            return [_op_name(o) for t, o, _ in self.opcodes if t >= since]
 
     def encoder_counts(self) -> tuple[int, int]:
         """(left, right) as the robot reports them (16 bits)."""
@@ -349,3 +352,11 @@ class Create2Emulator(PtyDevice):
             self.x += v / w * (math.sin(th1) - math.sin(self.theta))
             self.y -= v / w * (math.cos(th1) - math.cos(self.theta))
             self.theta = math.atan2(math.sin(th1), math.cos(th1))
+
+
+def _op_name(o: int) -> str:
+    """An opcode's name (``"DRIVE_DIRECT"``), or its number for one :class:`Op` does not name."""
+    try:
+        return Op(o).name
+    except ValueError:
+        return str(o)

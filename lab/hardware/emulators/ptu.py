@@ -101,6 +101,12 @@ class PTUEmulator(PtyDevice):
         with self._lock:
             return {ax: int(round(v)) for ax, v in self.pos.items()}
 
+    def axis_positions(self) -> tuple[dict[str, float], dict[str, float]]:
+        """Copies of the axes' true positions [steps] and resolutions [arc-seconds per step], by axis
+        ``"P"``, ``"T"``, read together under the lock."""
+        with self._lock:
+            return dict(self.pos), dict(self.res)
+
     def command_names(self) -> list[str]:
         with self._lock:
             return [c for _, c in self.commands]

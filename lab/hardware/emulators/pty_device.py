@@ -71,6 +71,11 @@ class PtyDevice:
         return self.link or self._slave_name
 
     @property
+    def slave_name(self) -> str:
+        """The pty's device file (``/dev/pts/N``) the host opens; ``""`` before :meth:`start`."""
+        return self._slave_name
+
+    @property
     def rx_bytes(self) -> bytes:
         """Everything the host sent since start (or since :meth:`clear_log`)."""
         with self._lock:

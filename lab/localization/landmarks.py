@@ -3,7 +3,7 @@
 A landmark is a flat textured panel on a wall (the lab room's posters). Its frame L has its origin at
 the panel's centre and the room's yaw of the body (``docs/conventions.md``: z up); ``normal_W`` is the
 unit direction, in the floor plane, in which its printed face looks into the room. The localizer
-(:mod:`lab.navigation.localization`) needs, per landmark, ``G_WL`` and its feature database ``B_L``
+(:mod:`lab.localization`) needs, per landmark, ``G_WL`` and its feature database ``B_L``
 (3D SIFT features in L, trained like the objects' in :mod:`lab.training.landmarks`).
 
 This module is data only: the map is built from a scene file or a hardware landmark file by

@@ -1,0 +1,690 @@
+r"""The localizer: an EKF over the robot's planar pose, corrected by stereo landmark observations.
+
+An extended Kalman filter over the planar pose :math:`x = [x, y, \theta]^T` in the world W fuses the
+odometry's increments (prediction, :func:`~lab.localization.models.motion_model`; its noise grows with
+the distance driven and the angle turned, :meth:`LocalizerConfig.motion_noise`) with landmark
+observations (update, :func:`~lab.localization.models.measurement_model`; each observation's covariance
+is the fit's own plus a floor, :meth:`LocalizerConfig.observation_floor`).
+
+The filter never sees ground truth. Its equations, written as the code does::
+
+    predict:  x_bar = f(x, u)                           F = df/dx,  V = df/du
+              Sigma_bar = F Sigma F^T + V M(u) V^T
+    update:   nu = z - h(x_bar)   (angle wrapped)       H = dh/dx
+              S = H Sigma_bar H^T + Q
+              gate: nu^T S^-1 nu <= chi2_3(gate_prob), else the observation is rejected (an outlier)
+              K = Sigma_bar H^T S^-1
+              x = x_bar + K nu
+              iterated: x_i+1 = x_bar + K_i (z - h(x_i) - H_i (x_bar - x_i)),  H_i, K_i at x_i
+                        (from x_0 = x_bar, until it stops moving: Gauss-Newton to the posterior's mode)
+              Sigma = (I - K H) Sigma_bar (I - K H)^T + K Q K^T      (Joseph form: stays symmetric PSD)
+
+**The odometry's calibration** (``LocalizerConfig.odometry_calibration``, on by default): the largest
+odometry errors of a real base are systematic, the same on every turn (spin slip, the effective track
+width) and every metre (unequal wheels), so they add up linearly where the noise ``M(u)`` grows like a
+random walk. The state is then ``s = [x, y, theta, k, c]``: the pose, the turn scale ``k`` and the
+curvature bias ``c`` [rad/m], with ``theta' = theta + k dtheta + c dx``
+(:func:`~lab.localization.models.calibrated_motion_model`) and the same equations on the longer state
+(``H = [dh/dx, 0]``: a landmark sees the pose; a turn correlates the heading with ``k``, and the next
+update corrects both). ``x`` and ``Sigma`` stay the pose's mean and covariance.
+
+The update is iterated (``LocalizerConfig.update_iterations``) because one EKF step is linearised at the
+prior: after a long drive on realistic odometry the heading can be 15 deg off, and one step then left
+the estimate 15 cm from where a precise poster sighting put the robot, with a covariance claiming 2 cm
+(measured in search trials); relinearising at the new mean converges to the posterior's mode instead.
+
+This module holds one idea, the filter: its configuration (noise models, gate and thresholds), the
+estimate and update records it reports, the pose clone it can keep, and :class:`Localizer` itself.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lab.errors import ConfigError
+from lab.estimation.fit import RansacConfig, chi2_quantile
+from lab.geometry import Pose2D, wrap_angle
+from lab.localization.landmarks import Landmark
+from lab.localization.models import (
+    calibrated_motion_jacobians,
+    calibrated_motion_model,
+    measurement_jacobian,
+    measurement_model,
+    motion_jacobians,
+    motion_model,
+    pose_from_observation,
+)
+from lab.localization.modes import LocalizationMode
+
+__all__ = ["Localizer", "LocalizerConfig", "PlanarPoseEstimate", "UpdateRecord"]
+
+
+@dataclass(frozen=True)
+class LocalizerConfig:
+    """Noise models and thresholds of the localizer.
+
+    How each was chosen (the split, the evidence, the command): ``docs/tuning/localizer-*.md``, one file
+    per tuned quantity, named below.
+
+    Attributes
+    ----------
+    sigma_along_m_per_sqrt_m : float [m / sqrt(m)]
+        Odometry's distance error grows like a random walk in the distance driven ``d``:
+        ``var = sigma**2 * d`` along the motion ...
+    sigma_cross_m_per_sqrt_m : float [m / sqrt(m)]
+        ... and across it;
+    sigma_heading_rad_per_sqrt_m : float [rad / sqrt(m)]
+        heading error per distance (unequal wheels curve a straight drive);
+    sigma_heading_rad_per_sqrt_rad : float [rad / sqrt(rad)]
+        heading error per angle turned (track width error, wheel scrub). How they were chosen:
+        docs/tuning/localizer-motion-noise.md.
+    obs_sigma_m, obs_sigma_rel, obs_sigma_per_m, obs_sigma_rel_across, obs_sigma_rad : float
+        A floor under each landmark observation's covariance, added to the fit's own for the errors a
+        fit cannot see because they move every feature of a frame together (see
+        :meth:`observation_floor`): along the line of sight a constant [m], a share of the range [-]
+        (the baseline's and focal lengths' scale error) and a share of its square [1/m] (a disparity
+        bias: depth error ``Z^2 delta_d / (f B)``); across it the constant and a share of the range [-]
+        (the pan-tilt's pointing error); and the heading [rad]. The heading's floor is wide because a
+        poster's yaw comes from the depth differences across its face, and errors its features share
+        turn it further than the fit's covariance says (not traced; depth errors along the line of
+        sight, where a stereo point's own covariance is long, are the likely cause). How they were
+        chosen: docs/tuning/localizer-observation-floor.md and docs/tuning/localizer-heading-floor.md.
+    gate_prob : float
+        Observations whose innovation's Mahalanobis distance exceeds the chi-square(3) quantile are
+        rejected as outliers.
+    max_rejected_in_a_row, reject_inflation : int, float
+        Gate lock-out recovery: after this many rejected observations in a row the estimate, not the
+        landmarks, is the likelier culprit (an odometry bias the noise model does not cover, such as
+        wheel scrub in long turns), so the covariance is multiplied by ``reject_inflation`` and the
+        next observation can correct it.
+    recount_m, recount_rad : float [m], [rad]
+        A rejection counts towards that lock-out once per landmark until the robot has driven
+        ``recount_m`` or turned ``recount_rad`` since: a robot standing still that sees the same wrong
+        fit frame after frame (a local search's dozen views, a poster in the background of each) holds
+        one piece of evidence against its estimate, not a dozen, and counted frame by frame it could
+        trip the recovery (the covariance x 9) on its own. Rejections of different landmarks from one
+        place still count each (and after an inflation every landmark counts again: several landmarks
+        that all disagree with the estimate do move it). How it was chosen:
+        docs/tuning/localizer-recount-rule.md.
+    min_inliers : int
+        Fewest RANSAC inliers for a landmark observation.
+    min_face_in_image : float
+        Smallest share of the printed face that must project into the image, at the fitted pose, for a
+        fit to be used (:func:`face_share_in_image`). A fit from a patch of the face at the image's edge
+        rests on features from a small part of it, and its covariance can understate its error. How it
+        was chosen: docs/tuning/localizer-min-face-in-image.md.
+    max_range_m, min_facing : float
+        A landmark is looked for in a frame only within this range and when seen at most
+        ``acos(min_facing)`` off its face normal.
+    relocalize_sigma_m, relocalize_sigma_rad : float [m], [rad]
+        Active re-localization: the robot looks for a landmark when the position standard deviation
+        (the larger axis of the covariance ellipse) or the heading's exceeds these.
+    report_sigma_m, report_sigma_rad : float [m], [rad]
+        The same thresholds before a run reports a pose in the room (a found object's): tighter, since
+        the object's world pose inherits the robot's error whole. How they were chosen:
+        docs/tuning/localizer-report-sigma.md.
+    report_max_views, report_passes : int
+        At most this many head views for the reporting re-localization, going round the landmarks in
+        view up to ``report_passes`` times (a second look at a poster brings fresh image noise, not a
+        fresh calibration: more passes would make the filter trust the shared error more than it should;
+        a later pass looks again only where the one before saw a landmark the filter accepted).
+    report_detour_m : float [m]
+        When the re-localization before a report cannot get the found object's point within
+        ``report_sigma_m`` (no landmark seen well from where the robot found it), the robot keeps that
+        pose in the filter (:meth:`Localizer.start_clone`), drives at most this far (straight-line) to a
+        place where a landmark is in view (:meth:`LocalizedRobot.landmark_vantage_points`), re-localizes
+        there, and reports the object from the corrected kept pose. 0: no detour.
+    report_detour_above_m : float [m]
+        The detour is made only when the point's standard deviation is above this after the
+        re-localization where the robot stands: the odometry of a detour itself leaves about 3 cm at
+        1.5 m, so a point known better than this gains nothing from one. How it was chosen:
+        docs/tuning/localizer-report-detour.md.
+    first_sighting_max_offset_m, first_sighting_max_offset_rad : float [m], [rad]
+        A start pose measured by hand (:class:`Localizer` with ``first_sighting=True``): the first
+        landmark sighting that disagrees with it beyond the gate replaces it when the pose it implies is
+        within these of the start (farther: an outlier, rejected).
+    update_iterations : int
+        The landmark update's iterations (the iterated EKF: relinearise at the new mean until it stops
+        moving, at most this many); 1 is the plain EKF. How it was chosen:
+        docs/tuning/localizer-update-iterations.md.
+    odometry_calibration : bool
+        Estimate the odometry's turn scale ``k`` and curvature bias ``c`` in the state
+        (:func:`calibrated_motion_model`); False: the pose alone, with the systematic errors left to the
+        motion noise's random walk.
+    turn_scale_sigma, curvature_sigma_rad_per_m : float [-], [rad/m]
+        The calibration's prior: ``k ~ N(1, turn_scale_sigma^2)``, ``c ~ N(0, curvature_sigma^2)``
+        (a Create 2's spin over-count and track error are a few per cent; unequal wheels of 0.5 % curve
+        it by 0.02 rad/m).
+    turn_scale_walk_per_sqrt_rad : float [1 / sqrt(rad)]
+        ``k`` is not quite a constant (the slip depends on how much of a motion is a spin): its variance
+        grows by this squared per radian turned.
+    calibrated_heading_rad_per_sqrt_m, calibrated_heading_rad_per_sqrt_rad : float
+        With the calibration on, the heading noise per distance and per angle turned that is left once
+        the systematic part is in the state: these replace ``sigma_heading_rad_per_sqrt_m`` and
+        ``sigma_heading_rad_per_sqrt_rad`` in :meth:`motion_noise`. How they and the calibration's
+        prior were chosen: docs/tuning/localizer-motion-noise.md.
+    """
+
+    sigma_along_m_per_sqrt_m: float = 0.02
+    sigma_cross_m_per_sqrt_m: float = 0.01
+    sigma_heading_rad_per_sqrt_m: float = 0.03
+    sigma_heading_rad_per_sqrt_rad: float = 0.1
+    obs_sigma_m: float = 0.002
+    obs_sigma_rel: float = 0.002
+    obs_sigma_per_m: float = 0.001
+    obs_sigma_rel_across: float = 0.001
+    obs_sigma_rad: float = math.radians(0.75)
+    gate_prob: float = 0.999
+    max_rejected_in_a_row: int = 3
+    reject_inflation: float = 9.0
+    recount_m: float = 0.05
+    recount_rad: float = math.radians(2.0)
+    min_inliers: int = 10
+    min_face_in_image: float = 1.0 / 3.0
+    max_range_m: float = 6.5
+    min_facing: float = 0.35
+    relocalize_sigma_m: float = 0.05
+    relocalize_sigma_rad: float = math.radians(0.5)
+    report_sigma_m: float = 0.015
+    report_sigma_rad: float = math.radians(0.5)
+    report_max_views: int = 12
+    report_passes: int = 3
+    report_detour_m: float = 1.5
+    report_detour_above_m: float = 0.04
+    first_sighting_max_offset_m: float = 1.0
+    first_sighting_max_offset_rad: float = math.radians(30.0)
+    update_iterations: int = 10
+    odometry_calibration: bool = True
+    turn_scale_sigma: float = 0.04
+    curvature_sigma_rad_per_m: float = 0.03
+    turn_scale_walk_per_sqrt_rad: float = 0.002
+    calibrated_heading_rad_per_sqrt_m: float = 0.02
+    calibrated_heading_rad_per_sqrt_rad: float = 0.03
+    ransac: RansacConfig = field(default_factory=lambda: RansacConfig(min_matches=6, dist_max_m=0.25))
+
+    def __post_init__(self):
+        for k in (
+            "sigma_along_m_per_sqrt_m",
+            "sigma_cross_m_per_sqrt_m",
+            "sigma_heading_rad_per_sqrt_m",
+            "sigma_heading_rad_per_sqrt_rad",
+            "obs_sigma_m",
+            "obs_sigma_rel",
+            "obs_sigma_per_m",
+            "obs_sigma_rel_across",
+            "obs_sigma_rad",
+            "recount_m",
+            "recount_rad",
+            "report_detour_m",
+            "report_detour_above_m",
+            "turn_scale_sigma",
+            "curvature_sigma_rad_per_m",
+            "turn_scale_walk_per_sqrt_rad",
+            "calibrated_heading_rad_per_sqrt_m",
+            "calibrated_heading_rad_per_sqrt_rad",
+        ):
+            v = getattr(self, k)
+            if not (math.isfinite(v) and v >= 0):
+                raise ConfigError(f"LocalizerConfig.{k} must be a finite number >= 0, got {v!r}")
+        if not 0.0 <= self.min_face_in_image <= 1.0:
+            raise ConfigError(
+                f"LocalizerConfig.min_face_in_image must be a share in [0, 1], got {self.min_face_in_image!r}"
+            )
+        if not 0.0 < self.gate_prob < 1.0:
+            raise ConfigError(f"LocalizerConfig.gate_prob must be in (0, 1), got {self.gate_prob}")
+        it = self.update_iterations
+        if isinstance(it, bool) or not (isinstance(it, int) and it >= 1):
+            raise ConfigError(
+                f"LocalizerConfig.update_iterations must be an integer >= 1 (1: the plain EKF), "
+                f"got {self.update_iterations!r}"
+            )
+        if not isinstance(self.odometry_calibration, bool):
+            raise ConfigError(
+                "LocalizerConfig.odometry_calibration must be True or False, "
+                f"got {self.odometry_calibration!r}"
+            )
+        for k in ("relocalize_sigma_m", "report_sigma_m"):
+            if not getattr(self, k) > 0:
+                raise ConfigError(f"LocalizerConfig.{k} must be > 0 m, got {getattr(self, k)}")
+
+    def motion_noise(self, u) -> np.ndarray:
+        r"""``M(u)``: covariance (3, 3) of an odometry increment ``u``, in its own frame.
+
+        .. math:: M = \mathrm{diag}(\sigma_a^2 d,\; \sigma_c^2 d,\;
+                  \sigma_{\theta d}^2 d + \sigma_{\theta\theta}^2 |\Delta\theta|),
+                  \quad d = \|[\Delta x, \Delta y]\|
+
+        With ``odometry_calibration`` the heading's two terms are the ``calibrated_heading_*`` ones.
+        """
+        d = math.hypot(float(u[0]), float(u[1]))
+        turn = abs(float(u[2]))
+        if self.odometry_calibration:
+            s_hd, s_ht = self.calibrated_heading_rad_per_sqrt_m, self.calibrated_heading_rad_per_sqrt_rad
+        else:
+            s_hd, s_ht = self.sigma_heading_rad_per_sqrt_m, self.sigma_heading_rad_per_sqrt_rad
+        return np.diag(
+            [
+                self.sigma_along_m_per_sqrt_m**2 * d,
+                self.sigma_cross_m_per_sqrt_m**2 * d,
+                s_hd**2 * d + s_ht**2 * turn,
+            ]
+        )
+
+    def observation_floor(self, z) -> np.ndarray:
+        r"""Covariance (3, 3) added to every landmark observation ``z`` (see the attributes).
+
+        Stereo measures range worse than bearing: the landmark's position error is an ellipse with its
+        long axis along the line of sight ``u = [z_1, z_2] / r``, ``r = \|[z_1, z_2]\|``:
+
+        .. math:: Q_{floor} = \begin{bmatrix} R_u\, \mathrm{diag}(s_\parallel^2, s_\perp^2)\, R_u^T & 0 \\
+                              0 & \sigma_{obs,\theta}^2 \end{bmatrix}, \quad
+                  s_\parallel = \sigma_{obs} + \sigma_{rel}\, r + \sigma_{r^2}\, r^2, \quad
+                  s_\perp = \sigma_{obs} + \sigma_{rel,\perp}\, r
+
+        with :math:`R_u = [u, u^\perp]` the rotation onto the line of sight.
+        """
+        r = math.hypot(float(z[0]), float(z[1]))
+        s_along = self.obs_sigma_m + self.obs_sigma_rel * r + self.obs_sigma_per_m * r * r
+        s_across = self.obs_sigma_m + self.obs_sigma_rel_across * r
+        u = np.array([z[0], z[1]], float) / r if r > 0 else np.array([1.0, 0.0])  # along the line of sight
+        v = np.array([-u[1], u[0]])  # across it
+        Q = np.zeros((3, 3))
+        Q[:2, :2] = s_along**2 * np.outer(u, u) + s_across**2 * np.outer(v, v)  # R_u diag(.) R_u^T
+        Q[2, 2] = self.obs_sigma_rad**2
+        return Q
+
+
+@dataclass(frozen=True)
+class PlanarPoseEstimate:
+    """The robot's pose estimate and its covariance.
+
+    Attributes
+    ----------
+    pose : Pose2D
+    Sigma : ndarray, shape (3, 3) [m^2, m rad, rad^2]
+    t : float [s]
+    mode : LocalizationMode
+    n_updates : int
+        Landmark observations the filter used so far (0: the pose is odometry alone).
+    """
+
+    pose: Pose2D
+    Sigma: np.ndarray = field(repr=False)
+    t: float = 0.0
+    mode: LocalizationMode = LocalizationMode.LANDMARKS
+    n_updates: int = 0
+
+    @property
+    def sigma_xy_m(self) -> float:
+        """Standard deviation along the position ellipse's larger axis [m]."""
+        return float(math.sqrt(max(np.linalg.eigvalsh(self.Sigma[:2, :2])[-1], 0.0)))
+
+    @property
+    def sigma_theta_rad(self) -> float:
+        return float(math.sqrt(max(self.Sigma[2, 2], 0.0)))
+
+    def point_sigma_m(self, p_W) -> float:
+        r"""Standard deviation [m] (the larger axis) of a point ``p_W`` (x, y in W) that the robot placed
+        from where it stands (an object it found): ``p_W = t + R(theta) p_R`` moves with the robot's
+        position and, through the lever arm, its heading,
+
+        .. math:: \Sigma_p = J \Sigma J^T, \quad
+                  J = \begin{bmatrix} 1 & 0 & -(p_y - y) \\ 0 & 1 & p_x - x \end{bmatrix}
+
+        Errors of position and heading can cancel or add up there: the point's, not the robot's,
+        is the error a found object inherits.
+        """
+        dx, dy = float(p_W[0]) - self.pose.x, float(p_W[1]) - self.pose.y
+        J = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx]])
+        S = J @ self.Sigma @ J.T
+        return float(math.sqrt(max(np.linalg.eigvalsh(S)[-1], 0.0)))
+
+
+@dataclass(frozen=True)
+class UpdateRecord:
+    """One landmark observation the filter considered: what it saw and whether the gate let it in.
+
+    ``x_bar``/``Sigma_bar`` before, ``x``/``Sigma`` after (equal to before when rejected); ``nis`` the
+    innovation's squared Mahalanobis distance. ``kind`` is ``"update"`` (the EKF update), or for the
+    first sighting of a start measured by hand (:meth:`Localizer.first_sighting`) ``"fused"`` (it agreed
+    with the start: both fused), ``"reset"`` (it did not: the start replaced by the sighting's pose) or
+    ``"outlier"`` (too far from the start: rejected).
+    """
+
+    t: float
+    landmark: str
+    z: np.ndarray = field(repr=False)
+    Q: np.ndarray = field(repr=False)
+    x_bar: np.ndarray = field(repr=False)
+    Sigma_bar: np.ndarray = field(repr=False)
+    x: np.ndarray = field(repr=False)
+    Sigma: np.ndarray = field(repr=False)
+    nis: float = 0.0
+    accepted: bool = True
+    n_inliers: int = 0
+    kind: str = "update"
+
+
+@dataclass
+class _Clone:
+    """A past pose kept in the localizer's state: its mean ``x``, covariance ``Sigma`` and its
+    cross-covariance ``cross`` = Cov(s_now, x_clone) (n, 3) with the moving state (the pose, and the
+    odometry's calibration when it is estimated)."""
+
+    x: np.ndarray
+    Sigma: np.ndarray
+    cross: np.ndarray
+
+    def update(self, P_bar, H, S, Q, v) -> None:
+        """The clone's part of an accepted update (:meth:`Localizer.start_clone`): the joint state
+        ``[s, x_c]`` with prior covariance ``P = [[P_bar, cross], [cross^T, Sigma]]`` and
+        ``H_joint = [H, 0]`` (``H`` is (3, n)); ``K_joint = P H_joint^T S^-1``, ``x_c += K_c v``,
+        Joseph form."""
+        n = P_bar.shape[0]
+        P = np.block([[P_bar, self.cross], [self.cross.T, self.Sigma]])
+        Hj = np.hstack([H, np.zeros((3, 3))])
+        Kj = np.linalg.solve(S, Hj @ P).T  # (n + 3, 3)
+        self.x = self.x + Kj[n:] @ v
+        self.x[2] = wrap_angle(self.x[2])
+        IKH = np.eye(n + 3) - Kj @ Hj
+        P = IKH @ P @ IKH.T + Kj @ Q @ Kj.T
+        P = 0.5 * (P + P.T)
+        self.Sigma, self.cross = P[n:, n:], P[:n, n:]
+
+
+class Localizer:
+    """The EKF over ``x = [x, y, theta]`` (see the module docstring for its equations), and with
+    ``config.odometry_calibration`` over ``s = [x, y, theta, k, c]``: the pose and the odometry's turn
+    scale and curvature bias (:func:`calibrated_motion_model`), which the landmark updates estimate
+    through their correlation with the heading (a landmark sees the pose only: ``H = [H_x, 0]``).
+
+    ``x`` and ``Sigma`` are the pose's mean and covariance (the first three of ``s`` and ``P``);
+    :attr:`calibration` the odometry's.
+
+    Parameters
+    ----------
+    x0 : array_like, shape (3,)
+        The start pose [m, m, rad] (the odometry's origin: the run starts aligned with the world).
+    Sigma0 : array_like, shape (3, 3), optional
+        Its covariance (default: 1 cm, 0.5 deg).
+    config : LocalizerConfig, optional
+    first_sighting : bool
+        The start was measured by hand (a real robot stood at a taped mark): the first landmark
+        observation goes through :meth:`first_sighting` instead of the EKF update, so that a start that
+        is off by more than ``Sigma0`` says is corrected, not locked out by the gate.
+
+    A past pose can be kept in the state (stochastic cloning, :meth:`start_clone`): the robot found an
+    object where no landmark was in view, drives to one, and the landmark corrects the pose it found
+    the object from too (:meth:`cloned_estimate`).
+    """
+
+    def __init__(self, x0, Sigma0=None, config: LocalizerConfig | None = None, first_sighting: bool = False):
+        self.config = c = config or LocalizerConfig()
+        self.first_sighting_pending = bool(first_sighting)
+        n = 5 if c.odometry_calibration else 3
+        self.s = np.zeros(n)
+        self.P = np.zeros((n, n))
+        self.x = x0
+        self.Sigma = (
+            np.diag([0.01**2, 0.01**2, math.radians(0.5) ** 2]) if Sigma0 is None else np.array(Sigma0, float)
+        )
+        if n == 5:  # the calibration's prior: nominal odometry, give or take its sigmas
+            self.s[3:] = (1.0, 0.0)
+            self.P[3, 3], self.P[4, 4] = c.turn_scale_sigma**2, c.curvature_sigma_rad_per_m**2
+        self.history: list[UpdateRecord] = []
+        self.rejected_in_a_row = 0
+        self.n_inflations = 0
+        self._rejected_here: set[str] = set()  # landmarks whose rejection counted since the last move
+        self._moved = np.zeros(2)  # driven [m] and turned [rad] since then
+        self._clone: _Clone | None = None  # a past pose kept in the state (start_clone)
+
+    # the pose: the first three of the state
+    @property
+    def x(self) -> np.ndarray:
+        """The pose's mean ``[x, y, theta]`` (a copy; assign to set it)."""
+        return self.s[:3].copy()
+
+    @x.setter
+    def x(self, value) -> None:
+        self.s[:3] = np.asarray(value, float).reshape(3)
+
+    @property
+    def Sigma(self) -> np.ndarray:
+        """The pose's covariance (3, 3) (a copy; assigning it sets the pose's block and forgets its
+        correlation with the calibration)."""
+        return self.P[:3, :3].copy()
+
+    @Sigma.setter
+    def Sigma(self, value) -> None:
+        self.P[:3, :3] = np.asarray(value, float).reshape(3, 3)
+        self.P[:3, 3:] = 0.0
+        self.P[3:, :3] = 0.0
+
+    @property
+    def calibration(self) -> tuple[float, float, float, float] | None:
+        """The odometry's turn scale ``k``, curvature bias ``c`` [rad/m] and their standard deviations,
+        or None without ``odometry_calibration``."""
+        if len(self.s) == 3:
+            return None
+        return (float(self.s[3]), float(self.s[4]), math.sqrt(self.P[3, 3]), math.sqrt(self.P[4, 4]))
+
+    @property
+    def n_updates(self) -> int:
+        return sum(1 for r in self.history if r.accepted)
+
+    def predict(self, u) -> None:
+        """Prediction from an odometry increment ``u`` (3,).
+
+        ``s_bar = f(s, u)``, ``P_bar = F P F^T + V M V^T`` (+ the turn scale's walk when calibrating)."""
+        c = self.config
+        if len(self.s) == 3:
+            F, V = motion_jacobians(self.s, u)
+            s_bar = motion_model(self.s, u)
+        else:
+            F, V = calibrated_motion_jacobians(self.s, u)
+            s_bar = calibrated_motion_model(self.s, u)
+        M = c.motion_noise(u)
+        P = F @ self.P @ F.T + V @ M @ V.T  # P_bar = F P F^T + V M V^T
+        if len(self.s) == 5:
+            P[3, 3] += c.turn_scale_walk_per_sqrt_rad**2 * abs(float(u[2]))
+        self.s, self.P = s_bar, 0.5 * (P + P.T)
+        if self._clone is not None:  # the clone stays where it was: Cov(s_bar, x_c) = F Cov(s, x_c)
+            self._clone.cross = F @ self._clone.cross
+        self._moved += (math.hypot(u[0], u[1]), abs(u[2]))
+        if self._moved[0] >= self.config.recount_m or self._moved[1] >= self.config.recount_rad:
+            self._rejected_here.clear()  # a new place: every landmark's rejection counts again
+            self._moved[:] = 0.0
+
+    def update(self, z, Q, landmark: Landmark, t: float = 0.0, n_inliers: int = 0) -> UpdateRecord:
+        """Update from one landmark observation ``z`` (3,) with covariance ``Q`` (3, 3); gated.
+
+        While the first sighting of a hand-measured start is pending (``first_sighting=True`` and no
+        observation accepted yet) this is :meth:`first_sighting`."""
+        if self.first_sighting_pending:
+            return self.first_sighting(z, Q, landmark, t, n_inliers)
+        z = np.asarray(z, float)
+        Q = np.asarray(Q, float) + self.config.observation_floor(z)
+        l = landmark.planar
+        x_bar, Sigma_bar = self.x, self.Sigma
+        s_bar, P_bar = self.s.copy(), self.P.copy()
+        n = len(s_bar)
+
+        def jacobian(s):  # H = [dh/dx, 0]: a landmark sees the pose, not the calibration
+            H = np.zeros((3, n))
+            H[:, :3] = measurement_jacobian(s[:3], l)
+            return H
+
+        H = jacobian(s_bar)
+        nu = z - measurement_model(x_bar, l)  # innovation
+        nu[2] = wrap_angle(nu[2])
+        S = H @ P_bar @ H.T + Q  # innovation covariance
+        nis = float(nu @ np.linalg.solve(S, nu))
+        accepted = nis <= chi2_quantile(self.config.gate_prob, 3)
+        if accepted:
+            # the iterated EKF: from s_0 = s_bar (whose step is the plain EKF's, K nu, with the gate's H
+            # and S), relinearise at each new mean until it stops moving
+            s_i = s_bar.copy()
+            for i in range(self.config.update_iterations):
+                if i > 0:
+                    H = jacobian(s_i)
+                    S = H @ P_bar @ H.T + Q
+                K = np.linalg.solve(S, H @ P_bar).T  # K = P_bar H^T S^-1 (S, P_bar symmetric)
+                r = z - measurement_model(s_i[:3], l)
+                r[2] = wrap_angle(r[2])
+                ds = s_bar - s_i
+                ds[2] = wrap_angle(ds[2])
+                v = r - H @ ds  # the iterated EKF's innovation at s_i
+                s_next = s_bar + K @ v
+                s_next[2] = wrap_angle(s_next[2])
+                step = s_next - s_i
+                step[2] = wrap_angle(step[2])
+                s_i = s_next
+                if np.max(np.abs(step)) < 1e-9:  # [m], [rad]: converged
+                    break
+            IKH = np.eye(n) - K @ H
+            P = IKH @ P_bar @ IKH.T + K @ Q @ K.T  # Joseph form
+            if self._clone is not None:
+                self._clone.update(P_bar, H, S, Q, v)
+            self.s, self.P = s_i, 0.5 * (P + P.T)
+            self.rejected_in_a_row = 0
+        elif landmark.name not in self._rejected_here:  # once per landmark per place (recount_m)
+            self._rejected_here.add(landmark.name)
+            self.rejected_in_a_row += 1
+            if self.rejected_in_a_row >= self.config.max_rejected_in_a_row:  # gate lock-out recovery
+                # the pose's variance times reject_inflation (D P D: its correlations scale along)
+                d = np.ones(n)
+                d[:3] = math.sqrt(self.config.reject_inflation)
+                self.P = d[:, None] * self.P * d[None, :]
+                self.rejected_in_a_row = 0
+                self.n_inflations += 1
+                self._rejected_here.clear()  # the doubted estimate is tried against them all again
+        rec = UpdateRecord(
+            t,
+            landmark.name,
+            z,
+            Q,
+            x_bar,
+            Sigma_bar,
+            self.x,
+            self.Sigma,
+            nis,
+            bool(accepted),
+            int(n_inliers),
+        )
+        self.history.append(rec)
+        return rec
+
+    # stochastic cloning: a past pose kept in the state
+
+    def start_clone(self) -> None:
+        r"""Keep the pose now, :math:`x_c = x`, in the state beside the moving pose (stochastic cloning).
+
+        The joint covariance starts as :math:`\begin{bmatrix} \Sigma & \Sigma \\ \Sigma & \Sigma
+        \end{bmatrix}` (both are the same pose). A prediction moves :math:`x` only, so the
+        cross-covariance becomes :math:`F\, \Sigma_{xc}`; an update corrects both through the joint
+        Kalman gain, the measurement seeing :math:`x` alone (:math:`H_{joint} = [H, 0]`):
+
+        .. math:: K_c = \Sigma_{xc}^T H^T S^{-1}, \qquad x_c \leftarrow x_c + K_c\, \nu
+
+        with :math:`\nu` the update's innovation (the iterated EKF's, at its last iterate), and the
+        joint covariance in Joseph form. A landmark seen after a short drive thus corrects the pose the
+        drive began from, as far as the odometry between the two ties them.
+
+        Raises
+        ------
+        ValueError
+            While the first sighting of a hand-measured start is pending (it may replace the pose
+            outright, which no cross-covariance describes).
+        """
+        if self.first_sighting_pending:
+            raise ValueError("cannot clone the pose before the first landmark sighting of a measured start")
+        self._clone = _Clone(self.x, self.Sigma, self.P[:, :3].copy())
+
+    @property
+    def cloning(self) -> bool:
+        return self._clone is not None
+
+    def cloned_estimate(self) -> tuple[np.ndarray, np.ndarray]:
+        """The kept pose ``x_c`` (3,) and its covariance (3, 3), as corrected since :meth:`start_clone`."""
+        if self._clone is None:
+            raise ValueError("no pose is cloned (start_clone)")
+        return self._clone.x.copy(), self._clone.Sigma.copy()
+
+    def end_clone(self) -> tuple[np.ndarray, np.ndarray]:
+        """Drop the kept pose; returns it and its covariance (:meth:`cloned_estimate`)."""
+        out = self.cloned_estimate()
+        self._clone = None
+        return out
+
+    def first_sighting(self, z, Q, landmark: Landmark, t: float = 0.0, n_inliers: int = 0) -> UpdateRecord:
+        r"""The first landmark observation of a start measured by hand: fuse it with the start, or let it
+        replace the start.
+
+        One observation of a (unique) landmark determines the whole planar pose,
+        :math:`x_z = h^{-1}(z; l)` with covariance :math:`\Sigma_z = J Q J^T`
+        (:func:`pose_from_observation`), so the prior can be compared with it in the pose's own space,
+        where nothing is linearised about a start that may be wrong by 10 degrees:
+
+        .. math:: d = x_z - \bar x, \quad S = \bar\Sigma + \Sigma_z, \quad
+                  d^T S^{-1} d \le \chi^2_3(p_{gate})
+
+        * within the gate, both are fused (the Kalman update with :math:`H = I`:
+          :math:`K = \bar\Sigma S^{-1}`, :math:`x = \bar x + K d`, Joseph form): ``kind="fused"``;
+        * beyond it the start, not the landmark, is the likelier culprit (a robot stood 30 cm off its mark
+          by a start covariance that says 10 cm): the sighting's pose replaces it, :math:`x = x_z`,
+          :math:`\Sigma = \Sigma_z` (``kind="reset"``), provided it is within
+          ``first_sighting_max_offset_m`` and ``_rad`` of the start; farther, it is rejected as an outlier
+          (a wrong fit) and the next sighting is tried the same way.
+
+        Later observations go through the EKF :meth:`update`.
+        """
+        z = np.asarray(z, float)
+        Q = np.asarray(Q, float) + self.config.observation_floor(z)
+        x_bar, Sigma_bar = self.x, self.Sigma
+        P_bar = self.P.copy()
+        n = len(self.s)
+        x_z, J = pose_from_observation(z, landmark.planar)
+        Sigma_z = J @ Q @ J.T  # the sighting's pose covariance
+        d = x_z - x_bar
+        d[2] = wrap_angle(d[2])
+        S = Sigma_bar + Sigma_z
+        nis = float(d @ np.linalg.solve(S, d))
+        cfg = self.config
+        kind = "fused"
+        accepted = True
+        if nis <= chi2_quantile(cfg.gate_prob, 3):
+            K = np.linalg.solve(S, P_bar[:3, :]).T  # K = P_bar H^T S^-1, H = [I, 0] (n, 3)
+            s_new = self.s + K @ d
+            IKH = np.eye(n)
+            IKH[:, :3] -= K
+            P = IKH @ P_bar @ IKH.T + K @ Sigma_z @ K.T  # Joseph form
+            s_new[2] = wrap_angle(s_new[2])
+            self.s, self.P = s_new, 0.5 * (P + P.T)
+        elif math.hypot(d[0], d[1]) <= cfg.first_sighting_max_offset_m and abs(d[2]) <= (
+            cfg.first_sighting_max_offset_rad
+        ):
+            kind = "reset"  # the pose from the sighting; the calibration keeps its prior
+            self.x, self.Sigma = x_z, 0.5 * (Sigma_z + Sigma_z.T)
+        else:
+            kind, accepted = "outlier", False  # rejected
+        if accepted:
+            self.first_sighting_pending = False
+        rec = UpdateRecord(
+            t,
+            landmark.name,
+            z,
+            Q,
+            x_bar,
+            Sigma_bar,
+            self.x,
+            self.Sigma,
+            nis,
+            accepted,
+            int(n_inliers),
+            kind,
+        )
+        self.history.append(rec)
+        return rec

@@ -1,0 +1,314 @@
+"""The localized robot: the localizer behind the :class:`~lab.robot.Robot` interface.
+
+:class:`LocalizedRobot`'s ``odometry()`` and every frame's ``odom`` are the filter's estimate, so the
+navigator's costmap and path following, the search's map and the object poses it reports all use the
+localized pose without a change; :meth:`LocalizedRobot.pose_estimate` adds the covariance. With
+``mode=odometry`` it passes the wheel odometry through unchanged (and still reports the covariance of
+dead reckoning). It also chooses where to look and where to stand to see a landmark: the head views of
+an active re-localization (:meth:`LocalizedRobot.landmark_views`) and the vantage points of a detour
+before a report (:meth:`LocalizedRobot.landmark_vantage_points`).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import replace
+
+import numpy as np
+
+from lab.errors import ConfigError
+from lab.geometry import Pose2D, wrap_angle
+from lab.localization.filter import Localizer, LocalizerConfig, PlanarPoseEstimate
+from lab.localization.landmarks import LandmarkMap
+from lab.localization.models import odometry_increment
+from lab.localization.modes import LocalizationMode
+from lab.localization.observer import LandmarkObserver
+from lab.robot import Robot, RobotWrapper
+
+__all__ = ["LocalizedRobot"]
+
+
+class LocalizedRobot(RobotWrapper):
+    """A :class:`~lab.robot.Robot` whose ``odometry()`` and frames' ``odom`` are the localizer's estimate.
+
+    Its frames keep the base's wheel odometry in ``wheel_odom``: the object filters predict with the
+    wheels' increment between two frames (:func:`lab.robot.frame_motion`), since a landmark update moves
+    the estimate, not the robot.
+
+    Every call is passed on to ``base``. With ``mode=LANDMARKS`` each captured frame in which a landmark
+    should be visible updates the filter; ``relocalize()`` points the head at landmarks until the pose
+    is certain again (active re-localization). With ``mode=ODOMETRY`` the base's odometry is passed
+    through unchanged and frames are not looked at (the filter only reports dead reckoning's covariance).
+
+    Parameters
+    ----------
+    base : Robot
+    mode : LocalizationMode or str
+    landmarks : LandmarkMap, optional
+        A trained map; needed for ``landmarks`` mode.
+    config : LocalizerConfig, optional
+    rng : numpy.random.Generator, optional
+    log : callable(str), optional
+        Where the localizer says what it does (default: stderr).
+    Sigma0 : array_like, shape (3, 3), optional
+        The covariance of the start, ``base.odometry()`` when this is made (default: the
+        :class:`Localizer`'s, 1 cm and 0.5 deg: the simulator's odometry starts at the true pose).
+    start_measured_by_hand : bool
+        The start is a pose an operator measured (a robot's): the first landmark sighting may correct it
+        (:meth:`Localizer.first_sighting`).
+    """
+
+    def __init__(
+        self,
+        base: Robot,
+        mode="landmarks",
+        landmarks: LandmarkMap | None = None,
+        config: LocalizerConfig | None = None,
+        rng: np.random.Generator | None = None,
+        log=None,
+        *,
+        Sigma0=None,
+        start_measured_by_hand: bool = False,
+    ):
+        super().__init__(base)
+        self.mode = LocalizationMode.parse(mode)
+        self.config = config or LocalizerConfig()
+        self._odom = base.odometry()
+        self.localizer = Localizer(
+            self._odom.as_array(), Sigma0, config=self.config, first_sighting=start_measured_by_hand
+        )
+        self.observer = None
+        if self.mode is LocalizationMode.LANDMARKS:
+            if landmarks is None or len(landmarks) == 0:
+                raise ConfigError(
+                    "localization 'landmarks' needs a trained landmark map with at least one landmark"
+                )
+            self.observer = LandmarkObserver(landmarks, self.config, rng or np.random.default_rng(0))
+        self.log = log or (lambda msg: print(f"lab: {msg}", file=sys.stderr))
+        self.frames_seen = 0
+
+    # the estimate
+    def _sync(self, odom: Pose2D | None = None) -> None:
+        odom = self.base.odometry() if odom is None else odom
+        u = odometry_increment(self._odom, odom)
+        if np.any(u != 0.0):
+            self.localizer.predict(u)
+        self._odom = odom
+
+    def _pose(self) -> Pose2D:
+        if self.mode is LocalizationMode.ODOMETRY:
+            return self._odom
+        return Pose2D(*(float(v) for v in self.localizer.x))
+
+    def pose_estimate(self) -> PlanarPoseEstimate:
+        """The robot's pose estimate and covariance now."""
+        self._sync()
+        return PlanarPoseEstimate(
+            self._pose(), self.localizer.Sigma.copy(), self.base.now(), self.mode, self.localizer.n_updates
+        )
+
+    def odometry(self) -> Pose2D:
+        """The pose estimate (the localized pose, or the wheel odometry in ``odometry`` mode)."""
+        self._sync()
+        return self._pose()
+
+    def odometry_calibration(self) -> dict | None:
+        """What the filter learned of the base's odometry (:attr:`Localizer.calibration`), for a run's
+        JSON and the operator: ``turn_scale`` (the true turn per turn the wheels report; 0.96 means
+        they over-count turns by about 4 %), ``curvature_rad_per_m`` and their standard deviations.
+        None with ``mode=odometry`` or without ``odometry_calibration``."""
+        cal = self.localizer.calibration
+        if self.mode is LocalizationMode.ODOMETRY or cal is None:
+            return None
+        k, c, sk, sc = cal
+        return {
+            "turn_scale": round(k, 5),
+            "turn_scale_sd": round(sk, 5),
+            "curvature_rad_per_m": round(c, 5),
+            "curvature_sd_rad_per_m": round(sc, 5),
+        }
+
+    def wheel_odometry(self) -> Pose2D:
+        """The base's wheel odometry, which the estimate starts from (in the base's frame)."""
+        return self.base.odometry()
+
+    def capture_stereo(self, after=None):
+        frame = self.base.capture_stereo(after)
+        self._sync(frame.odom)
+        if self.mode is LocalizationMode.ODOMETRY:
+            return frame
+        self.frames_seen += 1
+        cands = self.observer.candidates(self.localizer.x, frame)
+        for obs in self.observer.observe(frame, cands):
+            rec = self.localizer.update(obs.z, obs.Q, obs.landmark, frame.t, obs.n_inliers)
+            if not rec.accepted:
+                self.log(f"localization: rejected {obs.landmark.name} (NIS {rec.nis:.1f}, an outlier)")
+            elif rec.kind == "reset":
+                dx, dy = rec.x[:2] - rec.x_bar[:2]
+                dth = math.degrees(wrap_angle(rec.x[2] - rec.x_bar[2]))
+                self.log(
+                    f"localization: the start pose was {100 * math.hypot(dx, dy):.0f} cm and {abs(dth):.1f} "
+                    f"deg off what {obs.landmark.name} says (NIS {rec.nis:.1f}): reset from it"
+                )
+        return replace(frame, odom=self._pose(), wheel_odom=frame.wheels)  # the wheels: frame_motion
+
+    def certain(self, sigma_m: float | None = None, sigma_rad: float | None = None, at_W=None) -> bool:
+        """Whether the pose is within the thresholds ``sigma_m``, ``sigma_rad`` (position: the larger
+        axis of its ellipse, or of the point ``at_W`` = (x, y) placed from the robot,
+        :meth:`PlanarPoseEstimate.point_sigma_m`; heading), by default the re-localization's
+        (:class:`LocalizerConfig`)."""
+        est = self.pose_estimate()
+        sm = self.config.relocalize_sigma_m if sigma_m is None else sigma_m
+        sr = self.config.relocalize_sigma_rad if sigma_rad is None else sigma_rad
+        s_pos = est.sigma_xy_m if at_W is None else est.point_sigma_m(at_W)
+        return s_pos <= sm and est.sigma_theta_rad <= sr
+
+    def landmark_views(self, tilt_max: float = math.radians(25.0)) -> list[tuple[float, float, str]]:
+        """The head angles ``(pan, tilt, name)`` that point at each landmark the estimate says is in range,
+        facing and within the pan range, best first (facing, wide, near: the most inliers)."""
+        lim = self.base.pan_tilt_limits
+        cam = self.base.camera
+        x = self.localizer.x
+        order = []
+        for lm in self.observer.map:
+            r, bearing = self.observer.map.bearing_in_robot(lm, x)
+            if r > self.config.max_range_m or lm.facing(x[:2]) < self.config.min_facing:
+                continue
+            pan = wrap_angle(bearing)
+            if not lim.pan_min <= pan <= lim.pan_max:
+                continue
+            dz = lm.centre_W[2] - cam.mount_R[2]
+            tilt = float(
+                np.clip(math.atan2(dz, r), max(lim.tilt_min, -tilt_max), min(lim.tilt_max, tilt_max))
+            )
+            order.append((-lm.facing(x[:2]) * lm.width_m / max(r, 0.5), pan, tilt, lm.name))
+        order.sort()
+        return [(pan, tilt, name) for _, pan, tilt, name in order]
+
+    def landmark_vantage_points(
+        self,
+        free,
+        radii_m=None,
+        n_directions: int = 16,
+        min_facing: float = 0.7,
+        range_m: tuple[float, float] = (1.0, 3.5),
+        tilt_max: float = math.radians(25.0),
+    ) -> list[tuple[float, float, str]]:
+        """Places near the robot from which a landmark would be seen well: for a detour before a report
+        (``LocalizerConfig.report_detour_m``).
+
+        The candidates lie on rings around the estimated position (radii ``radii_m``, default 0.5 m
+        steps up to ``report_detour_m``; ``n_directions`` on each); ``free(x, y)`` says whether the robot
+        may stand there (its costmap). A landmark is seen well from a place when it is ``range_m`` away,
+        at most ``acos(min_facing)`` off its face's normal, and its centre within ``tilt_max`` of the
+        camera's height: the whole face in a frame, head-on enough for a precise fit (the robot turns
+        and pans to it there). Returns ``(x, y, landmark name)``, nearest first; of places equally near,
+        the better view first (facing x width / range, as :meth:`landmark_views`).
+        """
+        if self.mode is LocalizationMode.ODOMETRY:
+            return []
+        reach = self.config.report_detour_m
+        radii = radii_m if radii_m is not None else np.arange(0.5, reach + 1e-9, 0.5)
+        x0, y0 = float(self.localizer.x[0]), float(self.localizer.x[1])
+        h = self.base.camera.mount_R[2]
+        out = []
+        for r in radii:
+            for a in np.arange(n_directions) * (2.0 * math.pi / n_directions):
+                x, y = x0 + r * math.cos(a), y0 + r * math.sin(a)
+                if not free(x, y):
+                    continue
+                best = None
+                for lm in self.observer.map:
+                    d = math.hypot(lm.centre_W[0] - x, lm.centre_W[1] - y)
+                    facing = lm.facing((x, y))
+                    if not (range_m[0] <= d <= range_m[1] and facing >= min_facing):
+                        continue
+                    if abs(math.atan2(lm.centre_W[2] - h, d)) > tilt_max:
+                        continue
+                    score = facing * lm.width_m / d
+                    if best is None or score > best[0]:
+                        best = (score, lm.name)
+                if best is not None:
+                    out.append((round(float(r), 6), -best[0], x, y, best[1]))
+        out.sort()
+        return [(x, y, name) for _, _, x, y, name in out]
+
+    def relocalize(
+        self,
+        max_views: int = 6,
+        tilt_max: float = math.radians(25.0),
+        *,
+        sigma_m: float | None = None,
+        sigma_rad: float | None = None,
+        passes: int = 1,
+        at_W=None,
+    ) -> bool:
+        """Active re-localization: when the position is uncertain, stop and pan the head to the landmarks
+        the estimate says are in view, best first (:meth:`landmark_views`), until it is certain again.
+
+        ``sigma_m``, ``sigma_rad``, ``at_W``: the thresholds of :meth:`certain` and the point they hold
+        at (default the re-localization's, at the robot; a report uses ``report_sigma_m`` at the object,
+        :meth:`relocalize_to_report`); ``passes``: how many times round the landmarks in view, at most
+        ``max_views`` views in all; a pass after the first looks only where the one before it saw a
+        landmark the filter accepted.
+
+        Returns True when the pose is (or became) within the thresholds; the head is put back where
+        it was.
+        """
+        if self.mode is LocalizationMode.ODOMETRY:
+            return False
+        if self.certain(sigma_m, sigma_rad, at_W):
+            return True
+        self.base.stop()
+        start = self.base.pan_tilt()
+        views = self.landmark_views(tilt_max)
+        done, n_views = False, 0
+        for _ in range(max(int(passes), 1)):
+            productive = []
+            for view in views:
+                if n_views >= max_views:
+                    break
+                pan, tilt, _name = view
+                self.base.command_pan_tilt(pan, tilt)
+                self.base.wait_pan_tilt(timeout=15.0)  # a swing across the whole pan range takes > 5 s
+                n0 = len(self.localizer.history)
+                self.capture_stereo()
+                n_views += 1
+                if any(r.accepted for r in self.localizer.history[n0:]):
+                    productive.append(view)
+                if self.certain(sigma_m, sigma_rad, at_W):
+                    done = True
+                    break
+            # the next pass looks again only where this one saw a landmark it accepted: the robot stands
+            # still, so a view that showed none, or an outlier (a wrong fit), shows the same
+            # again, and repeated rejections would trip the gate lock-out recovery for nothing
+            views = productive
+            if done or not views or n_views >= max_views:
+                break
+        self.base.command_pan_tilt(start.pan, start.tilt)
+        self.base.wait_pan_tilt(timeout=15.0)
+        return done
+
+    def relocalize_to_report(self, at_W=None) -> bool:
+        """The re-localization before a pose is reported in the room (a found object's, at ``at_W`` =
+        (x, y) [m] in W): the ordinary one first (:meth:`relocalize`), then on until the point's
+        position standard deviation is within ``report_sigma_m`` (the robot's own without ``at_W``) and
+        the heading's within ``report_sigma_rad``, with up to ``report_max_views`` views,
+        ``report_passes`` times round the landmarks in view."""
+        if self.mode is LocalizationMode.ODOMETRY:
+            return False
+        self.relocalize()
+        c = self.config
+        return self.relocalize(
+            c.report_max_views,
+            sigma_m=c.report_sigma_m,
+            sigma_rad=c.report_sigma_rad,
+            passes=c.report_passes,
+            at_W=at_W,
+        )
+
+    # the rest of the Robot interface is RobotWrapper's: passed on to the base
+    def step(self, dt: float) -> None:
+        self.base.step(dt)
+        self._sync()

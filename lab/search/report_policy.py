@@ -1,0 +1,207 @@
+"""When the search re-localizes its robot: before every drive, and before it reports a found object.
+
+A search on a localized robot (:class:`~lab.localization.LocalizedRobot`) looks for
+landmarks at two moments, and :class:`ReportPolicy` decides both:
+
+* **before every drive** (:meth:`ReportPolicy.relocalize_before_drive`): when the pose is uncertain the
+  robot looks for a landmark first, so the drive starts from a pose it can trust. The agent gets this as
+  its ``navigate`` (:meth:`ReportPolicy.relocalizing`, a :class:`RelocalizingNavigate` round the search's
+  own navigate);
+* **before a find is reported** (:meth:`ReportPolicy.report`): the object's world pose is only as good
+  as the robot's pose when it was found, so the robot re-localizes to the report's tighter thresholds
+  at the object's point, and when no landmark is seen well from there it makes a detour to one
+  (:meth:`ReportPolicy.detour`) while the filter keeps the pose the object was found from.
+
+The policy works on the robot through the localized robot's interface (``relocalize``,
+``relocalize_to_report``, ``pose_estimate``, ``localizer``, ``mode``, ``config``,
+``landmark_vantage_points``, ``log``, ``stop``, ``now``): a wrapper that passes those on (the run's
+tracked robot) will do. The time budget is a callable ``check()`` that raises
+:class:`~lab.search.budget.SearchBudgetExceeded` once it is used up (:meth:`BudgetedRobot.check
+<lab.search.budget.BudgetedRobot.check>`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from lab.errors import SafetyStop
+from lab.geometry import Pose2D, se3_inv
+from lab.localization import LocalizationMode, PlanarPoseEstimate
+from lab.search.budget import SearchBudgetExceeded
+from lab.search.records import AgentResult, NavigationResult
+
+__all__ = ["RelocalizingNavigate", "ReportPolicy", "unlimited"]
+
+
+def unlimited() -> None:
+    """A budget check that never stops the run (no time budget)."""
+
+
+class RelocalizingNavigate:
+    """The search's ``navigate`` with an active re-localization before every drive
+    (:meth:`ReportPolicy.relocalize_before_drive`): the same call, ``navigate(target_xy, min_distance,
+    max_distance) -> NavigationResult``.
+
+    Attributes
+    ----------
+    navigate : callable
+        The navigate it drives with.
+    policy : ReportPolicy
+    """
+
+    def __init__(self, navigate: Callable[..., NavigationResult], policy: ReportPolicy):
+        self.navigate = navigate
+        self.policy = policy
+
+    @property
+    def navigator(self):
+        """The policy's :class:`~lab.navigation.navigator.Navigator` (None without one): whose costmap
+        the figures and the live view draw."""
+        return self.policy.navigator
+
+    def __call__(self, *args, **kwargs) -> NavigationResult:
+        self.policy.relocalize_before_drive()
+        return self.navigate(*args, **kwargs)
+
+
+class ReportPolicy:
+    """When the search re-localizes (see the module docstring): before every drive, and before a find is
+    reported, with a detour to a landmark when none is seen well from where the object was found.
+
+    Parameters
+    ----------
+    robot : LocalizedRobot or a wrapper that passes its interface on
+        The localized robot beneath the time budget (its views step it directly).
+    navigate : callable, optional
+        The search's ``navigate(target_xy, min_distance, max_distance) -> NavigationResult`` (on the
+        budgeted robot): what :meth:`relocalizing` wraps and what the detour drives with. None: no
+        detour.
+    navigator : Navigator, optional
+        The navigator behind ``navigate`` (:attr:`NavigatorAdapter.navigator
+        <lab.search.navigate.NavigatorAdapter.navigator>`): the detour plans on its planning grid.
+        None: no detour.
+    check : callable () -> None
+        The time budget's check (:meth:`BudgetedRobot.check <lab.search.budget.BudgetedRobot.check>`);
+        default: :func:`unlimited`.
+    """
+
+    def __init__(
+        self,
+        robot,
+        navigate: Callable[..., NavigationResult] | None = None,
+        navigator=None,
+        check: Callable[[], None] = unlimited,
+    ):
+        self.robot = robot
+        self.navigate = navigate
+        self.navigator = navigator
+        self.check = check
+
+    def relocalizing(self) -> RelocalizingNavigate:
+        """The agent's ``navigate``: this policy's ``navigate`` with a re-localization before every drive."""
+        return RelocalizingNavigate(self.navigate, self)
+
+    def relocalize_before_drive(self) -> None:
+        """Active re-localization before a drive: when the pose is uncertain, look for a landmark first.
+
+        Its views step the robot beneath the budget wrapper, which cannot stop them, so the budget is
+        checked before and after: a run whose drives all failed at once (an unreachable cell each)
+        looked round for 20 s before each and ran on to 768 s of a 300 s budget."""
+        self.check()
+        self.robot.relocalize()
+        self.check()
+
+    def report(self, out: AgentResult) -> tuple[AgentResult, dict | None]:
+        """Active re-localization before reporting a found object, to the report's tighter thresholds at
+        the object (:meth:`LocalizedRobot.relocalize_to_report`): the object's pose relative to the robot
+        stays; its world pose follows the corrected robot pose ``G_WO' = G_WR' G_WR^-1 G_WO``.
+
+        When no landmark from where the robot stands gets the object's point within ``report_sigma_m``
+        (and ``report_detour_above_m``) and there is a ``navigate`` to drive with, a detour
+        (:meth:`detour`): the pose the object was found from is kept in the filter while the robot drives
+        to a landmark, and ``G_WR'`` is that kept pose as the landmark corrected it.
+
+        Returns the result to report and what was done, for the JSON's ``report_relocalization`` (None
+        when nothing was reported: not found, or not localized against landmarks): the landmark updates
+        it made, the object point's position standard deviation before and after, how far the reported
+        object moved, and the detour (None: none was needed or possible)."""
+        robot = self.robot
+        if not out.found or out.G_WO is None or robot.mode is not LocalizationMode.LANDMARKS:
+            return out, None
+        p_W = out.G_WO[:2, 3].copy()
+        est0 = robot.pose_estimate()
+        robot.relocalize_to_report(at_W=p_W)
+        est1 = robot.pose_estimate()
+        G_WR, sigma, detour = est1.pose.G(), est1.point_sigma_m(p_W), None
+        cfg = robot.config
+        wanted = sigma > max(cfg.report_sigma_m, cfg.report_detour_above_m)
+        if wanted and self.navigate is not None and cfg.report_detour_m > 0:
+            kept, detour = self.detour()
+            if kept is not None:
+                G_WR, sigma = kept.pose.G(), kept.point_sigma_m(p_W)
+        G_WO = G_WR @ se3_inv(est0.pose.G()) @ out.G_WO
+        info = {
+            "updates": int(robot.pose_estimate().n_updates - est0.n_updates),
+            "point_sigma_before_m": round(est0.point_sigma_m(p_W), 4),
+            "point_sigma_after_m": round(sigma, 4),
+            "within_report_sigma": bool(sigma <= cfg.report_sigma_m),
+            "shift_m": round(float(np.linalg.norm(G_WO[:3, 3] - out.G_WO[:3, 3])), 4),
+            "detour": detour,
+        }
+        return replace(out, G_WO=G_WO), info
+
+    def detour(self) -> tuple[PlanarPoseEstimate | None, dict | None]:
+        """Keep the robot's pose in the filter (:meth:`Localizer.start_clone`), drive to the nearest place
+        from which a landmark is seen well (:meth:`LocalizedRobot.landmark_vantage_points`, on the
+        navigator's planning grid; the next one if a drive fails, two tries), re-localize there to the
+        report's thresholds, and return the kept pose as corrected (None when it could not be kept) and
+        what was done, for the JSON: the place, its landmark, whether the robot got there and the updates
+        there (None: no navigator to plan on, or the filter has not placed the robot yet).
+
+        The time budget holds: a drive that runs it out ends the detour with what the filter has then."""
+        robot, navigate = self.robot, self.navigate
+        loc = robot.localizer
+        nav = self.navigator
+        if nav is None or loc.first_sighting_pending:
+            return None, None
+        grid = nav.planning_grid()
+        spec = grid.spec
+
+        def free(x, y):
+            if not spec.contains_xy(x, y):
+                return False
+            i, j = spec.world_to_cell(x, y)
+            return not grid.blocked[i, j]
+
+        spots = robot.landmark_vantage_points(free)
+        info = {"to": None, "landmark": None, "arrived": False, "updates": 0, "stopped": None}
+        if not spots:
+            return None, {**info, "stopped": "no place within reach sees a landmark well"}
+        est = robot.pose_estimate()
+        n0 = est.n_updates
+        loc.start_clone()
+        try:
+            for x, y, name in spots[:2]:
+                info.update(to=[round(float(x), 3), round(float(y), 3)], landmark=name)
+                robot.log(
+                    f"localization: no landmark seen well where the object was found; a detour of "
+                    f"{math.hypot(x - est.pose.x, y - est.pose.y):.1f} m to see {name}"
+                )
+                if navigate((x, y), 0.0, 0.2).arrived:
+                    info["arrived"] = True
+                    robot.relocalize_to_report()
+                    break
+        except (SearchBudgetExceeded, SafetyStop) as e:
+            robot.stop()
+            info["stopped"] = str(e)
+        finally:
+            x_c, S_c = loc.end_clone()
+        info["updates"] = int(robot.pose_estimate().n_updates - n0)
+        kept = PlanarPoseEstimate(
+            Pose2D(*(float(v) for v in x_c)), S_c, robot.now(), LocalizationMode.LANDMARKS
+        )
+        return kept, info
