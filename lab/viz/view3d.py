@@ -219,7 +219,7 @@ class View3D:
         self.agent, self.kind = agent, kind
         self._prev = getattr(agent, attribute, None)
         setattr(agent, attribute, self)
-        self.steps.append(Step3D(0.0 if not self.steps else self.steps[-1].t, "start", self._scene_nodes()))
+        self.steps.append(Step3D(0.0 if not self.steps else self.steps[-1].t, "start", self._bodies()))
 
     def __call__(self, agent, item) -> None:
         if self._prev is not None:
@@ -249,9 +249,6 @@ class View3D:
         self.steps.append(Step3D(t, label, nodes))
 
     # --- the world and the robot ----------------------------------------------------------------------
-    def _scene_nodes(self) -> dict:
-        return self._bodies()
-
     def _bodies(self) -> dict:
         """The bodies that moved since the last step (all of them at the first)."""
         if self.world is None:
