@@ -20,9 +20,13 @@ the seeds both ran. It writes the same as JSON (``summary.json``).
 An episode that did not identify its model counts ``max_actions`` actions (a lower bound: the budget
 ran out), and the report lists every failure with its final probabilities.
 
-**Which seeds.** By default the report split (:mod:`lab.evaluation`: seeds 100000-100024) under the
-``realistic`` sensing profile; the report prints the split and gives every success rate with its Wilson
-95 % interval. Parameters are tuned on seeds below 1000 (``--seeds 0-19``), never on the report split.
+**Which seeds.** By default 25 fresh report seeds (:func:`lab.evaluation.fresh_report_seeds`: above
+every seed in the ledger of spent seeds, ``lab/data/spent_seeds.toml``) under the ``realistic`` sensing
+profile; the report prints the split and gives every success rate with its Wilson 95 % interval.
+Parameters are tuned on seeds below 1000 (``--seeds 0-19``), never on the report split. A report seed the
+ledger lists as spent is refused unless ``--allow-spent-seeds``, and the report then says "ON SPENT
+SEEDS" (``--report-only`` never refuses, it only says so). Once figures on fresh seeds are reported,
+record them: ``lab eval spend A-B --why "..." --runs identify``.
 """
 
 from __future__ import annotations
@@ -34,7 +38,17 @@ import statistics
 import sys
 from pathlib import Path
 
-from lab.evaluation import parse_seeds, report_seeds, split_of, wilson_interval
+from lab.errors import ConfigError
+from lab.eval.cli import IDENTIFY_SEEDS
+from lab.evaluation import (
+    check_report_seeds,
+    fresh_report_seeds,
+    parse_seeds,
+    seed_ranges_text,
+    spent_among,
+    split_of,
+    wilson_interval,
+)
 
 
 def episode_path(
@@ -56,6 +70,8 @@ def run_episodes(args, planners) -> int:
             "--max-time", str(args.max_time), "--out", str(args.out), "--resume"]  # fmt: skip
     if args.keep_direction is not None:
         argv += ["--keep-direction", str(args.keep_direction)]
+    if args.allow_spent_seeds:
+        argv += ["--allow-spent-seeds"]
     if args.scheduler is not None:
         argv += ["--scheduler", args.scheduler]
     else:
@@ -88,6 +104,7 @@ def summarise(
     out: Path, planners, models, seeds, max_actions: int, mover="evasive", sensing="realistic"
 ) -> dict:
     summary: dict = {"planners": {}, "models": models, "seeds": seeds, "split": split_of(seeds)}
+    summary["on_spent_seeds"] = seed_ranges_text(spent_among(seeds)) or None
     for planner in planners:
         rows = []
         for m in models:
@@ -168,7 +185,9 @@ def print_table(summary: dict) -> None:
 
     print()
     seeds = summary["seeds"]
-    print(f"split: {summary['split']} (seeds {min(seeds)}-{max(seeds)}, {len(seeds)} seeds)")
+    spent = summary.get("on_spent_seeds")
+    on = f"; ON SPENT SEEDS: {spent}, no fresh evidence" if spent else ""
+    print(f"split: {summary['split']} (seeds {min(seeds)}-{max(seeds)}, {len(seeds)} seeds{on})")
     print(
         f"{'planner':8s} {'ok/n':>7s} {'Wilson 95 %':>13s} {'actions med [q1,q3] max':>25s} "
         f"{'sim s med [max]':>17s} {'pose err med cm / deg':>22s} {'RTF med':>8s} {'loop/wall':>9s} "
@@ -199,15 +218,16 @@ def print_table(summary: dict) -> None:
         )
 
 
-def main(argv=None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("out/eval_identify"))
     ap.add_argument("--models", type=parse_seeds, default=[0, 1, 2, 3], help="e.g. 0-3 (default)")
     ap.add_argument(
         "--seeds",
         type=parse_seeds,
-        default=report_seeds(25),
-        help="e.g. 100000-100024 (default: the report split's first 25) or 0-9 (the tuning split)",
+        default=fresh_report_seeds(IDENTIFY_SEEDS),
+        help=f"e.g. 0-9 (the tuning split) or report seeds (default: {IDENTIFY_SEEDS} fresh report seeds, "
+        "above every seed in the ledger of spent seeds, lab/data/spent_seeds.toml)",
     )
     ap.add_argument(
         "--sensing", default="realistic", choices=("realistic", "ideal"), help="the simulator's sensor errors"
@@ -224,7 +244,21 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1, help="episodes run side by side (default 1)")
     ap.add_argument("--scheduler", help="a Dask scheduler's address (tcp://HOST:8786), or 'local'")
     ap.add_argument("--report-only", action="store_true", help="summarise the JSONs already in --out")
-    args = ap.parse_args(argv)
+    ap.add_argument(
+        "--allow-spent-seeds",
+        action="store_true",
+        help="run even on report seeds the ledger lists as spent (refused otherwise); the report says so",
+    )
+    return ap
+
+
+def main(argv=None) -> int:
+    try:  # a malformed ledger, or a spent seed: one line
+        args = build_parser().parse_args(argv)
+        check_report_seeds(args.seeds, allow_spent=args.allow_spent_seeds or args.report_only)
+    except ConfigError as e:
+        print(f"eval_identify: error: {e}", file=sys.stderr)
+        return 2
     planners = [p for p in args.planners.split(",") if p]
     if not args.report_only:
         run_episodes(args, planners)  # failed episodes are listed by it; --resume-like reruns retry them

@@ -4,9 +4,9 @@ Run from the repository root (each trial is a full closed-loop run in the simula
 costmap navigator that ``lab search`` uses; expect one to three minutes of CPU per trial)::
 
     python benchmarks/eval_search.py run --out out/eval_search [--strategies paper,rate,lawnmower,frontier]
-        [--seeds 100000,100001] [--sensing realistic|ideal]
+        [--seeds A,B] [--sensing realistic|ideal]
         [--obstacles both|no|yes] [--surfaces floor,table,shelf] [--max-time 600]
-        [--workers N | --scheduler tcp://HOST:8786]
+        [--workers N | --scheduler tcp://HOST:8786] [--allow-spent-seeds]
     python benchmarks/eval_search.py report out/eval_search [more folders, or old .jsonl files]
 
 ``run`` is ``lab eval search`` (:mod:`lab.eval.search`: the same trials, placements and scoring, on a
@@ -19,8 +19,12 @@ placement (``random_placement`` with ``default_rng([seed, object, surface])``: p
 same for every strategy and with and without obstacles. ``--obstacles yes`` adds the two boxes of
 ``lab.runs.search.path_obstacles`` on the straight line from the start to the object (the paper's
 "obstacles placed in the planned path"; the boxes are not in the robot's map, it must see them).
-Two seeds give the issue's 18 placements; by default the report split's (seeds 100000 and 100001, see
-:mod:`lab.evaluation`), under the ``realistic`` sensing profile (``--sensing``). A trial that runs out
+Two seeds give the issue's 18 placements; by default two fresh report seeds
+(:func:`lab.evaluation.fresh_report_seeds`: above every seed in the ledger of spent seeds,
+``lab/data/spent_seeds.toml``), under the ``realistic`` sensing profile (``--sensing``). A report seed
+the ledger lists as spent is refused unless ``--allow-spent-seeds``; ``report`` says "ON SPENT SEEDS"
+when its trials are on some. Once figures on fresh seeds are reported, record them: ``lab eval spend
+A-B --why "..."``. A trial that runs out
 of ``--max-time`` (simulated seconds; default 600, ``lab search``'s own) is a failure: a slow baseline
 fails by its budget. The report also counts the successes found within shorter budgets (90 s, the
 issue's median; 300 s, the evaluation's budget until stop 42), read off the same runs: the budget only
@@ -56,8 +60,9 @@ from pathlib import Path
 
 import numpy as np
 
+from lab.eval.cli import SEARCH_SEEDS
 from lab.eval.search import SEARCH_MAX_TIME_S, spl
-from lab.evaluation import report_seeds, wilson_interval
+from lab.evaluation import fresh_report_seeds, seed_ranges_text, spent_among, wilson_interval
 
 OBJECTS = ("cereal_box", "book", "toy_block")
 SURFACES = ("floor", "table", "shelf")
@@ -86,6 +91,8 @@ def cmd_run(args) -> int:
         argv += ["--workers", str(args.workers)]
     if args.scheduler is not None:
         argv += ["--scheduler", args.scheduler]
+    if args.allow_spent_seeds:
+        argv += ["--allow-spent-seeds"]
     return lab(argv)
 
 
@@ -256,6 +263,9 @@ def cmd_report(args) -> int:
     rows = list(by.values())
     for d in rows:
         d["n_obstacles"] = n_obstacles_placed(d)
+    spent = spent_among(int(d["seed"]) for d in rows)
+    if spent:
+        print(f"ON SPENT SEEDS: {seed_ranges_text(spent)} (the ledger of spent seeds): no fresh evidence")
     strategies = sorted(
         {d["strategy"] for d in rows}, key=lambda s: ("rate", "paper", "frontier", "lawnmower").index(s)
     )
@@ -297,7 +307,7 @@ def cmd_report(args) -> int:
     return 0
 
 
-def main(argv=None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run")
@@ -305,8 +315,9 @@ def main(argv=None) -> int:
     r.add_argument("--strategies", default="paper,rate,lawnmower,frontier")
     r.add_argument(
         "--seeds",
-        default=",".join(str(s) for s in report_seeds(2)),
-        help="comma-separated (default: the report split's first two, 100000,100001; tune on seeds < 1000)",
+        default=seed_ranges_text(fresh_report_seeds(SEARCH_SEEDS)),
+        help=f"e.g. 0,1 (tuning) or report seeds (default: {SEARCH_SEEDS} fresh report seeds, above every "
+        "seed in the ledger of spent seeds, lab/data/spent_seeds.toml; a spent one is refused)",
     )
     r.add_argument("--sensing", default="realistic", choices=("realistic", "ideal"))
     r.add_argument("--obstacles", choices=("no", "yes", "both"), default="both")
@@ -317,9 +328,18 @@ def main(argv=None) -> int:
     r.add_argument("--max-wall-time", type=float, default=None, help="wall-clock cap per trial [s]")
     r.add_argument("--workers", type=int, help="worker processes (default 1)")
     r.add_argument("--scheduler", help="a Dask scheduler's address (tcp://HOST:8786), or 'local'")
+    r.add_argument(
+        "--allow-spent-seeds",
+        action="store_true",
+        help="run even on report seeds the ledger lists as spent (refused otherwise); the report says so",
+    )
     rep = sub.add_parser("report")
     rep.add_argument("files", nargs="+", help="lab eval search folders (or old run .jsonl files)")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
     return cmd_run(args) if args.cmd == "run" else cmd_report(args)
 
 

@@ -18,6 +18,37 @@ each step against the simulator's ground truth.
 Conventions (frames, angles, units) are written down once in `docs/conventions.md`: the camera frame
 $C$ is the left camera's optical frame, $x$ right, $y$ down, $z$ forward.""",
     ),
+    (
+        "md",
+        r"""**Learning objectives.** After this notebook you can:
+
+1. project a 3D point of the camera frame to its pixel with the pinhole model, and check it against the simulator's truth;
+2. triangulate a stereo match (a pixel and its disparity) into a 3D point;
+3. propagate the disparity's noise to the depth, and explain why it grows with the square of the distance;
+4. name what the `realistic` sensing profile adds to `ideal` (camera noise, calibration error, odometry drift) and measure it.
+
+**Prerequisites:** Python and NumPy (arrays, broadcasting), matrices and vectors, a first look at probability (mean, standard deviation). No robotics needed.
+
+**Time:** about 60 minutes (reading 30, exercises 30). The exercises marked *checked* answer back when you run their cell: "correct", or a hint
+that names your mistake (`lab.exercises`); until you write your code they say "not attempted yet". This
+notebook prepares the [`stereo` assignment](../assignments/stereo/README.md); the course plan is
+[docs/course.md](../docs/course.md).""",
+    ),
+]
+
+SUMMARY = [
+    (
+        "md",
+        r"""## Summary
+
+* A point $(X, Y, Z)$ in $C$ lands on $u = f X / Z + c_x$, $v = f Y / Z + c_y$; a rectified pair puts it on the same row of both images, shifted by the disparity $d$.
+* Triangulation inverts it: $Z = f B / d$, then $X$ and $Y$ from the pinhole model; the simulator's depth buffer confirms it to millimetres.
+* Depth uncertainty $\sigma_Z = Z^2 \sigma_d / (f B)$ grows with the square of the distance: near features are worth more to the EKF.
+* `realistic` sensing adds noise, calibration error, a rectification residual and odometry drift of a few percent; every reported figure uses it.
+
+**Next:** [01 The pose EKF](01_pose_ekf.ipynb). **Assignment:** [`stereo`](../assignments/stereo/README.md) (its
+README says what to write and how it is graded).""",
+    ),
 ]
 
 CELLS = [
@@ -80,6 +111,22 @@ plt.imshow(frame.left); plt.plot(u, v, "r+", ms=20); plt.axis("off");
     ),
     (
         "md",
+        r"""**Exercise 1 (checked): the pinhole projection.** Write `my_project(points_C, f, cx, cy)`: the pixels $(u, v)$, shape (n, 2), of points given in $C$, shape (n, 3) [m]. Run the cell: the check compares your pixels with OpenCV's `projectPoints` and says "correct" or names the mistake. (It is `project` of the `stereo` assignment.)""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_project
+
+def my_project(points_C, f, cx, cy):
+    points_C = np.asarray(points_C, float)
+    raise NotImplementedError   # your code: return an (n, 2) array of (u, v) [px]
+
+check_project(my_project)
+""",
+    ),
+    (
+        "md",
         r"""## SIFT features and matches along epipolar rows
 
 The pair is *rectified*: a point appears on the same row $v$ in both images, shifted left in the right
@@ -127,6 +174,22 @@ plt.hist(err_mm, bins=20); plt.xlabel("3D error [mm]"); plt.ylabel("features");
     ),
     (
         "md",
+        r"""**Exercise 2 (checked): triangulation.** Write `my_triangulate(uv, disparity, f, cx, cy, baseline)`: the 3D points in $C$, shape (n, 3) [m], of left-image pixels `uv` (n, 2) with positive disparities (n,) [px]. The check compares with OpenCV's `triangulatePoints` on the same pixels. Then answer the question above with your function: the depth of a 25 px disparity, and how much it changes for 25.5 px.""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_triangulate
+
+def my_triangulate(uv, disparity, f, cx, cy, baseline):
+    uv, disparity = np.asarray(uv, float), np.asarray(disparity, float)
+    raise NotImplementedError   # your code: return an (n, 3) array [m]
+
+check_triangulate(my_triangulate)
+""",
+    ),
+    (
+        "md",
         r"""## How uncertain is a stereo point?
 
 Propagating pixel noise $\sigma_u$ and disparity noise $\sigma_d$ through the triangulation gives each
@@ -165,6 +228,21 @@ widgets.VBox([slider, out])
 Z = f3d.points_C[:, 2]
 assert np.allclose(np.sqrt(f3d.covariances[:, 2, 2]), sigma_z_mm(Z) / 1e3, rtol=1e-9)
 world.close()
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise 3 (checked): depth uncertainty.** Derive $\sigma_Z$ yourself: differentiate $Z(d) = f B / d$ with respect to $d$ and propagate a disparity standard deviation $\sigma_d$ to first order. Write `my_depth_std(Z, f, baseline, sigma_disparity)` [m] (without looking at `sigma_z_mm` above). The check compares with a finite-difference derivative.""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_depth_std
+
+def my_depth_std(Z, f, baseline, sigma_disparity):
+    raise NotImplementedError   # your code: the first-order standard deviation of the depth [m]
+
+check_depth_std(my_depth_std)
 """,
     ),
     # Ideal and realistic sensing (issue 19, item 4)

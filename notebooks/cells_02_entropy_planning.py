@@ -30,6 +30,38 @@ $C$ (notebook 00). If $M_i$ is the object, its pose in $C$ is $\mathbf{X}_{k,i}$
 Euler angles); one EKF per model tracks it (notebook 01), with prediction $\bar\mu_{k,i}$, $\bar\Sigma_{k,i}$.
 $\mathbf{u}$ is a control action: where the robot drives next.""",
     ),
+    (
+        "md",
+        r"""**Learning objectives.** After this notebook you can:
+
+1. compute the entropy of the model probabilities (Eq. (5)) and state its bounds $[0, \log L]$;
+2. update the model probabilities with Bayes' rule in log space (Eq. (7)), with the evidence weight and the floor;
+3. compute the information gain of an action (Eqs. (4), (10)) and choose the next-best view (Eq. (6));
+4. compare the Monte Carlo and the lookup-table expected entropy (Eqs. (10)-(15)) in speed and in the view they choose;
+5. run the identification loop against an evasive operator, and be that operator yourself.
+
+**Prerequisites:** notebooks [00](00_simulator_and_stereo.ipynb) and [01](01_pose_ekf.ipynb); discrete probability (Bayes' rule, expectation); logarithms.
+
+**Time:** about 90 minutes (reading 40, exercises 30, the closed loop 20). The exercises marked *checked* answer back when you run their cell: "correct", or a hint
+that names your mistake (`lab.exercises`); until you write your code they say "not attempted yet". This
+notebook prepares the [`planning` assignment](../assignments/planning/README.md); the course plan is
+[docs/course.md](../docs/course.md).""",
+    ),
+]
+
+SUMMARY = [
+    (
+        "md",
+        r"""## Summary
+
+* The robot keeps one probability per model and updates it frame by frame with Eq. (7); the data likelihood of Eq. (9) is a Gaussian in the EKF's predicted features.
+* Entropy (Eq. (5)) measures what is still unknown: 0 when one model is certain, $\log L$ when all are equally likely.
+* The information gain of an action (Eq. (4)) is the entropy now minus the entropy expected after its measurement; Eq. (6) takes the best.
+* Lookup tables (Eqs. (13)-(15)) choose what Monte Carlo rates highly, at a fraction of its cost: fast enough to plan while driving.
+
+**Next:** [03 Grid search](03_grid_search.ipynb). **Assignment:** [`planning`](../assignments/planning/README.md) (its
+README says what to write and how it is graded).""",
+    ),
 ]
 
 CELLS = [
@@ -59,6 +91,22 @@ p = np.linspace(0.25, 1.0, 100)
 plt.figure(figsize=(5, 3))
 plt.plot(p, entropy(np.stack([p, *(3 * [(1 - p) / 3])], axis=1)))
 plt.xlabel("P(M_0), the other three equal"); plt.ylabel("H [nats]");
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise 1 (checked): entropy.** Write `my_entropy(P)` in nats, with $0 \log 0 = 0$ (a model with probability 0 adds nothing). The check compares with `scipy.stats.entropy`. (It is `entropy` of the `planning` assignment.)""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_entropy
+
+def my_entropy(P):
+    P = np.asarray(P, float)
+    raise NotImplementedError   # your code: Eq. (5)
+
+check_entropy(my_entropy)
 """,
     ),
     (
@@ -179,6 +227,22 @@ assert np.isclose(e.log_density[j], ref)
     ),
     (
         "md",
+        r"""**Exercise 2 (checked): Bayes' rule over the models.** Write `my_model_probabilities(P_prior, log_likelihood)`: Eq. (7) with $\kappa = 1$ and no floor. The log-likelihoods may be near $-3000$, where `np.exp` gives 0.0: work in log space. The check compares with SciPy's `softmax`. (`model_probabilities` of the `planning` assignment adds the floor.)""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_model_probabilities
+
+def my_model_probabilities(P_prior, log_likelihood):
+    P_prior, log_likelihood = np.asarray(P_prior, float), np.asarray(log_likelihood, float)
+    raise NotImplementedError   # your code: the posterior, shape (L,), summing to 1
+
+check_model_probabilities(my_model_probabilities)
+""",
+    ),
+    (
+        "md",
         r"""**Exercise.** Set $\kappa$ to 1 (`ScoringConfig(evidence_weight=1.0)`, passed to every `ModelScorer`)
 and look at the shared face again. What happens, and why is $\kappa$ needed?
 
@@ -236,6 +300,22 @@ print(f"H now {H_now:.3f} nats; Monte Carlo: best goal at azimuth {azimuth[best]
 off_deg = np.abs((azimuth - 60 + 180) % 360 - 180)               # angle between goal and unique face
 faces_unique = off_deg < 55                                       # goals that see the unique face
 assert faces_unique[best] and gain_mc[off_deg > 95].max() < 0.01  # shared faces only: nothing to learn
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise 3 (checked): the information gain.** Eq. (4) for a measurement with a few outcomes $y$ (say: "the unique face is seen" or not): given $P(M_i)$ and a table $p(y \mid M_i)$, each outcome has probability $p(y) = \sum_i P(M_i)\, p(y \mid M_i)$ and leaves the posterior $P(M_i \mid y)$ (Bayes). Write `my_information_gain(P, likelihood)`, `likelihood[i, y]` $= p(y \mid M_i)$, that returns $H(M) - \sum_y p(y)\, H(M \mid y)$ [nats]. The check computes the same number by another route (the mutual information of the joint distribution).""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_information_gain
+
+def my_information_gain(P, likelihood):
+    P, likelihood = np.asarray(P, float), np.asarray(likelihood, float)
+    raise NotImplementedError   # your code: H now minus the expected entropy after the measurement
+
+check_information_gain(my_information_gain)
 """,
     ),
     (

@@ -30,6 +30,38 @@ $h^k_{ij} = 1$ says "the object is in cell $c_{ij}$". The **probability map** $M
 $P(h_{ij} = 1 \mid \mathbf{Y}_{1:k})$ for every cell; the object is in exactly one cell, so the map sums
 to 1.""",
     ),
+    (
+        "md",
+        r"""**Learning objectives.** After this notebook you can:
+
+1. write the detection model with its false-alarm and missed-detection rates (Eq. (2)) and update the probability map after a detection or a miss (Eqs. (1)-(3));
+2. explain how a failed search moves probability to the other cells, and why a detector needs $\alpha + \beta < 1$;
+3. find the places that look like the object by colour back-projection, and put them on the map with stereo;
+4. plan a path on a stereo costmap with A* and an admissible heuristic, and verify it against Dijkstra;
+5. run the whole search, and choose the next cell by probability or by detection rate.
+
+**Prerequisites:** notebooks [00](00_simulator_and_stereo.ipynb) and [01](01_pose_ekf.ipynb) (the local search uses the pose EKF); Bayes' rule; graphs and shortest paths (Dijkstra).
+
+**Time:** about 90 minutes (reading 40, exercises 30, the whole search 20). The exercises marked *checked* answer back when you run their cell: "correct", or a hint
+that names your mistake (`lab.exercises`); until you write your code they say "not attempted yet". This
+notebook prepares the [`search` assignment](../assignments/search/README.md); the course plan is
+[docs/course.md](../docs/course.md).""",
+    ),
+]
+
+SUMMARY = [
+    (
+        "md",
+        r"""## Summary
+
+* The probability map holds $P(h_{ij} = 1 \mid \mathbf{Y})$ for every cell and sums to 1; Eqs. (1)-(3) update it with each detection or miss.
+* A miss moves the searched cell's mass to all other cells in proportion; the global search's positive detections use a $\beta$ that grows away from the measured cell.
+* Colour back-projection of the histogram ratio finds object-like patches; dense stereo puts them on the map.
+* A* with the octile heuristic finds the cheapest path on the costmap, as Dijkstra does, and the agent closes the loop: scan, drive, look, update.
+
+**Next:** [04 The real robot](04_real_robot.ipynb). **Assignment:** [`search`](../assignments/search/README.md) (its
+README says what to write and how it is graded).""",
+    ),
 ]
 
 CELLS = [
@@ -77,6 +109,37 @@ P1_by_hand = L * P0 / evidence                               # Eq. (1)
 P1 = update(P0, (u, v), 0, alpha, beta)                      # the library
 assert np.allclose(P1, P1_by_hand) and np.isclose(P1.sum(), 1.0)
 print(f"searched cell: {P0[u, v]:.4f} -> {P1[u, v]:.4f};  every other cell: {P0[0, 0]:.4f} -> {P1[0, 0]:.4f}")
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise 1 (checked): the detection model.** Write `my_detection_likelihood(shape, cell, detected, alpha, beta)`: the array, of the map's shape, whose entry $(i, j)$ is $P(y \mid h_{ij} = 1)$ of Eq. (2), for a detection (`detected=True`, $y = 1$) and for a miss. (It is `detection_likelihood` of the `search` assignment.)""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_detection_likelihood
+
+def my_detection_likelihood(shape, cell, detected, alpha, beta):
+    raise NotImplementedError   # your code: an array of `shape`
+
+check_detection_likelihood(my_detection_likelihood)
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise 2 (checked): the map update.** Write `my_update_probability_map(P, cell, detected, alpha, beta)`: the posterior map of Eqs. (1)-(3) (use your detection model). The check takes the posterior from the joint distribution of the hypotheses and the measurement.""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_map_update
+
+def my_update_probability_map(P, cell, detected, alpha, beta):
+    P = np.asarray(P, float)
+    raise NotImplementedError   # your code: the posterior, of P's shape, summing to 1
+
+check_map_update(my_update_probability_map)
 """,
     ),
     (
@@ -402,6 +465,21 @@ plt.contour(gx, gy, truth.astype(float), [0.5], colors="red", linewidths=0.8)
 plt.plot(path.points_xy[:, 0], path.points_xy[:, 1], "y-", lw=2); plt.plot(*goal, "ys")
 plt.title("costmap: grown obstacles (orange), truth (red), A* path");
 world.close()
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise 3 (checked): A*'s heuristic.** On open floor where every cell costs at least $m_{min}$, the cheapest 8-connected path from a cell to the goal takes the diagonal as far as it can, then goes straight. Write `my_octile_heuristic(cell, goal, min_cost)` (in cell units: a straight step is 1, a diagonal one $\sqrt 2$, times the cost). The check compares with networkx's Dijkstra on an open grid. (It is `octile_heuristic` of the `search` assignment.)""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_octile_heuristic
+
+def my_octile_heuristic(cell, goal, min_cost):
+    raise NotImplementedError   # your code: a float, never more than the true cost
+
+check_octile_heuristic(my_octile_heuristic)
 """,
     ),
     (

@@ -25,6 +25,37 @@ drivers talk to them over real serial I/O, with the real timing: on hardware, `r
 environment variable `LAB_ROBOT_CONFIG=hardware/robot.toml` before starting Jupyter. Put the robot on
 the floor with 2 m of free space around it, and keep a hand near the Create's power button.""",
     ),
+    (
+        "md",
+        r"""**Learning objectives.** After this notebook you can:
+
+1. run the same code on the simulator and on the hardware adapter through the one `Robot` interface;
+2. turn a base command $(v, \omega)$ into the wheel speeds of a differential drive, and the wheels' travel into odometry;
+3. predict how far the base goes under its acceleration limit, and explain the watchdog, the emergency stop and a safety stop;
+4. rehearse the object search on the device emulators before the real robot runs it.
+
+**Prerequisites:** notebooks [00](00_simulator_and_stereo.ipynb)-[03](03_grid_search.ipynb); planar kinematics (a pose $(x, y, \theta)$, a rotation by $\theta$). For the real robot: the bring-up checklist in `hardware/README.md`.
+
+**Time:** about 60 minutes on the emulators (reading 25, exercises 35); plus a robot session of 60-90 minutes. The exercises marked *checked* answer back when you run their cell: "correct", or a hint
+that names your mistake (`lab.exercises`); until you write your code they say "not attempted yet". This
+notebook prepares the [`search` assignment](../assignments/search/README.md); the course plan is
+[docs/course.md](../docs/course.md).""",
+    ),
+]
+
+SUMMARY = [
+    (
+        "md",
+        r"""## Summary
+
+* `SimRobot` and `HardwareRobot` share one interface (metres, radians, seconds; the same exceptions), so every algorithm runs on both unchanged.
+* A differential drive turns $(v, \omega)$ into wheel speeds $v \mp \omega\, b / 2$; its odometry integrates the wheels' travel and drifts.
+* A drive command holds for 0.5 s (the watchdog); the emergency stop latches; a safety stop (a lifted robot, a cliff) stops the base until it is enabled again.
+* A rehearsal runs the real drivers on emulators with a rendered camera: the object search runs there before it runs in the room.
+
+**Next:** [05 Localization against the room](05_localization.ipynb). **Assignment:** [`search`](../assignments/search/README.md) (its
+README says what to write and how it is graded).""",
+    ),
 ]
 
 CELLS = [
@@ -127,6 +158,36 @@ assert all(0.12 < d < 0.2 for d in moved.values()) and abs(moved["simulator"] - 
     ),
     (
         "md",
+        r"""**Exercise 1 (checked): wheel speeds.** The Create 2 takes one speed per wheel (Drive Direct, in mm/s); the `Robot` interface takes the base's forward speed $v$ [m/s] and turn rate $\omega$ [rad/s], counter-clockwise positive. Write `my_wheel_speeds(v, omega, track)` returning `(v_left, v_right)` in m/s, `track` the distance between the wheels [m]. The check drives your wheel speeds forward and compares the base's motion with the command.""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_wheel_speeds
+
+def my_wheel_speeds(v, omega, track):
+    raise NotImplementedError   # your code: (v_left, v_right) [m/s]
+
+check_wheel_speeds(my_wheel_speeds)
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise 2 (checked): the ramp.** The comment above says 0.16 m in 1 s at 0.2 m/s: the base speeds up at its acceleration limit. Write `my_ramp_distance(v, accel, duration)`: the distance [m] a base at rest covers in `duration` [s] when commanded to `v` [m/s] with the acceleration limit `accel` [m/s^2] (it may not reach `v` at all). The check integrates the speed numerically.""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_ramp_distance
+
+def my_ramp_distance(v, accel, duration):
+    raise NotImplementedError   # your code: a distance [m]
+
+check_ramp_distance(my_ramp_distance)
+""",
+    ),
+    (
+        "md",
         r"""## The watchdog
 
 A drive command holds for `cmd_timeout_s` (0.5 s). If no new one comes (a program that hangs, a cell
@@ -154,6 +215,22 @@ assert hw.watchdog_stops >= 1
 if EMULATED:                                      # what reached the wheels: the emulator's log
     zero = emulators.create.first_zero_drive_after(t_cmd)
     print(f"the Create received a zero Drive Direct {zero.t - t_cmd:.2f} s after the command")
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise 3 (checked): one odometry step.** The odometry the robots report adds up the wheels' travel. Write `my_odometry_step(pose, d_left, d_right, track)`: the new pose $(x, y, \theta)$ [m, m, rad] after the wheels rolled `d_left`, `d_right` [m] (a few centimetres). The check compares with a fine numerical integration of the arc; a first-order step is accurate enough.""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_odometry_step
+
+def my_odometry_step(pose, d_left, d_right, track):
+    x, y, theta = pose
+    raise NotImplementedError   # your code: return (x, y, theta) after the step
+
+check_odometry_step(my_odometry_step)
 """,
     ),
     (

@@ -35,6 +35,37 @@ This notebook builds them step by step: the motion model and how the covariance 
 alone; one landmark update by hand, from a rendered stereo frame to the new mean and covariance; then
 the filter on a drive through the lab room, against the simulator's truth.""",
     ),
+    (
+        "md",
+        r"""**Learning objectives.** After this notebook you can:
+
+1. compose an odometry increment onto a pose (the motion model) and predict how its covariance grows;
+2. predict a landmark's observation in the robot frame (the measurement model) and check its Jacobian;
+3. carry out one gated EKF update by hand and compute the Joseph-form covariance for any gain;
+4. compare odometry alone with landmark localization on a drive against the truth, with the NEES.
+
+**Prerequisites:** notebooks [01](01_pose_ekf.ipynb) (the EKF) and [04](04_real_robot.ipynb) (odometry); 2D rotations; the chi-square distribution (for the gate and the NEES).
+
+**Time:** about 90 minutes in fast mode (reading 45, exercises 30, the drives 15). The exercises marked *checked* answer back when you run their cell: "correct", or a hint
+that names your mistake (`lab.exercises`); until you write your code they say "not attempted yet". This
+notebook prepares the [`ekf` assignment](../assignments/ekf/README.md); the course plan is
+[docs/course.md](../docs/course.md).""",
+    ),
+]
+
+SUMMARY = [
+    (
+        "md",
+        r"""## Summary
+
+* The localizer is an EKF over $(x, y, \theta)$: odometry increments predict (composed in the robot's own frame), poster observations update.
+* Dead reckoning's covariance grows fastest across the path, driven by the heading error of the turns.
+* An update computes the innovation, gates it with $\chi^2_3$, and uses the Joseph form, which is right for any gain.
+* On a drive through the room the landmarks keep the error at centimetres where odometry alone drifts by decimetres; calibrating the odometry in the state keeps it small between landmarks.
+
+**Next:** the course plan, [docs/course.md](../docs/course.md), and the robot session. **Assignment:** [`ekf`](../assignments/ekf/README.md) (its
+README says what to write and how it is graded).""",
+    ),
 ]
 
 CELLS = [
@@ -96,6 +127,21 @@ V_fd = central_differences(lambda s: motion_model(x, s), u)
 print("F =\\n", F.round(4))
 print(f"largest difference to finite differences: F {np.abs(F - F_fd).max():.1e}, V {np.abs(V - V_fd).max():.1e}")
 assert np.allclose(F, F_fd, atol=1e-8) and np.allclose(V, V_fd, atol=1e-8)
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise 1 (checked): the motion model.** Write `my_motion_model(x, u)`: the pose $x = (x, y, \theta)$ moved by the increment $u = (\Delta x, \Delta y, \Delta\theta)$, written in the robot's own frame, with the heading wrapped to $(-\pi, \pi]$ (`wrap_angle`). The check compares with a product of homogeneous 2D transforms.""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_motion_model
+
+def my_motion_model(x, u):
+    raise NotImplementedError   # your code: the new (x, y, theta)
+
+check_motion_model(my_motion_model)
 """,
     ),
     (
@@ -315,6 +361,21 @@ H_fd = central_differences(lambda s: measurement_model(s, l), x)
 print("h(x) =", measurement_model(x, l).round(4), "\\nH =\\n", H.round(4))
 print(f"largest difference to finite differences: {np.abs(H - H_fd).max():.1e}")
 assert np.allclose(H, H_fd, atol=1e-8)
+""",
+    ),
+    (
+        "md",
+        r"""**Exercise 2 (checked): the measurement model.** Write `my_landmark_measurement(x, l)`: the planar pose of landmark $l = (x_l, y_l, \theta_l)$ (in W) as the robot at $x$ sees it, in its own frame R, the angle wrapped. The check compares with $G(x)^{-1} G(l)$, homogeneous transforms.""",
+    ),
+    (
+        "code",
+        """\
+from lab.exercises import check_landmark_measurement
+
+def my_landmark_measurement(x, l):
+    raise NotImplementedError   # your code: z = (x, y, theta) of the landmark in R
+
+check_landmark_measurement(my_landmark_measurement)
 """,
     ),
     (
@@ -577,20 +638,31 @@ assert position_error_cm(iterated(x_far, Sigma_far, z_far, Q, 1)) > 5 > 1 > posi
     ),
     (
         "md",
-        r"""**Exercise (the Joseph form).** For the gain the update uses, $\Sigma = (I-KH)\bar\Sigma$ and the Joseph
-form agree. Take a gain that is *not* optimal, half of it, $K' = K/2$: the estimate $\bar x + K'\nu$ is
-still a valid estimate, just a worse one. Compute its covariance in both forms below, then run the check:
-it draws the prior's error $e = x_{true} - \bar x \sim N(0, \bar\Sigma)$ and the measurement noise
-$v \sim N(0, Q)$, forms the new error $e' = e - K'(He + v)$ (as $\nu = He + v$ to first order), and
-compares their spread with your two matrices. Which form is right, and why? (Hint: expand
+        r"""**Exercise 3 (checked): the Joseph form.** For the gain the update uses, $\Sigma = (I-KH)\bar\Sigma$
+and the Joseph form agree. Take a gain that is *not* optimal, half of it, $K' = K/2$: the estimate
+$\bar x + K'\nu$ is still a valid estimate, just a worse one. What is its covariance? Write
+`my_joseph_covariance(Sigma_bar, K, H, Q)`, right for *any* gain; the check below passes it half the optimal
+gain and compares with the covariance of the new error $e' = e - K'(He + v)$ (as $\nu = He + v$ to first
+order), with the prior's error $e \sim N(0, \bar\Sigma)$ and the measurement noise $v \sim N(0, Q)$. Then
+the two cells after it compare both forms with a Monte Carlo run of that error. Which form is right, and why? (Hint: expand
 $\mathrm{Cov}(e')$ and see which terms cancel only when $K$ is optimal.)""",
     ),
     (
         "code",
         """\
+from lab.exercises import check_joseph_covariance
+
+def my_joseph_covariance(Sigma_bar, K, H, Q):
+    raise NotImplementedError   # your code: the covariance of x_bar + K nu, right for ANY gain K
+
+check_joseph_covariance(my_joseph_covariance)   # the check passes half the optimal gain
+""",
+    ),
+    (
+        "code",
+        """\
 K_half = 0.5 * K
-# your answer: the covariance of x_bar + K_half nu, in the Joseph form and in the short form
-# (the answer is given here; cover it and write your own)
+# the two forms for the Monte Carlo comparison below (the exercise's check above has its own inputs)
 I_KH_half = np.eye(3) - K_half @ H
 Sigma_joseph = I_KH_half @ Sigma_bar @ I_KH_half.T + K_half @ Q @ K_half.T
 Sigma_short = I_KH_half @ Sigma_bar

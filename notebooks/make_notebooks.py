@@ -3,7 +3,9 @@
     python notebooks/make_notebooks.py
 
 Each notebook is a list of ("md" | "code", text) cells: its ``cells_NN_topic.py`` beside this script holds
-``INTRO`` (the title cell) and ``CELLS``, and this script puts the common set-up cell between them.
+``INTRO`` (the title cell and the learning objectives, prerequisites and time), ``SUMMARY`` (the closing
+cell: what was learnt, the next notebook, the assignment) and ``CELLS``; this script puts the common set-up
+cell after ``INTRO`` and ``SUMMARY`` at the end.
 Keeping the source in Python makes diffs readable and guarantees the committed notebooks carry no
 outputs; the tests execute them headless with LAB_FAST=1.
 """
@@ -33,8 +35,8 @@ FAST = os.environ.get("LAB_FAST") == "1"   # CI runs the notebooks quickly with 
 
 
 def notebook(cells) -> list[tuple[str, str]]:
-    """A notebook's cells: its title cell(s), the common set-up cell, then the rest."""
-    return [*cells.INTRO, ("code", SETUP), *cells.CELLS]
+    """A notebook's cells: its title cell(s), the common set-up cell, the rest, then its summary."""
+    return [*cells.INTRO, ("code", SETUP), *cells.CELLS, *cells.SUMMARY]
 
 
 def write(name: str, cells) -> Path:

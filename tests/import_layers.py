@@ -20,6 +20,7 @@ ALGORITHMS = (
     "lab.navigation",
     "lab.identification",
     "lab.search",
+    "lab.exercises",  # the checks of the notebooks' exercises: beside the algorithms
 )
 
 

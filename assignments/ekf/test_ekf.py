@@ -73,3 +73,19 @@ def test_ekf_update_moves_towards_the_truth():
     mu, Sigma = ekf_update(mu_bar, Sigma_bar, d, b, 1e-6 * np.eye(24))
     assert np.linalg.norm(mu - X) < 0.2 * np.linalg.norm(mu_bar - X)
     assert np.all(np.linalg.eigvalsh(Sigma) > 0)
+
+
+# The notebook's checks (lab.exercises), where the course package is installed: they name a mistake
+# ("transposed axes", "a wrong sign", "missing normalisation") where the tests above only fail.
+@pytest.mark.parametrize(
+    "check, function",
+    [
+        ("check_rotation_zyx", "rotation_zyx"),
+        ("check_measurement_jacobian", "measurement_jacobian"),
+        ("check_kalman_update", "kalman_update"),
+    ],
+)
+def test_the_notebooks_check_says_correct(check, function):
+    exercises = pytest.importorskip("lab.exercises")
+    feedback = getattr(exercises, check)(globals()[function])
+    assert feedback.correct, str(feedback)

@@ -53,3 +53,14 @@ def test_the_view_of_the_unique_faces_is_the_best_action():
     best, gains = next_best_action(P, np.stack([shared, unique]), DELTA_O, SIGMA_O)
     assert best == 1
     assert gains[0] == pytest.approx(0.0, abs=1e-12) and gains[1] > 1.0
+
+
+# The notebook's checks (lab.exercises), where the course package is installed: they name a mistake
+# ("transposed axes", "a wrong sign", "missing normalisation") where the tests above only fail.
+@pytest.mark.parametrize(
+    "check, function", [("check_entropy", "entropy"), ("check_model_probabilities", "model_probabilities")]
+)
+def test_the_notebooks_check_says_correct(check, function):
+    exercises = pytest.importorskip("lab.exercises")
+    feedback = getattr(exercises, check)(globals()[function])
+    assert feedback.correct, str(feedback)

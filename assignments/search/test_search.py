@@ -52,3 +52,19 @@ def test_astar_without_a_path():
     cost[2, :] = np.inf
     path, total = astar(cost, (0, 0), (4, 4))
     assert len(path) == 0 and total == math.inf
+
+
+# The notebook's checks (lab.exercises), where the course package is installed: they name a mistake
+# ("transposed axes", "a wrong sign", "missing normalisation") where the tests above only fail.
+@pytest.mark.parametrize(
+    "check, function",
+    [
+        ("check_detection_likelihood", "detection_likelihood"),
+        ("check_map_update", "update_probability_map"),
+        ("check_octile_heuristic", "octile_heuristic"),
+    ],
+)
+def test_the_notebooks_check_says_correct(check, function):
+    exercises = pytest.importorskip("lab.exercises")
+    feedback = getattr(exercises, check)(globals()[function])
+    assert feedback.correct, str(feedback)

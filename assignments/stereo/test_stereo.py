@@ -25,3 +25,15 @@ def test_projection_inverts_triangulation():
 
 def test_depth_error_grows_with_the_square_of_the_distance():
     assert depth_std(2.0, F, B, 0.25) == pytest.approx(4 * depth_std(1.0, F, B, 0.25))
+
+
+# The notebook's checks (lab.exercises), where the course package is installed: they name a mistake
+# ("transposed axes", "a wrong sign", "missing normalisation") where the tests above only fail.
+@pytest.mark.parametrize(
+    "check, function",
+    [("check_triangulate", "triangulate"), ("check_project", "project"), ("check_depth_std", "depth_std")],
+)
+def test_the_notebooks_check_says_correct(check, function):
+    exercises = pytest.importorskip("lab.exercises")
+    feedback = getattr(exercises, check)(globals()[function])
+    assert feedback.correct, str(feedback)

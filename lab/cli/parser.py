@@ -84,6 +84,12 @@ def _sweep_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", action="store_true", help="run only the jobs without a result in --out")
     _executor_arguments(p)
     p.add_argument("--retries", type=int, default=0, help="Dask re-runs a job that raised this often")
+    p.add_argument(
+        "--allow-spent-seeds",
+        action="store_true",
+        help="run even on report seeds the ledger lists as spent (lab/data/spent_seeds.toml; refused "
+        "otherwise); the report then says 'on spent seeds'. Tuning seeds (< 1000) are never refused",
+    )
 
 
 def _episode_arguments(p: argparse.ArgumentParser, movers: tuple[str, ...], max_time: float) -> None:
@@ -412,13 +418,19 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run a grid of seeded episodes (identify: models x seeds x planners x movers x sensing; "
         "search: objects x placements x seeds x strategies x obstacles x sensing x localization), locally "
         "(--workers N processes) or on a Dask cluster (--scheduler tcp://HOST:8786, or 'local' for a local "
-        "one); writes OUT/jobs/KEY.json per job as it finishes, OUT/results.csv and OUT/report.md.",
+        "one); writes OUT/jobs/KEY.json per job as it finishes, OUT/results.csv and OUT/report.md. Report "
+        "seeds the ledger lists as spent are refused (--allow-spent-seeds); `lab eval spend` records "
+        "new ones.",
     )
     evs = ev.add_subparsers(dest="eval_command", metavar="SWEEP", required=True)
     ei = evs.add_parser("identify", help="identification episodes (`lab identify`)")
     ei.add_argument("--sweep", type=Path, help="a TOML file with the grid (flags given here override it)")
     ei.add_argument("--models", help="true models, e.g. 0-3 (default) or 0,2")
-    ei.add_argument("--seeds", help="e.g. 100000-100009 (default: the report split's first 25)")
+    ei.add_argument(
+        "--seeds",
+        help="e.g. 0-9 (tuning) or report seeds (default: 25 fresh report seeds, above every seed in the "
+        "ledger of spent seeds; a spent one is refused without --allow-spent-seeds)",
+    )
     ei.add_argument("--planners", help="comma-separated: lut, mc, random, circle (default lut,random)")
     ei.add_argument("--movers", "--mover", dest="movers", help="comma-separated (default evasive)")
     ei.add_argument("--sensing", help="comma-separated: realistic, ideal (default realistic)")
@@ -430,7 +442,11 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("--sweep", type=Path, help="a TOML file with the grid (flags given here override it)")
     es.add_argument("--objects", help="comma-separated (default cereal_box,book,toy_block)")
     es.add_argument("--surfaces", help="placements: a subset of floor,table,shelf (default all three)")
-    es.add_argument("--seeds", help="e.g. 100000-100001 (default: the report split's first 2)")
+    es.add_argument(
+        "--seeds",
+        help="e.g. 0-1 (tuning) or report seeds (default: 2 fresh report seeds, above every seed in the "
+        "ledger of spent seeds; a spent one is refused without --allow-spent-seeds)",
+    )
     es.add_argument(
         "--strategies", help="comma-separated: paper, rate, lawnmower, frontier (default all four)"
     )
@@ -440,6 +456,19 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("--max-time", type=float, help="sim-time budget per trial [s] (default 600)")
     es.add_argument("--max-wall-time", type=float, help="the trial's own wall-clock cap [s] (default none)")
     _sweep_run_arguments(es)
+    sp = evs.add_parser(
+        "spend",
+        help="record report seeds as spent in the ledger (lab/data/spent_seeds.toml)",
+        description="Append to the ledger of spent report seeds: seeds looked at to decide anything, or "
+        "reported on, are spent, and `lab eval` refuses them afterwards unless --allow-spent-seeds. The "
+        "file is written through a temporary file and a rename; commit it.",
+    )
+    sp.add_argument("seeds", help="the report seeds, e.g. 101300-101304 or 101300,101302")
+    sp.add_argument("--why", required=True, help="what looking at them decided, or what was reported")
+    sp.add_argument("--runs", default="search", help="comma-separated runs that used them (default search)")
+    sp.add_argument("--commit", help="the commit the decision or report was made at")
+    sp.add_argument("--source", help="where it is written down (a closing note, docs/tuning/*.md)")
+    sp.add_argument("--ledger", type=Path, help="another ledger file (default: the package's)")
 
     a = sub.add_parser(
         "assignments",

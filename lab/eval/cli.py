@@ -6,7 +6,10 @@ from pathlib import Path
 
 from lab.errors import ConfigError
 
-__all__ = ["identify_sweep", "run_eval", "search_sweep"]
+__all__ = ["IDENTIFY_SEEDS", "SEARCH_SEEDS", "identify_sweep", "run_eval", "search_sweep", "spend"]
+
+IDENTIFY_SEEDS = 25  #: ``lab eval identify``'s default: this many fresh report seeds
+SEARCH_SEEDS = 2  #: ``lab eval search``'s default: this many fresh report seeds
 
 
 def _ints(v, what: str) -> tuple[int, ...]:
@@ -38,12 +41,12 @@ def _spec(args, fields) -> dict:
 def identify_sweep(args):
     """The grid of ``lab eval identify``, checked."""
     from lab.eval.sweep import SWEEP_FIELDS, IdentifySweep
-    from lab.evaluation import report_seeds
+    from lab.evaluation import fresh_report_seeds
 
     spec = _spec(args, SWEEP_FIELDS)
     sw = IdentifySweep(
         models=_ints(spec.get("models", "0-3"), "models"),
-        seeds=_ints(spec["seeds"], "seeds") if "seeds" in spec else tuple(report_seeds(25)),
+        seeds=_ints(spec["seeds"], "seeds") if "seeds" in spec else tuple(fresh_report_seeds(IDENTIFY_SEEDS)),
         planners=_names(spec.get("planners", "lut,random")),
         movers=_names(spec.get("movers", "evasive")),
         sensing=_names(spec.get("sensing", "realistic")),
@@ -58,14 +61,14 @@ def identify_sweep(args):
 def search_sweep(args):
     """The grid of ``lab eval search``, checked."""
     from lab.eval.search import SEARCH_FIELDS, SEARCH_MAX_TIME_S, STRATEGIES, SearchSweep
-    from lab.evaluation import report_seeds
+    from lab.evaluation import fresh_report_seeds
 
     spec = _spec(args, SEARCH_FIELDS)
     wall = spec.get("max_wall_time")
     sw = SearchSweep(
         objects=_names(spec.get("objects", "cereal_box,book,toy_block")),
         surfaces=_names(spec.get("surfaces", "floor,table,shelf")),
-        seeds=_ints(spec["seeds"], "seeds") if "seeds" in spec else tuple(report_seeds(2)),
+        seeds=_ints(spec["seeds"], "seeds") if "seeds" in spec else tuple(fresh_report_seeds(SEARCH_SEEDS)),
         strategies=_names(spec.get("strategies", ",".join(STRATEGIES))),
         obstacles=str(spec.get("obstacles", "both")),
         sensing=_names(spec.get("sensing", "realistic")),
@@ -77,10 +80,24 @@ def search_sweep(args):
     return sw
 
 
+def spend(args) -> int:
+    """``lab eval spend SEEDS --why TEXT``: record report seeds as spent (appended to the ledger)."""
+    from lab.evaluation import ledger_path, parse_seeds, record_spending
+
+    path = args.ledger or ledger_path()
+    seeds, runs = parse_seeds(args.seeds), _names(args.runs)
+    new = record_spending(seeds, args.why, runs, path, commit=args.commit, source=args.source)
+    print(f"recorded in {path}: {', '.join(e.label for e in new)} spent ({args.why}); commit the file")
+    return 0
+
+
 def run_eval(args) -> int:
     from lab.eval.executor import make_executor
     from lab.eval.sweep import IDENTIFY, print_split, run_sweep
+    from lab.evaluation import check_report_seeds
 
+    if args.eval_command == "spend":
+        return spend(args)
     if args.eval_command == "identify":
         sw, kind = identify_sweep(args), IDENTIFY  # every check before anything starts
     elif args.eval_command == "search":
@@ -88,11 +105,12 @@ def run_eval(args) -> int:
 
         sw, kind = search_sweep(args), SEARCH
     else:
-        raise ConfigError(f"unknown sweep {args.eval_command!r}; sweeps: identify, search")
+        raise ConfigError(f"unknown sweep {args.eval_command!r}; sweeps: identify, search, spend")
     if args.retries < 0:
         raise ConfigError(f"--retries must be >= 0, got {args.retries}")
     if args.job_timeout is not None and not args.job_timeout > 0:
         raise ConfigError(f"--job-timeout must be > 0 s, got {args.job_timeout:g}")
+    check_report_seeds(sw.seeds, allow_spent=args.allow_spent_seeds, run=args.eval_command)
     jobs = sw.jobs()
     out = Path(args.out)
     if not args.resume and (out / "results.csv").exists():

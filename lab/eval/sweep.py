@@ -304,8 +304,9 @@ def run_sweep(
 
 def write_report(out: Path, rows: list[dict], kind: SweepKind = IDENTIFY) -> Path:
     """``report.md``: success per condition (``kind.conditions``, e.g. planner, mover, sensing) with its
-    Wilson 95 % interval and the kind's medians; the split of the seeds; the failed jobs."""
-    from lab.evaluation import split_of, wilson_interval
+    Wilson 95 % interval and the kind's medians; the split of the seeds, and whether any is spent (in
+    the ledger of :mod:`lab.evaluation`); the failed jobs."""
+    from lab.evaluation import spent_among, spent_note, split_of, wilson_interval
     from lab.io import write_text_atomic
 
     lines = [f"# Sweep report: lab eval {kind.name}", ""]
@@ -313,6 +314,9 @@ def write_report(out: Path, rows: list[dict], kind: SweepKind = IDENTIFY) -> Pat
     if seeds:
         lines.append(f"Seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}): the {split_of(seeds)} split.")
         lines.append("")
+        note = spent_note(spent_among(seeds, run=kind.name), len(seeds))
+        if note:
+            lines += [note, ""]
     heads = [*kind.conditions, "success", "Wilson 95 %", *(h for h, _ in kind.medians), "errors"]
     lines += ["| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
     conds = sorted({tuple(str(r[c]) for c in kind.conditions) for r in rows})
@@ -334,8 +338,11 @@ def write_report(out: Path, rows: list[dict], kind: SweepKind = IDENTIFY) -> Pat
 
 
 def print_split(seeds, file=None) -> None:
-    from lab.evaluation import split_of
+    """``split: report (seeds A-B, N seeds)``, and which of them are spent when some are."""
+    from lab.evaluation import seed_ranges_text, spent_among, split_of
 
     file = file or sys.stdout
     s = sorted(seeds)
-    print(f"split: {split_of(s)} (seeds {s[0]}-{s[-1]}, {len(s)} seeds)", file=file)
+    spent = spent_among(s)
+    on = f"; ON SPENT SEEDS: {seed_ranges_text(spent)}" if spent else ""
+    print(f"split: {split_of(s)} (seeds {s[0]}-{s[-1]}, {len(s)} seeds{on})", file=file)
