@@ -34,6 +34,7 @@ setup:
 
 demo: setup
 	$(RUN) lab demo --out out/demo
+	@echo "make demo: to see the run in 3D (one HTML page, offline): $(UV) run --extra view3d lab demo --out out/demo --view3d out/demo/view3d.html"
 
 test: setup
 	$(PYTEST)

@@ -8,6 +8,11 @@ from pathlib import Path
 __all__ = ["build_parser"]
 
 
+HELP_VIEW3D = (
+    "write a recorded 3D view of the run: one self-contained HTML page with a time slider, opens offline "
+    "in any browser (needs the optional package viser: pip install 'lab[view3d]')"
+)
+
 def _sensing(value: str) -> str:
     """``--sensing``'s value: a profile name or a ``.toml`` file (read and checked by the command)."""
     if value in ("realistic", "ideal") or value.endswith(".toml"):
@@ -110,6 +115,7 @@ def _episode_arguments(p: argparse.ArgumentParser, movers: tuple[str, ...], max_
         "--max-time", type=float, default=max_time, help=f"time budget in seconds (default {max_time:g})"
     )
     p.add_argument("--record", type=Path, help="write an animation of the run (.gif, or .mp4 with ffmpeg)")
+    p.add_argument("--view3d", type=Path, metavar="FILE.html", help=HELP_VIEW3D)
     _sensing_argument(p)
     p.add_argument(
         "--robot",
@@ -290,6 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         help="write an animation of the run (.gif, or .mp4 with ffmpeg): one frame per event",
     )
+    se.add_argument("--view3d", type=Path, metavar="FILE.html", help=HELP_VIEW3D + "; one step per event")
     se.add_argument(
         "--robot",
         type=Path,

@@ -87,6 +87,8 @@ def _report(res: dict, names: list[str], figures: list[tuple[str, str]], robot: 
         lines += [f"## {caption}", "", f"![{caption}]({name})", ""]
     if res.get("recording"):
         lines += [f"Animation: `{res['recording']}`", ""]
+    if res.get("view3d"):
+        lines += [f"3D view (open in a browser, drag the time slider): `{res['view3d']}`", ""]
     return "\n".join(lines)
 
 
@@ -99,6 +101,7 @@ def run_demo(
     max_actions: int = 8,
     max_time_s: float = 150.0,
     record: Path | None = None,
+    view3d: Path | None = None,
     robot: Path | None = None,
     say: Callable[[str], None] = print,
     sensing="realistic",
@@ -114,6 +117,8 @@ def run_demo(
         8 actions, 150 s of simulated time).
     record : Path, optional
         Write an animation of the live view (.gif, or .mp4 with ffmpeg).
+    view3d : Path, optional
+        Write the recorded 3D view (:mod:`lab.viz.view3d`: one HTML page; needs ``lab[view3d]``).
     robot : Path, optional
         A hardware TOML config: run on that robot (no ground truth: no pose error, no Fig. 5 truth); a
         rehearsal config (``hardware/rehearsal.toml``) runs on the emulators with rendered frames and
@@ -158,6 +163,7 @@ def run_demo(
         json_path=out / "identify.json" if robot is None else None,
         max_time_s=max_time_s,
         record=record,
+        view3d=view3d,
         robot_config=robot,
         progress=say if robot is not None else None,
         sensing=sensing,

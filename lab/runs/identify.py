@@ -117,6 +117,7 @@ def run_identify(
     sensing="realistic",
     localization="odometry",
     start=None,
+    view3d: Path | None = None,
 ) -> dict:
     """Run one episode and return the ``lab identify`` JSON (also written to ``json_path``).
 
@@ -152,7 +153,14 @@ def run_identify(
         A robot only: where it stands in the room when it starts (default: its config's ``[room] start``,
         a rehearsal's ``[sim] robot_start``; the real robot has no default: without one it localizes by
         odometry alone, and says so).
+    view3d : Path, optional
+        Write the recorded 3D view there (:mod:`lab.viz.view3d`, one HTML page, one step per frame);
+        its path is the JSON's ``view3d``.
     """
+    if view3d is not None:
+        from lab.viz.view3d import require_viser
+
+        require_viser()  # the optional viewer missing: one line before anything starts
     hw, room, start_pose = _checked_setup(true_model, robot_config, localization, start)
     config = _agent_config(max_actions, max_time_s, keep_direction)
     t_wall, t_cpu = time.perf_counter(), time.process_time()  # CPU: the episode's cost whatever the load
@@ -163,6 +171,11 @@ def run_identify(
         tracked = TrackedRobot(robot, _truth_pose(session))  # the robot's path, for Fig. 6
         agent = build_agent(tracked, planner, seed, config, floor_plan=plan)
         recorder = _watch(agent, record, progress)
+        viewer = None
+        if view3d is not None:  # the world's bodies for display only; the agent never sees them
+            from lab.viz.view3d import View3D
+
+            viewer = View3D.for_identification(agent, view3d, session.world)
         if attach is not None:
             attach(agent, session.carrier)
         truth = _record_truth(agent, session)
@@ -176,6 +189,8 @@ def run_identify(
     result.update(sim_time_s=elapsed, wall_time_s=wall, pose_error=error, **extra)
     _add_reason_and_speed(result, agent, session, identified, interrupted, (elapsed, wall, cpu, loop))
     _finish_recording(recorder, result, progress)
+    if viewer is not None:
+        result["view3d"] = str(viewer.save())
     true_poses = [G_WO for _, G_WO in truth]
     _write(result, json_path, out if figures else None, agent, session, true_poses, tracked.track())
     return result
