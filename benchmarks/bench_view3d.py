@@ -52,7 +52,8 @@ def main() -> None:
 def _report(name: str, view, wall_s: float, page: Path) -> None:
     mb = page.stat().st_size / 1e6
     print(
-        f"{name:8s} steps {len(view.steps):4d}  run wall {wall_s:7.1f} s  recording {view.recording_s:6.2f} s "
+        f"{name:8s} steps {len(view.steps):4d}  run wall {wall_s:7.1f} s  "
+        f"recording {view.recording_s:6.2f} s "
         f"({100 * view.recording_s / wall_s:4.1f} %)  writing {view.writing_s:5.2f} s "
         f"({100 * view.writing_s / wall_s:4.1f} %)  page {mb:5.2f} MB"
     )

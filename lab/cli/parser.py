@@ -13,6 +13,7 @@ HELP_VIEW3D = (
     "in any browser (needs the optional package viser: pip install 'lab[view3d]')"
 )
 
+
 def _sensing(value: str) -> str:
     """``--sensing``'s value: a profile name or a ``.toml`` file (read and checked by the command)."""
     if value in ("realistic", "ideal") or value.endswith(".toml"):

@@ -51,6 +51,16 @@ _OUTPUT_KEEP = 4000  # characters of the child's stdout/stderr kept for feedback
 
 
 # ------------------------------------------------------------------------------------------ outcomes
+
+
+def _signal_name(number: int) -> str | None:
+    """The name of signal ``number`` (``"SIGKILL"``), or None when it is not a signal of this platform."""
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return None
+
+
 class SubmissionProblem(Exception):
     """The student's code did not produce a value: raised, timed out, crashed or failed to import."""
 
@@ -252,11 +262,11 @@ class ChildProcess:
             code = self.proc.wait(timeout=2.0)
         except subprocess.TimeoutExpired:
             return "the process closed the grader's channel"
-        bwrap_signal = 128 < code < 128 + 65 and code - 128 in signal.Signals._value2member_map_
+        bwrap_signal = 128 < code < 128 + 65 and _signal_name(code - 128) is not None
         if self.sandbox.bubblewrap and bwrap_signal:
             code = 128 - code  # bwrap reports a child killed by signal N as exit status 128 + N
         if code < 0:
-            sig = signal.Signals(-code).name if -code in signal.Signals._value2member_map_ else str(-code)
+            sig = _signal_name(-code) or str(-code)
             why = {
                 "SIGSEGV": " (segmentation fault: e.g. unbounded recursion)",
                 "SIGXCPU": " (CPU time limit)",

@@ -92,6 +92,16 @@ def _report(res: dict, names: list[str], figures: list[tuple[str, str]], robot: 
     return "\n".join(lines)
 
 
+def _what_runs(robot, planner: str, box: str, mover: str, max_actions: int, max_time_s: float) -> str:
+    """The line that says what the demo is about to run."""
+    if robot is not None:
+        return f"lab demo: identifying the box with the robot of {robot} ({planner} planner) ..."
+    return (
+        f"lab demo: identifying the box on the carrier ({box}, {mover} mover, "
+        f"{planner} planner, up to {max_actions} actions, {max_time_s:g} s simulated) ..."
+    )
+
+
 def run_demo(
     out: Path,
     seed: int = 0,
@@ -146,13 +156,7 @@ def run_demo(
     t0 = time.perf_counter()
     from lab.runs.identify import run_identify
 
-    if robot is not None:
-        say(f"lab demo: identifying the box with the robot of {robot} ({planner} planner) ...")
-    else:
-        say(
-            f"lab demo: identifying the box on the carrier ({names[true_model]}, {mover} mover, "
-            f"{planner} planner, up to {max_actions} actions, {max_time_s:g} s simulated) ..."
-        )
+    say(_what_runs(robot, planner, names[true_model], mover, max_actions, max_time_s))
     res = run_identify(
         true_model,
         seed,
