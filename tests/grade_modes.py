@@ -3,12 +3,14 @@
 A grading test asks for a mode with a fixture: ``grading_mode`` runs it once in each of bubblewrap
 (``bwrap``) and the uid mode (``uid``), ``any_mode`` once in the strongest mode there is. A mode the
 machine lacks skips the test with one line naming what to install, except that under CI
-(``CI=true``) a missing bubblewrap fails instead: CI must prove the full sandbox.
+(``CI=true``) a missing bubblewrap fails instead, and so does a uid mode that does not work as root on
+Linux: CI must prove both.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 
 import pytest
 
@@ -35,15 +37,21 @@ def mode_missing(mode: str) -> str | None:
     return None
 
 
+def _root_on_linux() -> bool:
+    return sys.platform == "linux" and os.geteuid() == 0
+
+
 def require(mode: str) -> None:
-    """Skip (fail under CI, for bubblewrap) unless ``mode`` works on this machine."""
+    """Skip unless ``mode`` works on this machine; under CI fail instead for bubblewrap, and for the uid
+    mode when the tests run as root on Linux (where it must work: CI proves both)."""
     why = mode_missing(mode)
     if why is None:
         return
-    if mode == "bwrap" and _ci():
-        pytest.fail(f"CI=true and bubblewrap does not work here: {why}")
+    if _ci() and (mode == "bwrap" or _root_on_linux()):
+        pytest.fail(f"CI=true and the {mode} isolation mode does not work here: {why}")
     first = why.split(";")[0]
-    how = first if "install" in first else WHAT_TO_INSTALL[mode]
+    # as root the uid mode's own reason says what to change (e.g. a Python other users cannot read)
+    how = first if "install" in first or (mode == "uid" and _root_on_linux()) else WHAT_TO_INSTALL[mode]
     pytest.skip(f"needs the {mode} isolation mode: {how}")
 
 

@@ -14,6 +14,7 @@ import sys
 import zipfile
 
 import pytest
+from grade_modes import require
 from test_grade_attacks import every_attack
 
 from lab.cli import main
@@ -44,6 +45,7 @@ def autograder(tmp_path_factory):
         pytest.skip("needs root on Linux with setpriv and unshare (util-linux): the bundle's root grader")
     if shutil.which("uv") is None:
         pytest.skip("needs uv to pin the bundle's versions from uv.lock: pip install uv")
+    require("uid")  # the bundle grades in the uid mode: its child must be able to run this Python
     tmp = tmp_path_factory.mktemp("gradescope")
     bundle = tmp / "autograder.zip"
     assert main(["assignments", "gradescope", "ekf", "--out", str(bundle), "--quiet"]) == 0
