@@ -617,6 +617,34 @@ they differ when a weaker peak lies much nearer.""",
     ),
     (
         "md",
+        r"""## The search in 3D
+
+The same search recorded as a 3D scene (`run_search(..., view3d=path)`, or `lab search --view3d FILE.html`):
+the room, the robot's true (black) and estimated (green) paths with the localizer's 3-sigma ellipse, the
+global scan's cameras and colour peaks (red), and the map $M_p$ as a heat map on the floor (log colour
+scale), one step per event. Drag the time slider to watch the mass move as each cell is searched. The
+page is self-contained: open the saved file in any browser, offline.""",
+    ),
+    (
+        "code",
+        """\
+from pathlib import Path
+from lab.errors import ConfigError
+from lab.viz.view3d import show_page
+
+page = Path("out") / "grid_search_3d.html"
+try:
+    res3d = run_search(target, seed=0, place=scene.body(target).pose, navigate=navigate,
+                       max_time=60 if FAST else 400, view3d=page)
+except ConfigError as e:   # the optional viewer is missing: the line says how to install it
+    print(e)
+else:
+    print(f"{len(res3d.events)} events, one step each on the time slider; the page: {page}")
+    display(show_page(page))
+""",
+    ),
+    (
+        "md",
         r"""## An object that moves: the prediction step
 
 The paper assumes the object stays put: the prior of Eq. (1) is the last map,

@@ -7,10 +7,12 @@ import json
 
 import pytest
 from grade_cases import make_class
+from grade_modes import *  # noqa: F403  (the fixture any_mode)
 
 from lab.cli import main
 
 pytest.importorskip("distributed")
+pytestmark = pytest.mark.usefixtures("any_mode")  # grading needs an isolation mode (skips without one)
 
 VOLATILE = ("execution_time",)
 

@@ -12,6 +12,7 @@ import sys
 
 import pytest
 from grade_cases import ALL, CASES
+from grade_modes import *  # noqa: F403  (the fixtures grading_mode and any_mode)
 
 from lab.contract import problems
 from lab.grading import get_assignment, grade_submission, list_assignments
@@ -50,7 +51,7 @@ def _check_report(report, tmp_path):
 
 
 @pytest.mark.parametrize("name", NAMES)
-def test_reference_solution_scores_100_percent(name, tmp_path):
+def test_reference_solution_scores_100_percent(name, tmp_path, any_mode):
     a = get_assignment(name)
     report = grade_submission(a, a.module_path)
     assert report.score == report.max_score, report.summary()
@@ -58,7 +59,7 @@ def test_reference_solution_scores_100_percent(name, tmp_path):
 
 
 @pytest.mark.parametrize("name", NAMES)
-def test_untouched_template_scores_0_with_not_implemented(name, released, tmp_path):
+def test_untouched_template_scores_0_with_not_implemented(name, released, tmp_path, any_mode):
     a = get_assignment(name)
     report = grade_submission(a, released / name)
     assert report.score == 0.0, report.summary()
@@ -68,7 +69,7 @@ def test_untouched_template_scores_0_with_not_implemented(name, released, tmp_pa
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
-def test_wrong_submission_loses_exactly_the_tests_it_should(case, tmp_path):
+def test_wrong_submission_loses_exactly_the_tests_it_should(case, tmp_path, any_mode):
     a = get_assignment(case.assignment)
     sub = tmp_path / "student"
     sub.mkdir()

@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import pytest
+from grade_modes import *  # noqa: F403  (the fixtures grading_mode and any_mode)
 
 from lab.contract import problems
 from lab.grading import get_assignment
@@ -19,7 +20,7 @@ def _lab(*args, cwd=None):
     )
 
 
-def test_grade_writes_gradescope_results_and_a_summary(tmp_path):
+def test_grade_writes_gradescope_results_and_a_summary(tmp_path, any_mode):
     a = get_assignment("stereo")
     sub = tmp_path / "submission"
     sub.mkdir()
@@ -34,7 +35,7 @@ def test_grade_writes_gradescope_results_and_a_summary(tmp_path):
     assert {"name", "score", "max_score", "output", "visibility"} <= set(data["tests"][0])
 
 
-def test_batch_grades_a_class_into_one_csv(tmp_path):
+def test_batch_grades_a_class_into_one_csv(tmp_path, any_mode):
     stereo, planning = get_assignment("stereo"), get_assignment("planning")
     released = tmp_path / "release"
     assert _lab("assignments", "release", released, "stereo", "planning").returncode == 0
@@ -50,11 +51,13 @@ def test_batch_grades_a_class_into_one_csv(tmp_path):
     assert "alice: stereo 6/6, planning 14/14; total 20/20" in r.stdout
     rows = list(csv.DictReader(scores.open()))
     assert [row["student"] for row in rows] == ["alice", "bob", "carol"]
+    assert {row["sandbox"] for row in rows} == {any_mode}  # the isolation mode, named for each student
     assert [row["total"] for row in rows] == ["20", "0", "0"] and rows[0]["max_score"] == "20"
     header = rows[0].keys()
     assert "stereo:triangulate_matches_opencv" in header and "planning:posterior_log_space" in header
     assert rows[0]["planning:posterior_log_space"] == "2" and rows[1]["planning:posterior_log_space"] == "0"
     results = json.loads((each / "carol" / "stereo.json").read_text())
+    assert results["extra_data"]["sandbox"] == any_mode and results["extra_data"]["secure"] is True
     assert results["score"] == 0 and "no stereo.py found" in results["tests"][0]["output"]
 
 

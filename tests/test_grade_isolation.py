@@ -10,6 +10,7 @@ import textwrap
 
 import numpy as np
 import pytest
+from grade_modes import *  # noqa: F403  (the fixtures grading_mode and any_mode)
 
 from lab.grading import get_assignment, grade_submission
 from lab.grading.sandbox import WireError, decode, encode
@@ -131,7 +132,7 @@ def _submit(tmp_path, source, name="student"):
     return d
 
 
-def test_each_misbehaviour_costs_its_own_test_and_says_what_happened(tmp_path):
+def test_each_misbehaviour_costs_its_own_test_and_says_what_happened(tmp_path, grading_mode):
     toy = _toy(tmp_path)
     assert grade_submission(toy, toy.module_path).score == len(FUNCTIONS)  # the toy reference passes
     report = grade_submission(toy, _submit(tmp_path, MISBEHAVING))
@@ -151,7 +152,7 @@ def test_each_misbehaviour_costs_its_own_test_and_says_what_happened(tmp_path):
     assert "cannot read" in out["garbles_channel"] or "answer" in out["garbles_channel"]
 
 
-def test_the_scoring_process_never_runs_the_submission(tmp_path):
+def test_the_scoring_process_never_runs_the_submission(tmp_path, any_mode):
     import builtins
 
     toy = _toy(tmp_path, ["good"])
@@ -168,7 +169,7 @@ def test_the_scoring_process_never_runs_the_submission(tmp_path):
     assert "toy" not in sys.modules
 
 
-def test_printing_or_writing_fake_results_does_not_change_the_grade(tmp_path):
+def test_printing_or_writing_fake_results_does_not_change_the_grade(tmp_path, any_mode):
     from lab.cli import main
 
     toy = _toy(tmp_path, ["good", "other"])
@@ -211,7 +212,7 @@ def test_printing_or_writing_fake_results_does_not_change_the_grade(tmp_path):
     assert "sandbox refused" in good and "results.json: not in the sandbox" in good
 
 
-def test_a_module_that_hangs_on_import_fails_every_test_once(tmp_path):
+def test_a_module_that_hangs_on_import_fails_every_test_once(tmp_path, any_mode):
     toy = _toy(tmp_path, ["a", "b", "c", "d"])
     report = grade_submission(toy, _submit(tmp_path, "while True:\n    pass\n"))
     assert report.score == 0.0
@@ -222,7 +223,7 @@ def test_a_module_that_hangs_on_import_fails_every_test_once(tmp_path):
     assert report.execution_time_s < 4 * 3
 
 
-def test_a_bug_in_a_graded_test_is_reported_as_a_grader_error(tmp_path):
+def test_a_bug_in_a_graded_test_is_reported_as_a_grader_error(tmp_path, any_mode):
     toy = _toy(tmp_path, ["a", "b"])
     tests = toy.tests_path.read_text()
     toy.tests_path.write_text(
@@ -234,7 +235,7 @@ def test_a_bug_in_a_graded_test_is_reported_as_a_grader_error(tmp_path):
     assert report.by_id()["c"].output.startswith("GRADER ERROR") and "KeyError" in report.by_id()["c"].output
 
 
-def test_a_submitted_file_under_another_name_is_graded_as_the_module(tmp_path):
+def test_a_submitted_file_under_another_name_is_graded_as_the_module(tmp_path, any_mode):
     toy = _toy(tmp_path, ["good", "bad"])
     upload = tmp_path / "alice_hw3 (1).py"
     upload.write_text("def good(x):\n    return [2 * v for v in x]\n\ndef bad(x):\n    return 1 / 0\n")
@@ -243,14 +244,14 @@ def test_a_submitted_file_under_another_name_is_graded_as_the_module(tmp_path):
     assert "at toy.py line 5, in bad: return 1 / 0" in report.by_id()["bad"].output
 
 
-def test_a_missing_module_fails_every_test_with_what_to_submit(tmp_path):
+def test_a_missing_module_fails_every_test_with_what_to_submit(tmp_path, any_mode):
     toy = _toy(tmp_path, ["a", "b"])
     (tmp_path / "empty").mkdir()
     report = grade_submission(toy, tmp_path / "empty")
     assert report.score == 0.0 and all("no toy.py found" in r.output for r in report.tests)
 
 
-def test_the_time_budget_bounds_a_submission_that_loops_everywhere(tmp_path):
+def test_the_time_budget_bounds_a_submission_that_loops_everywhere(tmp_path, any_mode):
     toy = _toy(tmp_path, ["a", "b", "c", "d", "e"], "timeout_s = 2\nimport_timeout_s = 3\nbudget_s = 5")
     src = "def a(x):\n    while True: pass\n\nb = c = d = e = a\n"
     report = grade_submission(toy, _submit(tmp_path, src), jobs=1)

@@ -105,6 +105,7 @@ def _cmd_identify(args) -> int:
         args.json,
         args.max_time,
         record=args.record,
+        view3d=args.view3d,
         keep_direction=args.keep_direction,
         robot_config=args.robot,
         progress=print if args.robot is not None else None,
@@ -112,6 +113,8 @@ def _cmd_identify(args) -> int:
         localization=args.localization,
         start=args.start,
     )
+    if args.view3d is not None:
+        print(f"lab identify: wrote the 3D view to {args.view3d} (open it in a browser)", file=sys.stderr)
     keys = ["true_model", "identified_model", "success", "actions", "sim_time_s", "wall_time_s"]
     keys += [
         "final_posterior",
@@ -175,6 +178,7 @@ def _cmd_search(args) -> int:
         obstacles=args.obstacles,
         progress=True,
         record=args.record,
+        view3d=args.view3d,
         sensing=_sensing(args),
         localization=args.localization,
         robot_config=args.robot,
@@ -183,6 +187,8 @@ def _cmd_search(args) -> int:
         moving=_moving(args),
     )
     data = res.to_json()
+    if args.view3d is not None:
+        print(f"lab search: wrote the 3D view to {args.view3d} (open it in a browser)", file=sys.stderr)
     if args.json is not None:
         write_json_atomic(args.json, data)
     if args.out is not None:
@@ -289,6 +295,7 @@ def _cmd_demo(args) -> int:
         max_actions=args.max_actions,
         max_time_s=args.max_time,
         record=args.record,
+        view3d=args.view3d,
         robot=args.robot,
         sensing=_sensing(args),
     )
@@ -317,6 +324,13 @@ def _cmd_grade(args) -> int:
     return run_grade(args, batch=batch)
 
 
+def _cmd_check(args) -> int:
+    from lab.grading.assignments import get_assignment
+    from lab.grading.selfcheck import self_check
+
+    return self_check(get_assignment(args.assignment, args.assignments), args.folder)
+
+
 def _cmd_eval(args) -> int:
     from lab.eval.cli import run_eval
 
@@ -336,6 +350,7 @@ def _cmd_assignments(args) -> int:
 #: The function of each command.
 HANDLERS = {
     "assignments": _cmd_assignments,
+    "check": _cmd_check,
     "demo": _cmd_demo,
     "eval": _cmd_eval,
     "grade": _cmd_grade,

@@ -8,6 +8,12 @@ from pathlib import Path
 __all__ = ["build_parser"]
 
 
+HELP_VIEW3D = (
+    "write a recorded 3D view of the run: one self-contained HTML page with a time slider, opens offline "
+    "in any browser (needs the optional package viser: pip install 'lab[view3d]')"
+)
+
+
 def _sensing(value: str) -> str:
     """``--sensing``'s value: a profile name or a ``.toml`` file (read and checked by the command)."""
     if value in ("realistic", "ideal") or value.endswith(".toml"):
@@ -110,6 +116,7 @@ def _episode_arguments(p: argparse.ArgumentParser, movers: tuple[str, ...], max_
         "--max-time", type=float, default=max_time, help=f"time budget in seconds (default {max_time:g})"
     )
     p.add_argument("--record", type=Path, help="write an animation of the run (.gif, or .mp4 with ffmpeg)")
+    p.add_argument("--view3d", type=Path, metavar="FILE.html", help=HELP_VIEW3D)
     _sensing_argument(p)
     p.add_argument(
         "--robot",
@@ -308,6 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         help="write an animation of the run (.gif, or .mp4 with ffmpeg): one frame per event",
     )
+    se.add_argument("--view3d", type=Path, metavar="FILE.html", help=HELP_VIEW3D + "; one step per event")
     se.add_argument(
         "--robot",
         type=Path,
@@ -378,6 +386,18 @@ def build_parser() -> argparse.ArgumentParser:
         "worlds",
         help="list the worlds and their bodies",
         description="List the scene files in worlds/ with their named bodies.",
+    )
+
+    ck = sub.add_parser(
+        "check",
+        help="students: run an assignment's public tests on your folder before submitting",
+        description="Run the public tests of ASSIGNMENT (the test_*.py you received) on the module in "
+        "FOLDER, on any OS, without the grader's sandbox or the graded tests: your grade may differ.",
+    )
+    ck.add_argument("assignment", help="assignment name (see `lab assignments list`), e.g. ekf")
+    ck.add_argument("folder", type=Path, help="the folder holding your module (e.g. ekf.py), or the file")
+    ck.add_argument(
+        "--assignments", type=Path, help="assignments folder (default: $LAB_ASSIGNMENTS or assignments/)"
     )
 
     g = sub.add_parser(
@@ -493,13 +513,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     a = sub.add_parser(
         "assignments",
-        help="list the assignments or write the student release",
+        help="list the assignments, write the student release or a Gradescope autograder zip",
         description="`list`: the assignments with their points. `release OUT_DIR [NAME ...]`: copy each "
         "assignment's student files into OUT_DIR/NAME with the solution blocks stripped and no graded tests, "
-        "and check that no solution code is left.",
+        "and check that no solution code is left. `gradescope NAME --out autograder.zip`: the autograder "
+        "bundle Gradescope builds its image from (setup.sh, run_autograder, the package, the versions of "
+        "uv.lock, the template in place of the reference solution; see assignments/README.md).",
     )
-    a.add_argument("action", choices=("list", "release"))
-    a.add_argument("out_dir", type=Path, nargs="?", help="release: the folder to write")
+    a.add_argument("action", choices=("list", "release", "gradescope"))
+    a.add_argument(
+        "out_dir", type=Path, nargs="?", help="release: the folder to write; gradescope: the assignment"
+    )
+    a.add_argument("--out", type=Path, help="gradescope: the zip to write (default autograder.zip)")
     a.add_argument("names", nargs="*", help="release: these assignments only (default: all)")
     a.add_argument("--force", action="store_true", help="release: replace existing assignment folders")
     a.add_argument(

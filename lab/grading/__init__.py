@@ -3,10 +3,13 @@
 * :mod:`lab.grading.assignments`: where the assignments are and what each is made of;
 * :mod:`lab.grading.suite`: how graded tests are written (points, visibility, checks with messages);
 * :mod:`lab.grading.runner`: grading one submission (the isolation design is in its docstring);
-* :mod:`lab.grading.isolation`: the bubblewrap sandbox each child runs in, ``--check-sandbox``;
+* :mod:`lab.grading.isolation`: the isolation modes each child runs in (bubblewrap, or a throwaway uid
+  where namespaces are forbidden), ``--check-sandbox``;
 * :mod:`lab.grading.sandbox`: the child process and its wire format;
 * :mod:`lab.grading.report`: Gradescope's results.json, the terminal summary, the class CSV;
 * :mod:`lab.grading.release`: the student release (solution blocks stripped, graded tests left out);
+* :mod:`lab.grading.gradescope`: the Gradescope autograder bundle (``lab assignments gradescope``);
+* :mod:`lab.grading.selfcheck`: a student's check with the public tests (``lab check``);
 * :mod:`lab.grading.cli`: ``lab grade`` and ``lab assignments``.
 """
 

@@ -16,7 +16,6 @@ import shutil
 import signal
 import struct
 import subprocess
-import tempfile
 import threading
 import time
 from dataclasses import dataclass
@@ -28,6 +27,8 @@ from lab.grading.isolation import (
     Sandbox,
     end_all,
     pid_namespace_members,
+    private_workdir,
+    processes_of_uid,
 )
 from lab.grading.sandbox import MAX_MESSAGE_BYTES, WireError, decode, encode
 from lab.grading.suite import Fail
@@ -50,6 +51,16 @@ _OUTPUT_KEEP = 4000  # characters of the child's stdout/stderr kept for feedback
 
 
 # ------------------------------------------------------------------------------------------ outcomes
+
+
+def _signal_name(number: int) -> str | None:
+    """The name of signal ``number`` (``"SIGKILL"``), or None when it is not a signal of this platform."""
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return None
+
+
 class SubmissionProblem(Exception):
     """The student's code did not produce a value: raised, timed out, crashed or failed to import."""
 
@@ -110,18 +121,21 @@ class ChildProcess:
     def __init__(
         self, source: bytes, module: str, memory_mb: int, cpu_s: int, sandbox: Sandbox, hide: tuple[str, ...]
     ):
-        self.dir = Path(tempfile.mkdtemp(prefix="lab-grade-"))
-        os.chmod(self.dir, 0o755)  # the child's throwaway uid reads it (read-only, in the sandbox)
+        self.sandbox = sandbox
+        self.uid = sandbox.new_uid()
+        own = sandbox.kind == "uid"  # no filesystem of its own: a private folder owned by its uid
+        # bwrap: the child's throwaway uid reads the folder (read-only, in the sandbox)
+        self.dir = private_workdir(self.uid if own else None, "lab-grade-")
         self.module_file = self.dir / module  # under the assignment's name, whatever the upload was called
         self.module_file.write_bytes(source)
         os.chmod(self.module_file, 0o644)
-        self.sandbox = sandbox
-        self.uid = sandbox.new_uid()
+        if own:
+            os.chown(self.module_file, self.uid, self.uid)
         self.notes: list[str] = []
         req_r, self.req_w = os.pipe()
         self.resp_r, resp_w = os.pipe()
-        info_r, info_w = os.pipe() if sandbox.secure else (-1, -1)
-        home = "/tmp" if sandbox.secure else str(self.dir)
+        info_r, info_w = os.pipe() if sandbox.bubblewrap else (-1, -1)
+        home = "/tmp" if sandbox.bubblewrap else str(self.dir)
         env = {
             "PATH": "/usr/bin:/bin" if sandbox.secure else os.environ.get("PATH", "/usr/bin:/bin"),
             "HOME": home,
@@ -137,18 +151,18 @@ class ChildProcess:
         args = [
             "-I",  # isolated: no PYTHON* variables, no user site, no script folder on sys.path
             "-u",  # unbuffered: what the student printed before a crash or a timeout is not lost
-            ENTRY if sandbox.secure else str(_SANDBOX),
+            ENTRY if sandbox.bubblewrap else str(_SANDBOX),  # uid mode: read as root, before the drop
             str(req_r),
             str(resp_w),
-            f"{SUBMISSION_DIR}/{module}" if sandbox.secure else str(self.module_file),
+            f"{SUBMISSION_DIR}/{module}" if sandbox.bubblewrap else str(self.module_file),
             str(memory_mb),
             str(cpu_s),
             str(-1 if self.uid is None else self.uid),
         ]
         cmd = sandbox.command(args, self.dir, _SANDBOX, self.uid, hide)
-        if sandbox.secure:
+        if sandbox.bubblewrap:
             cmd[1:1] = ["--info-fd", str(info_w)]  # bwrap says there the pid of the namespace's first process
-        fds = (req_r, resp_w) + ((info_w,) if sandbox.secure else ())
+        fds = (req_r, resp_w) + ((info_w,) if sandbox.bubblewrap else ())
         try:
             self.proc = subprocess.Popen(
                 cmd,
@@ -248,10 +262,11 @@ class ChildProcess:
             code = self.proc.wait(timeout=2.0)
         except subprocess.TimeoutExpired:
             return "the process closed the grader's channel"
-        if self.sandbox.secure and 128 < code < 128 + 65 and code - 128 in signal.Signals._value2member_map_:
+        bwrap_signal = 128 < code < 128 + 65 and _signal_name(code - 128) is not None
+        if self.sandbox.bubblewrap and bwrap_signal:
             code = 128 - code  # bwrap reports a child killed by signal N as exit status 128 + N
         if code < 0:
-            sig = signal.Signals(-code).name if -code in signal.Signals._value2member_map_ else str(-code)
+            sig = _signal_name(-code) or str(-code)
             why = {
                 "SIGSEGV": " (segmentation fault: e.g. unbounded recursion)",
                 "SIGXCPU": " (CPU time limit)",
@@ -276,13 +291,16 @@ class ChildProcess:
             return
         self._closed = True
         init = self._namespace_init()
+        extra = 0
         if init is not None:
             # the namespace's first process and the child it runs; anything more was left running
             extra = len(pid_namespace_members(init)) - 2
-            if extra > 0:
-                self.notes.append(
-                    f"{extra} process(es) your code started were still running; the sandbox ended them"
-                )
+        elif self.sandbox.kind == "uid" and self.uid is not None:
+            extra = len([p for p in processes_of_uid(self.uid) if p != self.proc.pid])
+        if extra > 0:
+            self.notes.append(
+                f"{extra} process(es) your code started were still running; the sandbox ended them"
+            )
         try:
             os.killpg(self.proc.pid, signal.SIGKILL)
         except (ProcessLookupError, PermissionError):

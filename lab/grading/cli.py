@@ -7,6 +7,7 @@ from pathlib import Path
 
 from lab.errors import ConfigError
 from lab.grading.assignments import Assignment, get_assignment, list_assignments
+from lab.grading.isolation import make_grader_private
 from lab.grading.report import GradeReport, write_scores_csv
 from lab.grading.runner import choose_sandbox, grade_submission
 
@@ -45,12 +46,15 @@ def run_grade(args, batch=None) -> int:
     if not sub.exists() and not sub.is_symlink():
         raise ConfigError(f"submission {sub} does not exist")
     insecure = getattr(args, "insecure", False)
-    choose_sandbox(insecure)  # refuses here, once, before any grading, when there is no sandbox
     if args.batch:
         _check_batch(sub, args)
-        return (batch or _batch)(chosen, sub, args)
-    if len(chosen) != 1:
+    elif len(chosen) != 1:
         raise ConfigError("grade one assignment at a time (several, or 'all', only with --batch)")
+    sb = choose_sandbox(insecure)  # refuses here, once, before any grading, when there is no sandbox
+    if args.batch:
+        return (batch or _batch)(chosen, sub, args)
+    if args.json and sb.kind == "uid":  # the results' folder: the grader's alone
+        make_grader_private([Path(args.json).resolve().parent])
     report = grade_submission(
         chosen[0], sub, jobs=args.jobs, timeout_scale=args.timeout_scale, insecure=insecure
     )
@@ -60,7 +64,14 @@ def run_grade(args, batch=None) -> int:
         print(report.summary())
         if args.json:
             print(f"wrote {args.json}")
+        _warn(sb)
     return 0
+
+
+def _warn(sb) -> None:
+    """What the isolation mode cannot stop, said after grading, not hidden (stderr: not the student's)."""
+    for c in sb.cannot_stop:
+        print(f"lab grade: WARNING: the {sb.kind} isolation mode cannot stop {c}", file=sys.stderr)
 
 
 def _check_batch(folder: Path, args) -> None:
@@ -79,6 +90,9 @@ def _batch(chosen: list[Assignment], folder: Path, args) -> int:
     if not students:
         raise ConfigError(f"{folder} has no student subfolders")
     rows: list[tuple[str, list[GradeReport]]] = []
+    if choose_sandbox(getattr(args, "insecure", False)).kind == "uid":
+        # the uid mode's children see the filesystem: no student may read a classmate's folder
+        make_grader_private([folder, *([Path(args.out)] if args.out else [])])
     for s in students:
         # each student's every test in a sandbox of its own that sees only that student's copy
         reports = [
@@ -103,13 +117,25 @@ def _batch(chosen: list[Assignment], folder: Path, args) -> int:
     csv_path = write_scores_csv(args.csv or folder / "scores.csv", rows)
     if not args.quiet:
         print(f"wrote {csv_path} ({len(rows)} students)")
+        _warn(choose_sandbox(getattr(args, "insecure", False)))
     return 0
 
 
 def run_assignments(args) -> int:
-    """``lab assignments list`` and ``lab assignments release OUT_DIR [NAME ...]``."""
+    """``lab assignments list``, ``lab assignments release OUT_DIR [NAME ...]`` and
+    ``lab assignments gradescope NAME --out FILE.zip``."""
     from lab.grading.release import release
 
+    if args.action == "gradescope":
+        from lab.grading.gradescope import build_bundle
+
+        if args.out_dir is None or args.names:
+            raise ConfigError("lab assignments gradescope needs one ASSIGNMENT (and --out FILE.zip)")
+        a = get_assignment(str(args.out_dir), args.assignments)
+        out = build_bundle(a, args.out or Path("autograder.zip"))
+        if not args.quiet:
+            print(f"wrote {out}: upload it as the autograder of {a.name} (assignments/README.md)")
+        return 0
     if args.action == "list":
         for a in list_assignments(args.assignments):
             suite = a.load_suite()

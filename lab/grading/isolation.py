@@ -19,7 +19,7 @@ small, packaged everywhere, needs no daemon, and gives in one command everything
 
 Two ways of running it, chosen by who runs the grader:
 
-* ``bwrap-uid`` (the grader is root, as on Gradescope and in CI): bwrap runs privileged (no user
+* ``bwrap-uid`` (the grader is root where namespaces are allowed, as in CI): bwrap runs privileged (no user
   namespace needed) with every capability dropped except ``setuid``/``setgid``; the child's first act,
   before it imports anything of the student's, is to become a throwaway uid and gid (random, above
   2**30, no supplementary groups), different for every child. So the student's code is not root,
@@ -31,14 +31,30 @@ Two ways of running it, chosen by who runs the grader:
 The grader itself is made non-dumpable (``prctl(PR_SET_DUMPABLE, 0)``): no process of its uid can
 read or write its memory through ``/proc/<pid>/mem`` or ptrace it.
 
-When bwrap is missing or does not work here (a container that forbids namespaces), :func:`find_sandbox`
-says why, and ``lab grade`` refuses to grade for scores unless ``--insecure`` (practice only; every
-result then says so). ``lab grade --check-sandbox`` runs :func:`check_sandbox`: a real sandboxed child
+A third way, for a root grader where bubblewrap cannot make namespaces (a default Docker container, as
+on Gradescope: no ``CAP_SYS_ADMIN``), needs no namespace at all:
+
+* ``uid``: the child starts as root, and its first act, before it imports anything of the student's,
+  is to become a throwaway uid and gid of its own (as in ``bwrap-uid``); it then lowers its limits on
+  processes (none), memory, CPU time, file size (no writes) and open files. It works in a private
+  folder owned by that uid (mode 0700). The grader makes its own folders private (mode 0700: the
+  course library, the assignments with their reference solutions and graded tests, a class's
+  submissions and the results' folder: :func:`make_private`), so another uid reads none of them; the
+  grader is non-dumpable, and every process of the child's uid is killed before a result is recorded.
+  What it cannot stop, :attr:`Sandbox.cannot_stop` says (and ``--check-sandbox`` prints it as a
+  WARNING): the network (cut it where the grader runs: ``docker run --network none``) and the list of
+  the machine's processes in ``/proc`` (their command lines, not their memory or files).
+
+:func:`find_sandbox` picks the strongest mode that works here (``bwrap-uid``, ``bwrap-userns``, then
+``uid``; ``$LAB_GRADE_SANDBOX`` = ``bwrap`` or ``uid`` restricts the choice) and says which. When none
+works it says why, and ``lab grade`` refuses to grade for scores unless ``--insecure`` (practice only;
+every result then says so). ``lab grade --check-sandbox`` runs :func:`check_sandbox`: a real sandboxed child
 that tries what a cheating submission would, and reports each attempt.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import functools
 import json
@@ -47,6 +63,7 @@ import secrets
 import shutil
 import signal
 import site
+import stat
 import subprocess
 import sys
 import sysconfig
@@ -62,6 +79,9 @@ __all__ = [
     "find_sandbox",
     "check_sandbox",
     "make_undumpable",
+    "make_private",
+    "make_grader_private",
+    "MODES",
     "SUBMISSION_DIR",
     "ENTRY",
 ]
@@ -71,6 +91,17 @@ ENTRY = "/grader/sandbox.py"  # where the child sees its entry point
 _UID_LOW, _UID_HIGH = 1 << 30, (1 << 31) - 2  # throwaway uids: far above any real account
 _PR_SET_DUMPABLE, _PR_GET_DUMPABLE = 4, 3
 _handed_out: set[int] = set()
+MODES = ("bwrap-uid", "bwrap-userns", "uid")  # strongest first: find_sandbox takes the first that works
+_NETWORK = (
+    "the network: the student's code can open connections (uid mode has no network namespace); cut it "
+    "where the grader runs (docker run --network none; on a course server, a firewall rule for the "
+    "throwaway uids 1073741824-2147483645: iptables -m owner --uid-owner)"
+)
+_PROCESSES = (
+    "the process list: the student's code sees the machine's processes in /proc and their command "
+    "lines (not their memory, files or environment); give the grader a command line with no secrets"
+)
+_CANNOT_STOP = {"uid": (_NETWORK, _PROCESSES)}
 
 
 class SandboxUnavailable(LabError):
@@ -84,7 +115,8 @@ class Sandbox:
     Attributes
     ----------
     kind : str
-        ``"bwrap-uid"`` (root: throwaway uid per child), ``"bwrap-userns"`` (a user namespace) or
+        ``"bwrap-uid"`` (root: throwaway uid per child), ``"bwrap-userns"`` (a user namespace),
+        ``"uid"`` (root without namespaces: throwaway uid per child, private grader folders) or
         ``"none"`` (``--insecure``: no isolation beyond resource limits).
     bwrap : str or None
         Path of the bwrap executable.
@@ -97,17 +129,29 @@ class Sandbox:
     def secure(self) -> bool:
         return self.kind != "none"
 
+    @property
+    def bubblewrap(self) -> bool:
+        """True when the child runs inside bwrap (its own filesystem, network and PID namespace)."""
+        return self.kind.startswith("bwrap")
+
+    @property
+    def cannot_stop(self) -> tuple[str, ...]:
+        """What this mode does not stop, in words, with the platform setting that does."""
+        return _CANNOT_STOP.get(self.kind, ())
+
     def describe(self) -> str:
         return {
             "bwrap-uid": "bubblewrap: own filesystem, no network, own PID namespace, throwaway uid per test",
             "bwrap-userns": "bubblewrap: own filesystem, no network, own PID namespace, a user namespace",
+            "uid": "uid mode (no namespaces): throwaway uid per test, private grader folders, rlimits; "
+            "the network is NOT cut",
             "none": "NO SANDBOX (--insecure): the student code can read the grader files; practice only",
         }[self.kind]
 
     def new_uid(self) -> int | None:
         """A fresh throwaway uid (root only: one of 2**30, drawn at random, never one handed out before
         by this process); None when the child keeps the grader's uid."""
-        if self.kind != "bwrap-uid":
+        if self.kind not in ("bwrap-uid", "uid"):
             return None
         while True:
             uid = _UID_LOW + secrets.randbelow(_UID_HIGH - _UID_LOW)
@@ -120,8 +164,9 @@ class Sandbox:
     ) -> list[str]:
         """The full command line running ``python python_args`` in the sandbox (or bare, if none):
         ``scratch`` is seen as ``/submission``, ``entry`` as ``/grader/sandbox.py``; folders in ``hide``
-        (an assignment's) are masked if they lie inside what the child is given."""
-        if self.kind == "none":
+        (an assignment's) are masked if they lie inside what the child is given. In ``uid`` mode the
+        command is bare too: the child itself becomes ``uid`` first (see :mod:`lab.grading.sandbox`)."""
+        if not self.bubblewrap:
             return [sys.executable, *python_args]
         return [*_bwrap_args(self, scratch, entry, hide), "--", sys.executable, *python_args]
 
@@ -296,55 +341,136 @@ def make_undumpable() -> bool:
         return False
 
 
+def make_private(paths) -> list[str]:
+    """Take every permission of group and others off the folders in ``paths`` (``chmod go-rwx``), so that
+    a throwaway uid (``uid`` mode, where the child sees the grader's filesystem) can neither list nor
+    read nor enter them. Only folders this process owns are changed, never a shared sticky one such as
+    ``/tmp`` nor one holding the Python installation the child needs (a repository with its venv);
+    returns the folders that are private now (changed or already so)."""
+    done: list[str] = []
+    pythons = [r.rstrip("/") + "/" for r in _python_roots()]
+    for p in dict.fromkeys(os.path.realpath(q) for q in paths):
+        try:
+            st = os.stat(p)
+        except OSError:
+            continue
+        if not stat.S_ISDIR(st.st_mode) or st.st_uid != os.geteuid() or st.st_mode & stat.S_ISVTX:
+            continue
+        real = os.path.realpath(p).rstrip("/") + "/"
+        if any(r.startswith(real) for r in pythons):
+            continue
+        if st.st_mode & 0o077:
+            try:
+                os.chmod(p, stat.S_IMODE(st.st_mode) & 0o700)
+            except OSError:
+                continue
+        done.append(str(p))
+    return done
+
+
+def make_grader_private(extra=()) -> list[str]:
+    """:func:`make_private` on the grader's own folders (the course library, the repository, the
+    assignments; the repository's tests, which hold edits of the reference solutions, for when the
+    repository itself must stay readable because the venv is inside it) and on ``extra`` (an
+    assignment's folder, a class's submissions, the results)."""
+    from lab.paths import repo_root
+
+    return make_private([*_secrets(), repo_root() / "tests", *extra])
+
+
+def private_workdir(uid: int | None, prefix: str) -> Path:
+    """A fresh folder for one child: in ``uid`` mode owned by the child's uid and closed to everyone
+    else (0700), otherwise readable (0755: bwrap binds it read-only for the child's uid)."""
+    import tempfile
+
+    d = Path(tempfile.mkdtemp(prefix=prefix))
+    if uid is None:
+        os.chmod(d, 0o755)
+    else:
+        os.chown(d, uid, uid)
+        os.chmod(d, 0o700)
+    return d
+
+
 # ---------------------------------------------------------------------------------- detection
 def _probe(sb: Sandbox) -> str | None:
     """Run one trivial child in ``sb``; None if it works, else why not."""
-    import tempfile
-
     entry = Path(__file__).with_name("sandbox.py")
-    with tempfile.TemporaryDirectory(prefix="lab-probe-") as d:
-        os.chmod(d, 0o755)
-        uid = sb.new_uid()
+    uid = sb.new_uid()
+    d = private_workdir(uid if sb.kind == "uid" else None, "lab-probe-")
+    try:
         code = "import os, sys; "
         if uid is not None:
             code += f"os.setgroups([]); os.setgid({uid}); os.setuid({uid}); "
-        # NumPy found (not imported: that would take longer than the rest) proves the packages are there
-        code += "import importlib.util as u; assert u.find_spec('numpy'), 'no numpy in the sandbox'; "
+        if sb.kind == "uid":
+            # no filesystem of its own: the Python installation and NumPy must be readable by any uid
+            code += "import numpy; "
+        else:  # NumPy found (not imported: that would take longer than the rest) proves it is there
+            code += "import importlib.util as u; assert u.find_spec('numpy'), 'no numpy in the sandbox'; "
         code += "sys.stdout.write(str(os.getuid()))"
+        what = sb.bwrap if sb.bubblewrap else "the uid mode"
         try:
             r = subprocess.run(
-                sb.command(["-I", "-c", code], Path(d), entry, uid),
+                sb.command(["-I", "-c", code], d, entry, uid),
                 capture_output=True,
                 text=True,
                 timeout=60,
                 stdin=subprocess.DEVNULL,
+                cwd=d,
             )
         except (OSError, subprocess.TimeoutExpired) as e:
-            return f"{sb.bwrap} could not run: {e}"
+            return f"{what} could not run: {e}"
         if r.returncode != 0:
             last = (r.stderr.strip().splitlines() or [f"exit status {r.returncode}"])[-1]
-            return f"{sb.bwrap} failed here: {last}"
+            if sb.kind == "uid" and "Permission denied" in last:
+                last += (
+                    f" (the Python at {sys.base_prefix} or its packages are not readable by other users:"
+                    " use a Python installed for all users, e.g. /usr/bin/python3)"
+                )
+            return f"{what} failed here: {last}"
         if uid is not None and r.stdout.strip() != str(uid):
-            return f"the sandboxed child did not become uid {uid}"
+            return f"the child did not become uid {uid}"
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
     return None
 
 
-@functools.lru_cache(maxsize=1)
 def find_sandbox() -> Sandbox:
-    """The sandbox this machine supports (probed once per process); raises SandboxUnavailable."""
+    """The strongest isolation mode that works on this machine (probed once per process and choice);
+    raises SandboxUnavailable saying why each one does not work.
+
+    ``$LAB_GRADE_SANDBOX`` restricts the choice: ``bwrap`` (only bubblewrap), ``uid`` (only the uid
+    mode), or ``auto`` (the default: :data:`MODES` in order)."""
+    return _find(os.environ.get("LAB_GRADE_SANDBOX", "auto").strip() or "auto")
+
+
+@functools.lru_cache(maxsize=4)
+def _find(choice: str) -> Sandbox:
+    if choice not in ("auto", "bwrap", "uid", *MODES):
+        raise SandboxUnavailable(f"LAB_GRADE_SANDBOX={choice!r}: use auto, bwrap or uid")
     if sys.platform != "linux":
-        raise SandboxUnavailable(f"the grading sandbox needs Linux (bubblewrap); this is {sys.platform}")
-    bwrap = shutil.which("bwrap")
-    if bwrap is None:
         raise SandboxUnavailable(
-            "bubblewrap (bwrap) is not installed: apt-get install bubblewrap "
-            "(then check with lab grade --check-sandbox)"
+            f"the grading sandbox needs Linux (bubblewrap, or root for the uid mode); this is {sys.platform}"
         )
-    sb = Sandbox("bwrap-uid" if os.geteuid() == 0 else "bwrap-userns", bwrap)
-    why = _probe(sb)
-    if why:
-        raise SandboxUnavailable(f"{why} (namespaces forbidden here?); check with lab grade --check-sandbox")
-    return sb
+    root = os.geteuid() == 0
+    bwrap = shutil.which("bwrap")
+    why: list[str] = []
+    kinds = [k for k in MODES if choice in ("auto", k) or (choice == "bwrap" and k.startswith("bwrap"))]
+    if any(k.startswith("bwrap") for k in kinds) and bwrap is None:
+        why.append("bubblewrap (bwrap) is not installed: apt-get install bubblewrap")
+    for kind in kinds:
+        if kind.startswith("bwrap") and bwrap is None:
+            continue
+        if kind in ("bwrap-uid", "uid") and not root:
+            if kind == "uid":
+                why.append("the uid mode needs the grader to run as root (as on Gradescope)")
+            continue
+        sb = Sandbox(kind, bwrap if kind.startswith("bwrap") else None)
+        problem = _probe(sb)
+        if problem is None:
+            return sb
+        why.append(f"{kind}: {problem}" + (" (namespaces forbidden here?)" if sb.bubblewrap else ""))
+    raise SandboxUnavailable("; ".join(why) + "; check with lab grade --check-sandbox")
 
 
 # ------------------------------------------------------------------------------- check-sandbox
@@ -353,7 +479,7 @@ import json, os, socket, sys
 uid = int(sys.argv[1])
 if uid >= 0:
     os.setgroups([]); os.setgid(uid); os.setuid(uid)
-secrets, grader_pid, results = json.loads(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+secrets, grader_pid, results, token = json.loads(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5]
 out = {}
 def attempt(name, fn):
     try:
@@ -363,7 +489,10 @@ def attempt(name, fn):
         out[name] = f"stopped ({type(e).__name__}: {e})"
 for s in secrets:
     attempt(f"read {s}", lambda s=s: os.listdir(s) if os.path.isdir(s) else open(s).read())
-attempt(f"write {results}", lambda: open(results, "a").close())
+def write_results():
+    with open(results, "a") as f:
+        f.write(token)
+attempt(f"write {results}", write_results)
 attempt(f"see the grader (pid {grader_pid}) in /proc", lambda: open(f"/proc/{grader_pid}/status").read())
 attempt(f"signal the grader (pid {grader_pid})", lambda: os.kill(grader_pid, 0))
 def net():
@@ -380,10 +509,11 @@ sys.stdout.write(json.dumps(out))
 def check_sandbox(results_path: str | Path | None = None) -> tuple[bool, list[str]]:
     """Start a real sandboxed child and try, from inside, what a cheating submission would.
 
-    Returns ``(ok, lines)``: ``ok`` is True when a sandbox works and stops every attempt.
+    Returns ``(ok, lines)``: ``ok`` is True when a sandbox works and stops every attempt it can;
+    what the mode cannot stop is a ``WARNING`` line (with the platform setting that stops it), not a
+    failure. The write to the results file is judged by the real file: a write that lands in the
+    sandbox's private ``/tmp`` is stopped, from whatever folder this runs.
     """
-    import tempfile
-
     lines = []
     undumpable = make_undumpable()
     lines.append(f"{'ok ' if undumpable else 'BAD'} the grader is not dumpable (prctl PR_SET_DUMPABLE 0)")
@@ -391,7 +521,7 @@ def check_sandbox(results_path: str | Path | None = None) -> tuple[bool, list[st
         sb = find_sandbox()
     except SandboxUnavailable as e:
         return False, [*lines, f"BAD no sandbox: {e}"]
-    lines.append(f"ok  sandbox: {sb.describe()} ({sb.bwrap})")
+    lines.append(f"ok  sandbox: {sb.kind}: {sb.describe()}" + (f" ({sb.bwrap})" if sb.bwrap else ""))
     from lab.grading.assignments import assignments_dir
     from lab.paths import repo_root
 
@@ -401,31 +531,35 @@ def check_sandbox(results_path: str | Path | None = None) -> tuple[bool, list[st
     for name in ("ekf/ekf.py", "ekf/hidden_tests.py"):
         if (a_dir / name).exists():
             targets.append(str((a_dir / name).resolve()))
-    results = str(Path(results_path or Path.cwd() / "results.json").resolve())
+    results = Path(results_path or Path.cwd() / "results.json").resolve()
+    if sb.kind == "uid":  # as lab grade would (not the results' folder: a check changes no folder of yours)
+        for p in make_grader_private():
+            lines.append(f"ok  made private (chmod go-rwx): {p}")
     entry = Path(__file__).with_name("sandbox.py")
     ok = undumpable
-    with tempfile.TemporaryDirectory(prefix="lab-check-") as d:
-        os.chmod(d, 0o755)
-        uid = sb.new_uid()
-        cmd = sb.command(
-            [
-                "-I",
-                "-c",
-                _CHECKS,
-                str(-1 if uid is None else uid),
-                json.dumps(targets),
-                str(os.getpid()),
-                results,
-            ],
-            Path(d),
-            entry,
-            uid,
-        )
-        r = subprocess.run(cmd, capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+    token = secrets.token_hex(8)
+    created = _canary(results)
+    uid = sb.new_uid()
+    d = private_workdir(uid if sb.kind == "uid" else None, "lab-check-")
+    try:
+        args = ["-I", "-c", _CHECKS, str(-1 if uid is None else uid), json.dumps(targets)]
+        cmd = sb.command([*args, str(os.getpid()), str(results), token], d, entry, uid)
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL, cwd=d)
+        if uid is not None and sb.kind == "uid":
+            end_all(None, uid)
         try:
-            found = json.loads(r.stdout)
-        except ValueError:
-            return False, [*lines, f"BAD the check did not run: {r.stderr.strip()[-300:]}"]
+            landed = token in results.read_text(errors="replace")
+        except OSError:
+            landed = False
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+        if created:
+            with contextlib.suppress(OSError):
+                results.unlink()
+    try:
+        found = json.loads(r.stdout)
+    except ValueError:
+        return False, [*lines, f"BAD the check did not run: {r.stderr.strip()[-300:]}"]
     child_uid = found.pop("uid")
     if uid is not None:
         good = child_uid == uid
@@ -433,8 +567,27 @@ def check_sandbox(results_path: str | Path | None = None) -> tuple[bool, list[st
         lines.append(f"{'ok ' if good else 'BAD'} the student's code runs as uid {child_uid}, not root")
     else:
         lines.append(f"ok  the student's code runs as uid {child_uid} in a user namespace")
+    limits = {"network": _NETWORK, "/proc": _PROCESSES}
     for what, res in found.items():
+        if what == f"write {results}":
+            res = "NOT stopped" if landed else "stopped (the real file is unchanged)"
         good = res.startswith("stopped")
+        known = next((v for k, v in limits.items() if k in what and v in sb.cannot_stop), None)
+        if not good and known:
+            lines.append(f"WARN {what}: {res} (this mode cannot stop it; see the WARNING below)")
+            continue
         ok &= good
         lines.append(f"{'ok ' if good else 'BAD'} {what}: {res}")
+    lines += [f"WARNING {sb.kind} mode cannot stop {c}" for c in sb.cannot_stop]
     return ok, lines
+
+
+def _canary(results: Path) -> bool:
+    """Make the results file (empty, 0600) if it is not there, so that the check's write to it is judged
+    by the real file whatever folder it is in; True if this made it (the check removes it again)."""
+    try:
+        fd = os.open(results, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+    except OSError:
+        return False
+    os.close(fd)
+    return True

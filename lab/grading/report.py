@@ -65,8 +65,8 @@ class GradeReport:
         then carries it.
     sandbox : str
         How the student's code was isolated (:class:`~lab.grading.isolation.Sandbox` ``kind``:
-        ``"bwrap-uid"``, ``"bwrap-userns"``); ``"none"`` means graded with ``--insecure``, which every
-        test's output says.
+        ``"bwrap-uid"``, ``"bwrap-userns"``, ``"uid"``); ``"none"`` means graded with ``--insecure``,
+        which every test's output says, and ``results.json``'s ``extra_data.secure`` is false.
     """
 
     assignment: Assignment
@@ -138,6 +138,7 @@ class GradeReport:
                 "assignment": self.assignment.name,
                 "submission": self.submission,
                 "sandbox": self.sandbox,
+                "secure": self.sandbox != "none",
                 "refused": self.refused,
             },
         }
@@ -187,7 +188,11 @@ class GradeReport:
 
     def summary(self) -> str:
         """A readable summary for the terminal: one line per test, the message under each failure."""
-        lines = [f"{self.assignment.name} ({self.assignment.title})", f"submission: {self.submission}"]
+        lines = [
+            f"{self.assignment.name} ({self.assignment.title})",
+            f"submission: {self.submission}",
+            f"isolation: {self.sandbox}" + (" (INSECURE)" if self.sandbox == "none" else ""),
+        ]
         if self.sandbox == "none":
             lines.insert(0, INSECURE)
         width = max(len(r.test.name) for r in self.tests) if self.tests else 0
@@ -206,20 +211,31 @@ class GradeReport:
 
 
 def write_scores_csv(path: str | Path, rows: list[tuple[str, list[GradeReport]]]) -> Path:
-    """One CSV for a class: ``student``, one column ``assignment:test_id`` per graded test, ``total``,
-    ``max_score``. ``rows`` holds each student's reports (same assignments, same order, for everyone)."""
+    """One CSV for a class: ``student``, ``sandbox`` (the isolation mode; ``none (INSECURE)`` for a
+    score that does not count), one column ``assignment:test_id`` per graded test, ``total``,
+    ``max_score``. ``rows`` holds each student's reports (same assignments, same order, for everyone).
+    Written atomically, readable by its owner only."""
     path = Path(path)
     columns: list[str] = []
     for _, reports in rows[:1]:
         for rep in reports:
             columns += [f"{rep.assignment.name}:{r.test.id}" for r in rep.tests]
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["student", *columns, "total", "max_score"])
-        for student, reports in rows:
-            scores = [f"{r.score:g}" for rep in reports for r in rep.tests]
-            total = sum(rep.score for rep in reports)
-            top = sum(rep.max_score for rep in reports)
-            w.writerow([student, *scores, f"{total:g}", f"{top:g}"])
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["student", "sandbox", *columns, "total", "max_score"])
+            for student, reports in rows:
+                kinds = sorted({rep.sandbox for rep in reports})
+                mode = "+".join(kinds) + (" (INSECURE)" if "none" in kinds else "")
+                scores = [f"{r.score:g}" for rep in reports for r in rep.tests]
+                total = sum(rep.score for rep in reports)
+                top = sum(rep.max_score for rep in reports)
+                w.writerow([student, mode, *scores, f"{total:g}", f"{top:g}"])
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
     return path

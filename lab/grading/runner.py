@@ -6,8 +6,11 @@ child's side):
 * **The student's code runs in a sandbox, as another user.** Each test starts a fresh child inside
   bubblewrap: a filesystem holding only the system, Python and a private copy of the submission (no
   assignments, graded tests, reference solutions, other students' folders or grader files), no
-  network, its own PID namespace, and (when the grader is root) a throwaway uid of its own. The
-  grading process is not dumpable, so no process can read or write its memory.
+  network, its own PID namespace, and (when the grader is root) a throwaway uid of its own. Where
+  namespaces are forbidden (a root grader in Docker, as on Gradescope), the ``uid`` mode gives the
+  child a throwaway uid and a private folder instead, and makes the grader's folders private (see
+  :mod:`lab.grading.isolation` for what it cannot stop). The grading process is not dumpable, so no
+  process can read or write its memory.
 * **The submission is read once, as a regular file.** Its bytes are read when grading starts (a
   classmate changing the file later changes nothing); a symbolic link, a device or a folder where the
   module is expected is refused with a message.
@@ -56,6 +59,7 @@ from lab.grading.isolation import (
     Sandbox,
     SandboxUnavailable,
     find_sandbox,
+    make_grader_private,
     make_undumpable,
 )
 from lab.grading.report import INSECURE, GradeReport, TestResult
@@ -235,6 +239,9 @@ def grade_submission(
     t0 = time.monotonic()
     sb = sandbox or choose_sandbox(insecure)
     make_undumpable()
+    if sb.kind == "uid":  # the child sees the grader's filesystem: close the grader's folders to it
+        folder = Path(assignment.folder).resolve()
+        make_grader_private([folder.parent, folder])
     suite = assignment.load_suite()
     jobs = jobs or max(1, min(4, os.cpu_count() or 1))
 

@@ -3,11 +3,12 @@
 The grader never imports a submission. For every graded test it starts this file as a fresh Python
 process (``python -I sandbox.py ...``) which
 
-1. becomes the throwaway uid it is given, when the grader runs it as root inside the bubblewrap
-   sandbox of :mod:`lab.grading.isolation` (that sandbox gives it a filesystem holding only the
-   system, Python and the copy of the submission, and no network);
-2. lowers its own resource limits (address space, CPU time, file size, processes), before any
-   student code runs;
+1. becomes the throwaway uid it is given, when the grader runs it as root (inside the bubblewrap
+   sandbox of :mod:`lab.grading.isolation`, which gives it a filesystem holding only the system,
+   Python and the copy of the submission, and no network; or, in the ``uid`` mode where namespaces
+   are forbidden, on the grader's filesystem with the grader's folders private);
+2. lowers its own resource limits (address space, CPU time, file size, open files, processes),
+   before any student code runs;
 3. imports the submitted module from its private folder (``lab`` itself cannot be imported: the
    assignments are to be written, not borrowed; in the sandbox it is not even there);
 4. notes what the student's code tried that the sandbox forbids (files outside the submission,
@@ -196,6 +197,7 @@ def _apply_limits(memory_mb: int, cpu_s: int) -> None:
     lower(resource.RLIMIT_CPU, cpu_s)  # backstop; the grader's wall-clock timeout comes first
     lower(resource.RLIMIT_FSIZE, 0)  # no writing into files (the results file included)
     lower(resource.RLIMIT_CORE, 0)
+    lower(resource.RLIMIT_NOFILE, 128)  # open files (the pipes to the grader are already open)
     if hasattr(resource, "RLIMIT_NPROC"):
         lower(resource.RLIMIT_NPROC, 0)  # no new processes or threads (not enforced for root)
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write then fails with OSError(EFBIG) instead
@@ -239,6 +241,8 @@ def _watch(allowed: tuple[str, ...]):
             path = args[0]
             if isinstance(path, (str, bytes)):
                 p = os.path.normpath(os.path.join(os.getcwd(), os.fsdecode(path)))
+                if "/__pycache__/" in p:  # the import system looking for a cached module: not the student
+                    return
                 if not any(p == a or p.startswith(a + "/") for a in allowed):
                     _note(f"open {p}: outside the submission")
                 elif p.startswith("/tmp/") and not os.path.exists(os.path.dirname(p)):

@@ -87,7 +87,19 @@ def _report(res: dict, names: list[str], figures: list[tuple[str, str]], robot: 
         lines += [f"## {caption}", "", f"![{caption}]({name})", ""]
     if res.get("recording"):
         lines += [f"Animation: `{res['recording']}`", ""]
+    if res.get("view3d"):
+        lines += [f"3D view (open in a browser, drag the time slider): `{res['view3d']}`", ""]
     return "\n".join(lines)
+
+
+def _what_runs(robot, planner: str, box: str, mover: str, max_actions: int, max_time_s: float) -> str:
+    """The line that says what the demo is about to run."""
+    if robot is not None:
+        return f"lab demo: identifying the box with the robot of {robot} ({planner} planner) ..."
+    return (
+        f"lab demo: identifying the box on the carrier ({box}, {mover} mover, "
+        f"{planner} planner, up to {max_actions} actions, {max_time_s:g} s simulated) ..."
+    )
 
 
 def run_demo(
@@ -99,6 +111,7 @@ def run_demo(
     max_actions: int = 8,
     max_time_s: float = 150.0,
     record: Path | None = None,
+    view3d: Path | None = None,
     robot: Path | None = None,
     say: Callable[[str], None] = print,
     sensing="realistic",
@@ -114,6 +127,8 @@ def run_demo(
         8 actions, 150 s of simulated time).
     record : Path, optional
         Write an animation of the live view (.gif, or .mp4 with ffmpeg).
+    view3d : Path, optional
+        Write the recorded 3D view (:mod:`lab.viz.view3d`: one HTML page; needs ``lab[view3d]``).
     robot : Path, optional
         A hardware TOML config: run on that robot (no ground truth: no pose error, no Fig. 5 truth); a
         rehearsal config (``hardware/rehearsal.toml``) runs on the emulators with rendered frames and
@@ -141,13 +156,7 @@ def run_demo(
     t0 = time.perf_counter()
     from lab.runs.identify import run_identify
 
-    if robot is not None:
-        say(f"lab demo: identifying the box with the robot of {robot} ({planner} planner) ...")
-    else:
-        say(
-            f"lab demo: identifying the box on the carrier ({names[true_model]}, {mover} mover, "
-            f"{planner} planner, up to {max_actions} actions, {max_time_s:g} s simulated) ..."
-        )
+    say(_what_runs(robot, planner, names[true_model], mover, max_actions, max_time_s))
     res = run_identify(
         true_model,
         seed,
@@ -158,6 +167,7 @@ def run_demo(
         json_path=out / "identify.json" if robot is None else None,
         max_time_s=max_time_s,
         record=record,
+        view3d=view3d,
         robot_config=robot,
         progress=say if robot is not None else None,
         sensing=sensing,

@@ -117,6 +117,7 @@ def run_identify(
     sensing="realistic",
     localization="odometry",
     start=None,
+    view3d: Path | None = None,
 ) -> dict:
     """Run one episode and return the ``lab identify`` JSON (also written to ``json_path``).
 
@@ -141,19 +142,18 @@ def run_identify(
     progress : callable(str), optional
         One line per decision (the robot's console).
     sensing : str or mapping
-        The simulator's sensing profile (:func:`lab.sim.sensing.sensing_profile`; default realistic,
-        or ideal), recorded as the JSON's ``sensing``; a rehearsal's rendered camera follows its camera
-        section (the JSON's ``sensing_applies_to`` says which sections applied).
+        The simulator's sensing profile (:func:`lab.sim.sensing.sensing_profile`), the JSON's ``sensing``;
+        a rehearsal's rendered camera follows its camera section (the JSON's ``sensing_applies_to``).
     localization : {"landmarks", "odometry"}
-        Where the robot's pose comes from (:class:`lab.localization.LocalizedRobot`); the
-        landmark map on a robot is its config's ``[room] landmarks``, a rehearsal's by default the posters
-        of the scene it renders (:mod:`lab.runs.room`).
+        Where the robot's pose comes from (:class:`lab.localization.LocalizedRobot`); a robot's map is
+        its config's ``[room] landmarks``, a rehearsal's the rendered scene's posters (:mod:`lab.runs.room`).
     start : (x_m, y_m, heading_deg), optional
-        A robot only: where it stands in the room when it starts (default: its config's ``[room] start``,
-        a rehearsal's ``[sim] robot_start``; the real robot has no default: without one it localizes by
-        odometry alone, and says so).
+        A robot only: where it stands in the room at the start (default: its config's ``[room] start``, a
+        rehearsal's ``[sim] robot_start``; the real robot without one uses odometry alone, and says so).
+    view3d : Path, optional
+        Write the recorded 3D view there (:mod:`lab.viz.view3d`, one HTML page); the JSON's ``view3d``.
     """
-    hw, room, start_pose = _checked_setup(true_model, robot_config, localization, start)
+    hw, room, start_pose = _checked_setup(true_model, robot_config, localization, start, view3d)
     config = _agent_config(max_actions, max_time_s, keep_direction)
     t_wall, t_cpu = time.perf_counter(), time.process_time()  # CPU: the episode's cost whatever the load
     with contextlib.ExitStack() as stack:
@@ -162,7 +162,7 @@ def run_identify(
         robot, note = _localized(session, room, start_pose, seed)
         tracked = TrackedRobot(robot, _truth_pose(session))  # the robot's path, for Fig. 6
         agent = build_agent(tracked, planner, seed, config, floor_plan=plan)
-        recorder = _watch(agent, record, progress)
+        recorder, viewer = _watch(agent, record, progress), _viewer(agent, session, view3d)
         if attach is not None:
             attach(agent, session.carrier)
         truth = _record_truth(agent, session)
@@ -175,18 +175,23 @@ def run_identify(
     result = _episode_json(agent, session, true_model, identified, planner, seed, mover, t0)
     result.update(sim_time_s=elapsed, wall_time_s=wall, pose_error=error, **extra)
     _add_reason_and_speed(result, agent, session, identified, interrupted, (elapsed, wall, cpu, loop))
-    _finish_recording(recorder, result, progress)
-    true_poses = [G_WO for _, G_WO in truth]
-    _write(result, json_path, out if figures else None, agent, session, true_poses, tracked.track())
+    _finish_recording(recorder, result, progress, viewer)
+    poses = [G for _, G in truth]
+    _write(result, json_path, out if figures else None, agent, session, poses, tracked.track())
     return result
 
 
-def _checked_setup(true_model: int, robot_config, localization, start):
+def _checked_setup(true_model: int, robot_config, localization, start, view3d=None):
     """The robot config, the room's landmarks and the robot's start in the room, each checked before
-    anything starts (a bad model, config or map: one clear error)."""
+    anything starts (a bad model, config or map, or a 3D view without its optional viewer: one clear
+    error)."""
     from lab.sim import box_model
 
     box_model(true_model)  # a clear error before anything starts
+    if view3d is not None:
+        from lab.viz.view3d import require_viser
+
+        require_viser()
     hw = load_robot_config(robot_config)
     kind = robot_kind(hw)
     room = room_landmarks(kind, hw, _scene_of(kind, hw), localization)  # a bad map: one line, first
@@ -480,7 +485,20 @@ def _speed_fields(sim_time: float, wall: float, cpu: float, loop: dict) -> dict:
     }
 
 
-def _finish_recording(recorder, result: dict, progress) -> None:
+def _viewer(agent, session, view3d):
+    """The recorded 3D view of the episode (None without ``view3d``): the world's bodies are for
+    display only; the agent never sees them."""
+    if view3d is None:
+        return None
+    from lab.viz.view3d import View3D
+
+    return View3D.for_identification(agent, view3d, session.world)
+
+
+def _finish_recording(recorder, result: dict, progress, viewer=None) -> None:
+    """Close the animation and the 3D view; their paths go into the JSON's ``recording`` and ``view3d``."""
+    if viewer is not None:
+        result["view3d"] = str(viewer.save())
     if recorder is None:
         return
     p = recorder.close()

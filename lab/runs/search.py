@@ -199,6 +199,8 @@ class TrialOptions:
     moving : MovingOptions, optional
         The simulator only: the object moves over the floor, and the agent predicts it unless it is the
         static-map baseline (:mod:`lab.runs.moving`). None: the paper's stationary object.
+    view3d : path, optional
+        Write the recorded 3D view there (:mod:`lab.viz.view3d`: one HTML page, one step per event).
     """
 
     place: tuple | None = None
@@ -220,6 +222,7 @@ class TrialOptions:
     emulator_setup: Callable | None = None
     start: tuple | None = None
     moving: MovingOptions | None = None
+    view3d: object = None
 
 
 def run_search(
@@ -245,6 +248,7 @@ def run_search(
     emulator_setup: Callable | None = None,
     start=None,
     moving: MovingOptions | None = None,
+    view3d=None,
 ) -> SearchResult:
     """Run one search trial (in the simulator, a rehearsal or on the robot) and score it.
 
@@ -273,6 +277,7 @@ def run_search(
         emulator_setup=emulator_setup,
         start=start,
         moving=moving,
+        view3d=view3d,
     )
     return run_trial(object, seed, options)
 
@@ -284,6 +289,11 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     strategy = Strategy.parse(opts.strategy)
     scene = opts.world if isinstance(opts.world, Scene) else load_scene(opts.world)
     recorder = _check_trial(scene, object, opts.navigate, opts.max_time, opts.record)
+    viewer = None
+    if opts.view3d is not None:  # a missing viewer library: one line before anything starts
+        from lab.viz.view3d import View3D
+
+        viewer = View3D(opts.view3d)
     hw = load_robot_config(opts.robot_config)  # a bad robot config is one clear line before anything starts
     kind = robot_kind(hw)
     # the landmark map (a bad landmark file is one line too) and where the robot's odometry starts
@@ -302,11 +312,15 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
         robot = localize(run.robot, kind, room, start_pose, seed)
         t0 = 0.0 if kind is RobotKind.SIM else robot.now()
         hook = _with_progress(opts.attach, t0) if opts.progress else opts.attach
+        if viewer is not None:  # the world's bodies for the 3D view: display only
+            viewer.world, hook = run.world, viewer.attach_search(hook)
         parts = (db, opts.navigate, spec, cfg, seed, recorder, hook, (opts.max_time, opts.max_wall_time))
         out, truth_end, budget, odom, track, report_reloc = _search(robot, truth_of, *parts)
         profile, applies = run.sensing, tuple(run.sensing_applies_to)
         estimate = robot.pose_estimate()
         watchdog = None if kind is RobotKind.SIM else int(run.robot.watchdog_stops)
+    if viewer is not None:
+        viewer.save()
     if note is None and mode is LocalizationMode.LANDMARKS and estimate.n_updates == 0:
         note = "no landmark was seen: the pose is odometry alone"
     if note is not None:

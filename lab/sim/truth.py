@@ -5,6 +5,7 @@ For tests and evaluation only; the algorithms see the world through :class:`lab.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -16,7 +17,22 @@ from lab.sim.client import pybullet
 if TYPE_CHECKING:
     from lab.sim.world import SimWorld
 
-__all__ = ["Truth"]
+__all__ = ["BodyShape", "Truth"]
+
+_SOLIDS = (pybullet.GEOM_BOX, pybullet.GEOM_CYLINDER)
+
+
+@dataclass(frozen=True)
+class BodyShape:
+    """One solid of a simulated body, for display: ``shape`` "box" (``size`` = full extents x, y, z [m])
+    or "cylinder" (``size`` = (radius, height) [m], along its z axis); ``G_W`` its centre's pose in the
+    world; ``rgba`` its colour in [0, 1] (white for a textured body)."""
+
+    name: str
+    shape: str
+    size: tuple[float, ...]
+    G_W: np.ndarray = field(repr=False)
+    rgba: tuple[float, float, float, float] = (0.7, 0.7, 0.7, 1.0)
 
 
 class Truth:
@@ -56,6 +72,35 @@ class Truth:
     def collisions(self) -> int:
         r = self._w.robot
         return 0 if r is None else r.truth.collisions
+
+    def shapes(self) -> list[BodyShape]:
+        """Every body of the world as simple solids with their true poses (for display only: the
+        recorded 3D view, :mod:`lab.viz.view3d`). A body's collision shape gives its solid (the visual
+        shape where it has none, e.g. the robot's mast); textured bodies report white."""
+        p, out = self._w.p, []
+        for k in range(p.getNumBodies()):
+            bid = p.getBodyUniqueId(k)
+            name = self._w.body_name(bid) or f"body{bid}"
+            pos, q = p.getBasePositionAndOrientation(bid)
+            G_W = se3(quat_xyzw_to_R(q), pos)
+            vis = p.getVisualShapeData(bid)
+            rgba = tuple(float(c) for c in vis[0][7]) if vis else (0.7, 0.7, 0.7, 1.0)
+            col = [c for c in p.getCollisionShapeData(bid, -1) if c[2] in _SOLIDS]
+            # (type, dimensions, local position, local orientation) of the collision or the visual shape
+            parts = [(c[2], c[3], c[5], c[6]) for c in col] or [
+                (v[2], v[3], v[5], v[6]) for v in vis if v[1] == -1 and v[2] in _SOLIDS
+            ]
+            for j, (kind, dims, lp, lq) in enumerate(parts):
+                G_local = se3(quat_xyzw_to_R(lq), lp)
+                if kind == pybullet.GEOM_BOX:
+                    size = (float(dims[0]), float(dims[1]), float(dims[2]))
+                    shape = "box"
+                else:  # a cylinder: (height, radius) from a collision shape, (length, radius) from a visual
+                    size = (float(dims[1]), float(dims[0]))
+                    shape = "cylinder"
+                part = name if len(parts) == 1 else f"{name}#{j}"
+                out.append(BodyShape(part, shape, size, G_W @ G_local, rgba))
+        return out
 
     def occupancy(self, spec, z_min: float, z_max: float, exclude=("floor", "robot")) -> np.ndarray:
         """True occupancy of a floor grid: cells that a body's footprint overlaps within a height band.
