@@ -422,7 +422,7 @@ def _probe(sb: Sandbox) -> str | None:
             return f"{what} could not run: {e}"
         if r.returncode != 0:
             last = (r.stderr.strip().splitlines() or [f"exit status {r.returncode}"])[-1]
-            if sb.kind == "uid" and "Permission denied" in last:
+            if sb.kind == "uid" and ("Permission denied" in last or not _others_can_enter(sys.base_prefix)):
                 last += (
                     f" (the Python at {sys.base_prefix} or its packages are not readable by other users:"
                     " use a Python installed for all users, e.g. /usr/bin/python3)"
@@ -433,6 +433,19 @@ def _probe(sb: Sandbox) -> str | None:
     finally:
         shutil.rmtree(d, ignore_errors=True)
     return None
+
+
+def _others_can_enter(path: str) -> bool:
+    """Whether a user other than the owner can reach ``path``: every folder on the way lets others through
+    (a Python under ``/root``, as pyenv installs it, does not)."""
+    p = Path(path).resolve()
+    for d in (p, *p.parents):
+        try:
+            if not d.stat().st_mode & stat.S_IXOTH:
+                return False
+        except OSError:
+            return False
+    return True
 
 
 def find_sandbox() -> Sandbox:
