@@ -23,8 +23,6 @@ bundle outside Gradescope.
 
 from __future__ import annotations
 
-import contextlib
-import os
 import shutil
 import subprocess
 import tempfile
@@ -34,6 +32,7 @@ from pathlib import Path
 from lab.errors import ConfigError
 from lab.grading.assignments import Assignment
 from lab.grading.release import release, solution_lines
+from lab.io import atomic_output
 
 __all__ = ["build_bundle", "SETUP_SH", "RUN_AUTOGRADER"]
 
@@ -152,20 +151,11 @@ def build_bundle(assignment: Assignment, out: str | Path) -> Path:
             if p.is_file() and p.suffix != ".pyc" and p.name != assignment.module:
                 files[f"{a_dir}/{p.name}"] = p
         files[f"{a_dir}/{assignment.module}"] = template.encode()
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
-        os.close(fd)
-        try:
-            with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-                for name, data in files.items():
-                    info = zipfile.ZipInfo(name, date_time=(2024, 1, 1, 0, 0, 0))
-                    info.compress_type = zipfile.ZIP_DEFLATED
-                    mode = 0o755 if name in ("setup.sh", "run_autograder") else 0o644
-                    info.external_attr = (0o100000 | mode) << 16
-                    z.writestr(info, data if isinstance(data, bytes) else data.read_bytes())
-            os.replace(tmp, out)
-        except BaseException:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            raise
+        with atomic_output(out) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+            for name, data in files.items():
+                info = zipfile.ZipInfo(name, date_time=(2024, 1, 1, 0, 0, 0))
+                info.compress_type = zipfile.ZIP_DEFLATED
+                mode = 0o755 if name in ("setup.sh", "run_autograder") else 0o644
+                info.external_attr = (0o100000 | mode) << 16
+                z.writestr(info, data if isinstance(data, bytes) else data.read_bytes())
     return out

@@ -423,10 +423,8 @@ def _probe(sb: Sandbox) -> str | None:
         if r.returncode != 0:
             last = (r.stderr.strip().splitlines() or [f"exit status {r.returncode}"])[-1]
             if sb.kind == "uid" and ("Permission denied" in last or not _others_can_enter(sys.base_prefix)):
-                last += (
-                    f" (the Python at {sys.base_prefix} or its packages are not readable by other users:"
-                    " use a Python installed for all users, e.g. /usr/bin/python3)"
-                )
+                hint = "or its packages are not readable by other users: use one installed for all users"
+                last += f" (the Python at {sys.base_prefix} {hint}, e.g. /usr/bin/python3)"
             return f"{what} failed here: {last}"
         if uid is not None and r.stdout.strip() != str(uid):
             return f"the child did not become uid {uid}"
@@ -436,16 +434,12 @@ def _probe(sb: Sandbox) -> str | None:
 
 
 def _others_can_enter(path: str) -> bool:
-    """Whether a user other than the owner can reach ``path``: every folder on the way lets others through
-    (a Python under ``/root``, as pyenv installs it, does not)."""
+    """Whether other users can reach ``path`` (a pyenv Python under ``/root`` cannot)."""
     p = Path(path).resolve()
-    for d in (p, *p.parents):
-        try:
-            if not d.stat().st_mode & stat.S_IXOTH:
-                return False
-        except OSError:
-            return False
-    return True
+    try:
+        return all(d.stat().st_mode & stat.S_IXOTH for d in (p, *p.parents))
+    except OSError:
+        return False
 
 
 def find_sandbox() -> Sandbox:

@@ -15,16 +15,15 @@ ignores and our scripts read.
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import json
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from lab.grading.suite import GradedTest
+from lab.io import atomic_output
 
 if TYPE_CHECKING:
     from lab.grading.assignments import Assignment
@@ -168,20 +167,12 @@ class GradeReport:
         """Write results.json atomically (a temporary file, flushed to disk, renamed over the target),
         then read it back: an error if what is there is not what was meant to be written."""
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         data = self.to_gradescope()
         text = json.dumps(data, indent=2) + "\n"
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-        try:
-            with os.fdopen(fd, "w") as f:
-                f.write(text)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            raise
+        with atomic_output(path) as tmp, open(tmp, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
         if json.loads(path.read_text()) != json.loads(text):
             raise OSError(f"{path} does not hold the results just written to it")
         return path
@@ -220,22 +211,14 @@ def write_scores_csv(path: str | Path, rows: list[tuple[str, list[GradeReport]]]
     for _, reports in rows[:1]:
         for rep in reports:
             columns += [f"{rep.assignment.name}:{r.test.id}" for r in rep.tests]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["student", "sandbox", *columns, "total", "max_score"])
-            for student, reports in rows:
-                kinds = sorted({rep.sandbox for rep in reports})
-                mode = "+".join(kinds) + (" (INSECURE)" if "none" in kinds else "")
-                scores = [f"{r.score:g}" for rep in reports for r in rep.tests]
-                total = sum(rep.score for rep in reports)
-                top = sum(rep.max_score for rep in reports)
-                w.writerow([student, mode, *scores, f"{total:g}", f"{top:g}"])
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
+    with atomic_output(path) as tmp, open(tmp, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["student", "sandbox", *columns, "total", "max_score"])
+        for student, reports in rows:
+            kinds = sorted({rep.sandbox for rep in reports})
+            mode = "+".join(kinds) + (" (INSECURE)" if "none" in kinds else "")
+            scores = [f"{r.score:g}" for rep in reports for r in rep.tests]
+            total = sum(rep.score for rep in reports)
+            top = sum(rep.max_score for rep in reports)
+            w.writerow([student, mode, *scores, f"{total:g}", f"{top:g}"])
     return path

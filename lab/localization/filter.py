@@ -561,18 +561,12 @@ class Localizer:
                 self.rejected_in_a_row = 0
                 self.n_inflations += 1
                 self._rejected_here.clear()  # the doubted estimate is tried against them all again
+        return self._record(t, landmark, z, Q, x_bar, Sigma_bar, nis, bool(accepted), n_inliers)
+
+    def _record(self, t, landmark, z, Q, x_bar, Sigma_bar, nis, accepted, n_inliers, kind="update"):
+        """Keep what an observation did, with the filter's state after it, in :attr:`history`."""
         rec = UpdateRecord(
-            t,
-            landmark.name,
-            z,
-            Q,
-            x_bar,
-            Sigma_bar,
-            self.x,
-            self.Sigma,
-            nis,
-            bool(accepted),
-            int(n_inliers),
+            t, landmark.name, z, Q, x_bar, Sigma_bar, self.x, self.Sigma, nis, accepted, int(n_inliers), kind
         )
         self.history.append(rec)
         return rec
@@ -672,19 +666,4 @@ class Localizer:
             kind, accepted = "outlier", False  # rejected
         if accepted:
             self.first_sighting_pending = False
-        rec = UpdateRecord(
-            t,
-            landmark.name,
-            z,
-            Q,
-            x_bar,
-            Sigma_bar,
-            self.x,
-            self.Sigma,
-            nis,
-            accepted,
-            int(n_inliers),
-            kind,
-        )
-        self.history.append(rec)
-        return rec
+        return self._record(t, landmark, z, Q, x_bar, Sigma_bar, nis, accepted, n_inliers, kind)
