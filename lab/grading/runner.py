@@ -63,6 +63,7 @@ from lab.grading.isolation import (
     make_undumpable,
 )
 from lab.grading.report import INSECURE, GradeReport, TestResult
+from lab.grading.rules import child_rules, importable_from_grader, oracle_folders, oracles
 from lab.grading.suite import Fail, GradedTest
 
 __all__ = [
@@ -239,9 +240,10 @@ def grade_submission(
     t0 = time.monotonic()
     sb = sandbox or choose_sandbox(insecure)
     make_undumpable()
+    banned = oracle_folders(oracles(assignment))  # the graded tests' oracles: never in the child's reach
     if sb.kind == "uid":  # the child sees the grader's filesystem: close the grader's folders to it
         folder = Path(assignment.folder).resolve()
-        make_grader_private([folder.parent, folder])
+        make_grader_private([folder.parent, folder, *banned])
     suite = assignment.load_suite()
     jobs = jobs or max(1, min(4, os.cpu_count() or 1))
 
@@ -253,6 +255,9 @@ def grade_submission(
         return nothing_runs(
             f"no {assignment.module} found in {submission}: submit the file {assignment.module}"
         )
+    shadowing = importable_from_grader(module_path.parent)
+    if shadowing:
+        return nothing_runs(f"refused {submission}: {shadowing}")
     try:
         source = read_module(assignment, module_path)
     except Refused as e:
@@ -263,7 +268,8 @@ def grade_submission(
         assignment.memory_mb,
         assignment.import_timeout_s * timeout_scale,
         sb,
-        (str(Path(assignment.folder).resolve()),),
+        (str(Path(assignment.folder).resolve()), *banned),
+        child_rules(assignment),
     )
     # One import probe: a module that cannot be imported fails every test with the same message,
     # without paying its import timeout once per test.
