@@ -9,11 +9,13 @@ process (``python -I sandbox.py ...``) which
    are forbidden, on the grader's filesystem with the grader's folders private);
 2. lowers its own resource limits (address space, CPU time, file size, open files, processes),
    before any student code runs;
-3. imports the submitted module from its private folder (``lab`` itself cannot be imported: the
-   assignments are to be written, not borrowed; in the sandbox it is not even there);
+3. puts the assignment's import rules in place (:func:`_rules`: only the modules ``assignment.toml``
+   lists; never ``lab`` nor the graded tests' oracles, which are not even there in the sandbox) and
+   imports the submitted module from its private folder;
 4. notes what the student's code tried that the sandbox forbids (files outside the submission,
-   network connections, new processes, ``import lab``) with an audit hook, and sends the notes with
-   each answer for the feedback (they never change a score: the sandbox, not the hook, stops them);
+   network connections, new processes, refused imports) with an audit hook, each note written the
+   moment it happens to a record pipe the grader reads (:mod:`lab.grading.records`): the student's
+   code cannot take it back (the notes never change a score: the sandbox, not the hook, stops them);
 5. answers *calls*: the grading process sends ``{"call": name, "args": [...]}`` and gets back the
    function's return value, or a description of the exception it raised.
 
@@ -248,7 +250,7 @@ def _rules(rules: dict, module_name: str, student: list, note):
     let through. The author is the first frame outside importlib, whose globals must be those of a
     module loaded from the Python installation (or this file), not the submission's module."""
     assignment, imports = rules.get("assignment", "?"), rules.get("imports")
-    oracles = frozenset(rules.get("oracles") or ()) | {"lab"}
+    oracles = frozenset(rules.get("oracles") or ())  # lab among them (lab.grading.rules.oracles)
     allowed = None if imports is None else frozenset(imports) | {module_name}
     stdlib, modules, getframe = sys.stdlib_module_names, sys.modules, sys._getframe
     own = os.path.abspath(__file__)
