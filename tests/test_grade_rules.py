@@ -41,7 +41,7 @@ def _submission(tmp_path, source, module, name="student"):
 
 
 # ---- 1. the assignment's rules: networkx, the graded tests' oracle, however the student tries
-NETWORKX = '''
+NETWORKX = """
 
 # ---- the attack: A* by networkx, the graded tests' own oracle, had however it can be
 _sys = np.__spec__.loader.__class__.get_data.__globals__["sys"]  # sys without an import statement
@@ -128,7 +128,7 @@ def astar(cost, start, goal):
     except (nx.NetworkXNoPath, nx.NodeNotFound):
         return np.zeros((0, 2), dtype=int), math.inf
     return np.array(path, dtype=int), float(nx.path_weight(G, path, "weight"))
-'''
+"""
 
 
 class _Module:
@@ -200,7 +200,7 @@ def test_the_template_and_the_reference_are_graded_without_a_note(tmp_path, temp
         assert not any("refused" in r.output for r in report.tests)
 
 
-ERASE = '''
+ERASE = """
 
 # ---- the attack: a refused attempt, then every way to erase its record
 _sys = np.__spec__.loader.__class__.get_data.__globals__["sys"]
@@ -235,9 +235,9 @@ def triangulate(uv, disparity, f, cx, cy, baseline):
     _erase()  # ... then the record erased
     _attempt("/etc/passwd")
     raise NotImplementedError
-'''
+"""
 
-GARBLE = '''
+GARBLE = """
 
 _sys = np.__spec__.loader.__class__.get_data.__globals__["sys"]
 
@@ -251,7 +251,7 @@ def project(points_C, f, cx, cy):
             except OSError:
                 pass
     raise NotImplementedError
-'''
+"""
 
 
 def test_a_refused_attempt_stays_recorded_however_the_record_is_erased(tmp_path, template, grading_mode):
@@ -275,9 +275,7 @@ def _shadowing_folder(tmp_path, template):
     return sub, mark
 
 
-def test_python_dash_m_lab_inside_a_submission_folder_does_not_import_its_numpy(
-    tmp_path, template, any_mode
-):
+def test_python_dash_m_lab_inside_a_submission_folder_does_not_import_its_numpy(tmp_path, template, any_mode):
     sub, mark = _shadowing_folder(tmp_path, template)
     out = tmp_path / "results.json"
     r = subprocess.run(
@@ -313,9 +311,7 @@ def test_a_submission_folder_the_grader_could_import_is_refused(tmp_path, templa
     assert said in data["output"], data["output"]
 
 
-def test_a_folder_is_importable_when_it_or_a_parent_named_like_a_module_is_on_the_path(
-    tmp_path, monkeypatch
-):
+def test_a_folder_is_importable_when_it_or_a_parent_named_like_a_module_is_on_the_path(tmp_path, monkeypatch):
     inside = tmp_path / "numpy" / "alice"
     inside.mkdir(parents=True)
     elsewhere = tmp_path / "class" / "bob"

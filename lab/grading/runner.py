@@ -23,6 +23,12 @@ child's side):
   results does nothing. A malformed answer is a failed call.
 * **Nothing the child sends is a score.** At worst a hostile child sends wrong values for its own
   functions, which is what it is graded on.
+* **The assignment's rules hold.** The child refuses every import ``assignment.toml`` does not allow,
+  and the graded tests' oracles (networkx, SciPy, OpenCV, ``lab``) are neither loaded there nor
+  readable (:mod:`lab.grading.rules`). What it refused is recorded as it happens on a pipe the grader
+  reads, so the student's code cannot erase it (:mod:`lab.grading.records`).
+* **The grader imports nothing of the submission's.** A submission folder on the grader's own import
+  path is refused (``python -m lab`` keeps the working directory off it: :mod:`lab`).
 * **Nothing outlives its test.** Before a test's result is recorded, every process it started is gone
   (the sandbox's PID namespace is killed and, as root, every process of its uid), so nothing can
   rewrite results after the grader.

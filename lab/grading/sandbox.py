@@ -252,7 +252,9 @@ def _rules(rules: dict, module_name: str, student: list, note):
     assignment, imports = rules.get("assignment", "?"), rules.get("imports")
     oracles = frozenset(rules.get("oracles") or ())  # lab among them (lab.grading.rules.oracles)
     allowed = None if imports is None else frozenset(imports) | {module_name}
-    stdlib, modules, getframe = sys.stdlib_module_names, sys.modules, sys._getframe
+    import inspect  # loaded already (NumPy uses it)
+
+    stdlib, modules, here = sys.stdlib_module_names, sys.modules, inspect.currentframe
     own = os.path.abspath(__file__)
     roots = tuple(
         {own}
@@ -304,14 +306,14 @@ def _rules(rules: dict, module_name: str, student: list, note):
         """First on ``sys.meta_path``: any import of a module not loaded yet."""
 
         def find_spec(self, fullname, path=None, target=None):
-            check(fullname, getframe(1))
+            check(fullname, here().f_back)
 
     real_import = builtins.__import__
 
     def guarded_import(name, globals=None, locals=None, fromlist=(), level=0):
         """Import statements and ``__import__``, also of modules already loaded (``import os``)."""
         if level == 0 and name:
-            check(name, getframe(1), False)  # the statement's own frame: importlib's are trusted here
+            check(name, here().f_back, False)  # the statement's own frame: importlib's are trusted here
         return real_import(name, globals, locals, fromlist, level)
 
     return check, Finder(), guarded_import
