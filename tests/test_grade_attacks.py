@@ -40,6 +40,17 @@ INSECURE = Sandbox("none")
 ENTRY = Path(sys.modules["lab.grading.sandbox"].__file__)
 
 
+@pytest.fixture(autouse=True)
+def no_import_rules(monkeypatch):
+    """These attacks test the sandbox itself: the assignments' import rules (tests/test_grade_rules.py)
+    would refuse most of them (``import os``) before they reach it. ``lab`` stays refused."""
+    monkeypatch.setattr("lab.grading.runner.child_rules", lambda a: _rules(a, ["lab"]))
+
+
+def _rules(assignment, oracles):
+    return {"assignment": assignment.name, "imports": None, "oracles": oracles}
+
+
 @pytest.fixture(scope="module")
 def template(tmp_path_factory):
     """The released (solutions stripped) ekf.py and stereo.py, as students receive them."""
@@ -67,7 +78,9 @@ class _OneTest:
 
 
 def _scores_without_sandbox(sub, test_id="measurement_model_eq3"):
-    return grade_submission(_OneTest(EKF, test_id), sub, sandbox=INSECURE).score
+    with pytest.MonkeyPatch.context() as m:  # and without any import rule
+        m.setattr("lab.grading.runner.child_rules", lambda a: _rules(a, []))
+        return grade_submission(_OneTest(EKF, test_id), sub, sandbox=INSECURE).score
 
 
 def _submission(tmp_path, template_src, attack, name="student", module="ekf.py"):

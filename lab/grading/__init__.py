@@ -6,6 +6,8 @@
 * :mod:`lab.grading.isolation`: the isolation modes each child runs in (bubblewrap, or a throwaway uid
   where namespaces are forbidden), ``--check-sandbox``;
 * :mod:`lab.grading.sandbox`: the child process and its wire format;
+* :mod:`lab.grading.rules`: an assignment's import rules, its oracles, a submission the grader could import;
+* :mod:`lab.grading.records`: the record of refused attempts, read from a pipe as they happen;
 * :mod:`lab.grading.report`: Gradescope's results.json, the terminal summary, the class CSV;
 * :mod:`lab.grading.release`: the student release (solution blocks stripped, graded tests left out);
 * :mod:`lab.grading.gradescope`: the Gradescope autograder bundle (``lab assignments gradescope``);

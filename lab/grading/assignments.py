@@ -56,6 +56,10 @@ class Assignment:
         Address-space limit of the child process [MB].
     budget_s : float
         Total grading time [s] for one submission; tests not started by then fail as "not run".
+    imports : tuple of str or None
+        The top-level modules the student's code may import (``imports`` in ``assignment.toml``); the
+        sandboxed child refuses every other (:mod:`lab.grading.rules`). None when the file declares
+        none: then only ``lab`` and the graded tests' oracles are refused.
     """
 
     name: str
@@ -69,6 +73,7 @@ class Assignment:
     import_timeout_s: float
     memory_mb: int
     budget_s: float
+    imports: tuple[str, ...] | None = None
 
     @property
     def module_path(self) -> Path:
@@ -132,6 +137,7 @@ def _load(folder: Path) -> Assignment:
         import_timeout_s=float(limits["import_timeout_s"]),
         memory_mb=int(limits["memory_mb"]),
         budget_s=float(limits["budget_s"]),
+        imports=_imports(cfg, path),
     )
     if a.module not in a.release:
         raise ConfigError(f"{path}: the module {a.module!r} must be listed in 'release'")
@@ -141,6 +147,21 @@ def _load(folder: Path) -> Assignment:
         if not (folder / f).is_file():
             raise ConfigError(f"{path}: {f!r} does not exist in {folder}")
     return a
+
+
+def _imports(cfg: dict, path: Path) -> tuple[str, ...] | None:
+    """The ``imports`` field: a list of top-level module names (``numpy``, ``heapq``), or absent."""
+    if "imports" not in cfg:
+        return None
+    names = cfg["imports"]
+    if not isinstance(names, list) or not all(isinstance(n, str) and n.isidentifier() for n in names):
+        raise ConfigError(
+            f'{path}: \'imports\' must be a list of top-level module names (e.g. ["numpy", "heapq"]), '
+            f"not {names!r}"
+        )
+    if "lab" in names:
+        raise ConfigError(f"{path}: 'imports' may not allow 'lab' (the assignments are to be written)")
+    return tuple(sorted(set(names)))
 
 
 def list_assignments(root: str | Path | None = None) -> list[Assignment]:

@@ -30,6 +30,7 @@ from lab.grading.isolation import (
     private_workdir,
     processes_of_uid,
 )
+from lab.grading.records import Records
 from lab.grading.sandbox import MAX_MESSAGE_BYTES, WireError, decode, encode
 from lab.grading.suite import Fail
 
@@ -119,7 +120,14 @@ class ChildProcess:
     """A running ``sandbox.py`` (in the sandbox) with its private request and answer pipes."""
 
     def __init__(
-        self, source: bytes, module: str, memory_mb: int, cpu_s: int, sandbox: Sandbox, hide: tuple[str, ...]
+        self,
+        source: bytes,
+        module: str,
+        memory_mb: int,
+        cpu_s: int,
+        sandbox: Sandbox,
+        hide: tuple[str, ...],
+        rules: dict | None = None,
     ):
         self.sandbox = sandbox
         self.uid = sandbox.new_uid()
@@ -135,6 +143,8 @@ class ChildProcess:
         req_r, self.req_w = os.pipe()
         self.resp_r, resp_w = os.pipe()
         info_r, info_w = os.pipe() if sandbox.bubblewrap else (-1, -1)
+        rec_r, rec_w = os.pipe()  # the record of refused attempts (lab.grading.records)
+        self.records = Records(rec_r, self.notes)
         home = "/tmp" if sandbox.bubblewrap else str(self.dir)
         env = {
             "PATH": "/usr/bin:/bin" if sandbox.secure else os.environ.get("PATH", "/usr/bin:/bin"),
@@ -147,6 +157,7 @@ class ChildProcess:
             "MKL_NUM_THREADS": "1",
             "PYTHONHASHSEED": "0",
             "LC_ALL": "C.UTF-8",
+            "LAB_GRADE_RULES": json.dumps({**(rules or {}), "records_fd": rec_w}),
         }
         args = [
             "-I",  # isolated: no PYTHON* variables, no user site, no script folder on sys.path
@@ -162,7 +173,7 @@ class ChildProcess:
         cmd = sandbox.command(args, self.dir, _SANDBOX, self.uid, hide)
         if sandbox.bubblewrap:
             cmd[1:1] = ["--info-fd", str(info_w)]  # bwrap says there the pid of the namespace's first process
-        fds = (req_r, resp_w) + ((info_w,) if sandbox.bubblewrap else ())
+        fds = (req_r, resp_w, rec_w) + ((info_w,) if sandbox.bubblewrap else ())
         try:
             self.proc = subprocess.Popen(
                 cmd,
@@ -183,6 +194,7 @@ class ChildProcess:
         self._buf = bytearray()
         self._out = bytearray()
         self._out_total = 0
+        self._messages = 0  # received so far (the record pipe has one mark per message)
         self._reader = threading.Thread(target=self._drain, daemon=True)
         self._reader.start()
         self.memory_mb = memory_mb
@@ -244,13 +256,17 @@ class ChildProcess:
                 if len(self._buf) >= _HEADER.size + n:
                     data = bytes(self._buf[_HEADER.size : _HEADER.size + n])
                     del self._buf[: _HEADER.size + n]
+                    self.records.after_message(self._messages)
+                    self._messages += 1
                     return decode(data)
             left = deadline - time.monotonic()
             if left <= 0:
                 raise _Timeout
-            r, _, _ = select.select([self.resp_r], [], [], left)
-            if not r:
-                raise _Timeout
+            r, _, _ = select.select([self.resp_r, *self.records.waiting()], [], [], left)
+            if self.records.fd in r:  # read as it comes: a child noting much never blocks on it
+                self.records.pump()
+            if self.resp_r not in r:
+                continue
             chunk = os.read(self.resp_r, 1 << 20)
             if not chunk:
                 raise StudentCrash(self.death())
@@ -275,14 +291,6 @@ class ChildProcess:
             }.get(sig, "")
             return f"the process died with {sig}{why}"
         return f"the process exited with status {code} (sys.exit or os._exit in the submission?)"
-
-    def take_notes(self, answer) -> None:
-        """Keep what the child's audit hook noticed (feedback only; it never changes a score)."""
-        notes = answer.get("notes") if isinstance(answer, dict) else None
-        if isinstance(notes, list):
-            for n in notes[:8]:
-                if isinstance(n, str) and n not in self.notes:
-                    self.notes.append(n[:300])
 
     def close(self) -> None:
         """End every process of the child (its PID namespace; as root every process of its uid), wait
@@ -311,6 +319,7 @@ class ChildProcess:
             self.proc.wait(timeout=5.0)
         except subprocess.TimeoutExpired:
             pass
+        self.records.finish()  # what reached the record pipe, to the end
         for fd in (self.req_w, self.resp_r, self.info_r):
             if fd >= 0:
                 try:
@@ -375,7 +384,6 @@ class Submission:
             raise StudentCrash(self._dead) from None
         finally:
             self._left_s -= time.monotonic() - t0
-        self._child.take_notes(answer)
         if not isinstance(answer, dict) or "ok" not in answer:
             raise StudentCrash(f"{name} sent an answer the grader cannot read")
         if answer["ok"]:
@@ -392,7 +400,8 @@ class ChildLimits:
     memory_mb: int
     import_timeout_s: float
     sandbox: Sandbox
-    hide: tuple[str, ...] = ()  # folders the child must not see (the assignment's)
+    hide: tuple[str, ...] = ()  # folders the child must not see (the assignment's, the oracles')
+    rules: dict | None = None  # the import rules (lab.grading.rules.child_rules)
 
 
 def start_child(limits: ChildLimits, cpu_s: float, import_deadline: float) -> tuple[ChildProcess, list[str]]:
@@ -400,11 +409,16 @@ def start_child(limits: ChildLimits, cpu_s: float, import_deadline: float) -> tu
 
     ``cpu_s`` is the child's CPU-time backstop (``RLIMIT_CPU``), above every wall-clock limit it has."""
     child = ChildProcess(
-        limits.source, limits.module, limits.memory_mb, int(cpu_s) + 2, limits.sandbox, limits.hide
+        limits.source,
+        limits.module,
+        limits.memory_mb,
+        int(cpu_s) + 2,
+        limits.sandbox,
+        limits.hide,
+        limits.rules,
     )
     try:
         hello = child.receive(import_deadline)
-        child.take_notes(hello)
         if not (isinstance(hello, dict) and hello.get("ready")):
             info = hello.get("error", {}) if isinstance(hello, dict) else {}
             t, m = info.get("type", "Exception"), info.get("message", "")

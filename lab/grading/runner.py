@@ -23,6 +23,12 @@ child's side):
   results does nothing. A malformed answer is a failed call.
 * **Nothing the child sends is a score.** At worst a hostile child sends wrong values for its own
   functions, which is what it is graded on.
+* **The assignment's rules hold.** The child refuses every import ``assignment.toml`` does not allow,
+  and the graded tests' oracles (networkx, SciPy, OpenCV, ``lab``) are neither loaded there nor
+  readable (:mod:`lab.grading.rules`). What it refused is recorded as it happens on a pipe the grader
+  reads, so the student's code cannot erase it (:mod:`lab.grading.records`).
+* **The grader imports nothing of the submission's.** A submission folder on the grader's own import
+  path is refused (``python -m lab`` keeps the working directory off it: :mod:`lab`).
 * **Nothing outlives its test.** Before a test's result is recorded, every process it started is gone
   (the sandbox's PID namespace is killed and, as root, every process of its uid), so nothing can
   rewrite results after the grader.
@@ -63,6 +69,7 @@ from lab.grading.isolation import (
     make_undumpable,
 )
 from lab.grading.report import INSECURE, GradeReport, TestResult
+from lab.grading.rules import child_rules, importable_from_grader, oracle_folders, oracles
 from lab.grading.suite import Fail, GradedTest
 
 __all__ = [
@@ -239,9 +246,10 @@ def grade_submission(
     t0 = time.monotonic()
     sb = sandbox or choose_sandbox(insecure)
     make_undumpable()
+    banned = oracle_folders(oracles(assignment))  # the graded tests' oracles: never in the child's reach
     if sb.kind == "uid":  # the child sees the grader's filesystem: close the grader's folders to it
         folder = Path(assignment.folder).resolve()
-        make_grader_private([folder.parent, folder])
+        make_grader_private([folder.parent, folder, *banned])
     suite = assignment.load_suite()
     jobs = jobs or max(1, min(4, os.cpu_count() or 1))
 
@@ -253,6 +261,9 @@ def grade_submission(
         return nothing_runs(
             f"no {assignment.module} found in {submission}: submit the file {assignment.module}"
         )
+    shadowing = importable_from_grader(module_path.parent)
+    if shadowing:
+        return nothing_runs(f"refused {submission}: {shadowing}")
     try:
         source = read_module(assignment, module_path)
     except Refused as e:
@@ -263,7 +274,8 @@ def grade_submission(
         assignment.memory_mb,
         assignment.import_timeout_s * timeout_scale,
         sb,
-        (str(Path(assignment.folder).resolve()),),
+        (str(Path(assignment.folder).resolve()), *banned),
+        child_rules(assignment),
     )
     # One import probe: a module that cannot be imported fails every test with the same message,
     # without paying its import timeout once per test.

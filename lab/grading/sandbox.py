@@ -9,11 +9,13 @@ process (``python -I sandbox.py ...``) which
    are forbidden, on the grader's filesystem with the grader's folders private);
 2. lowers its own resource limits (address space, CPU time, file size, open files, processes),
    before any student code runs;
-3. imports the submitted module from its private folder (``lab`` itself cannot be imported: the
-   assignments are to be written, not borrowed; in the sandbox it is not even there);
+3. puts the assignment's import rules in place (:func:`_rules`: only the modules ``assignment.toml``
+   lists; never ``lab`` nor the graded tests' oracles, which are not even there in the sandbox) and
+   imports the submitted module from its private folder;
 4. notes what the student's code tried that the sandbox forbids (files outside the submission,
-   network connections, new processes, ``import lab``) with an audit hook, and sends the notes with
-   each answer for the feedback (they never change a score: the sandbox, not the hook, stops them);
+   network connections, new processes, refused imports) with an audit hook, each note written the
+   moment it happens to a record pipe the grader reads (:mod:`lab.grading.records`): the student's
+   code cannot take it back (the notes never change a score: the sandbox, not the hook, stops them);
 5. answers *calls*: the grading process sends ``{"call": name, "args": [...]}`` and gets back the
    function's return value, or a description of the exception it raised.
 
@@ -34,6 +36,7 @@ This module imports only the standard library and NumPy, so the child starts in 
 from __future__ import annotations
 
 import base64
+import builtins
 import json
 import math
 import os
@@ -203,29 +206,124 @@ def _apply_limits(memory_mb: int, cpu_s: int) -> None:
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write then fails with OSError(EFBIG) instead
 
 
-class _NoLab:
-    """Meta-path finder that refuses ``import lab``: the assignment is to write it, not import it."""
+# ------------------------------------------------------------------------------- records and rules
+# importlib's own frames: an import's true author is the first frame outside them
+_IMPORTLIB = frozenset(
+    {"importlib", "importlib.util", "importlib._bootstrap", "importlib._bootstrap_external"}
+    | {"_frozen_importlib", "_frozen_importlib_external"}
+)
 
-    def find_spec(self, fullname, path=None, target=None):
-        if fullname == "lab" or fullname.startswith("lab."):
+
+def _recorder(fd: int):
+    """``note(text)`` and ``mark(k)`` on the grader's record pipe ``fd``.
+
+    A note of a refused attempt is written the moment the attempt is made, before the student's code
+    goes on, so nothing in this process can take it back; ``mark(k)`` precedes the ``k``-th message on
+    the answer channel, so the grader sees a record channel the student's code closed or replaced (its
+    marks go missing). Everything used is bound here: replacing ``os.write`` or this module's functions
+    later changes nothing."""
+    write, text_of = os.write, str
+
+    def note(text: str) -> None:
+        line = "N" + " ".join(text_of(text).split())[:300] + "\n"
+        try:
+            write(fd, line.encode("utf-8", "backslashreplace"))
+        except (OSError, ValueError):
+            pass  # closed or replaced by the student's code: the grader notices the missing marks
+
+    def mark(k: int) -> None:
+        try:
+            write(fd, b"M%d\n" % k)
+        except OSError:
+            pass
+
+    return note, mark
+
+
+def _rules(rules: dict, module_name: str, student: list, note):
+    """``check(fullname, frame)``: raise ImportError (after a note) when the import is refused.
+
+    Allowed: the assignment's ``imports`` and the submission's own module. Refused whoever imports it:
+    ``lab``, the graded tests' oracles and (when the assignment lists its imports) every module outside
+    the standard library that it does not list. Refused when the student's code imports it: a
+    standard-library module the assignment does not list; a library's own import of one (NumPy's) is
+    let through. The author is the first frame outside importlib, whose globals must be those of a
+    module loaded from the Python installation (or this file), not the submission's module."""
+    assignment, imports = rules.get("assignment", "?"), rules.get("imports")
+    oracles = frozenset(rules.get("oracles") or ())  # lab among them (lab.grading.rules.oracles)
+    allowed = None if imports is None else frozenset(imports) | {module_name}
+    import inspect  # loaded already (NumPy uses it)
+
+    stdlib, modules, here = sys.stdlib_module_names, sys.modules, inspect.currentframe
+    own = os.path.abspath(__file__)
+    roots = tuple(
+        {own}
+        | {
+            os.path.join(p, "")
+            for q in (sys.prefix, sys.base_prefix, sys.exec_prefix)
+            if q
+            for p in (q, os.path.realpath(q))
+        }
+    )
+    rule = "its graded tests use it to check your answers"
+    if allowed is not None:
+        rule = f"assignment {assignment!r} allows only {', '.join(sorted(imports))}"
+
+    def by_student(frame, skip: bool) -> bool:
+        while skip and frame is not None and frame.f_globals.get("__name__") in _IMPORTLIB:
+            frame = frame.f_back
+        if frame is None:
+            return True
+        g = frame.f_globals
+        mod = modules.get(g.get("__name__"))
+        if mod is None or mod in student or getattr(mod, "__dict__", None) is not g:
+            return True
+        f = getattr(mod, "__file__", None)
+        return not (isinstance(f, str) and f.startswith(roots))
+
+    def refused(top: str, frame, skip: bool) -> bool:
+        if top == module_name or (allowed is not None and top in allowed):
+            return False
+        if top in oracles or (allowed is not None and top not in stdlib):
+            return True
+        return allowed is not None and frame is not None and by_student(frame, skip)
+
+    def check(fullname: str, frame=None, skip: bool = True) -> None:
+        top = fullname.partition(".")[0]
+        if not refused(top, frame, skip):
+            return
+        if top == "lab":
+            note("import lab: the course library is not available to a submission")
+            also = f" ({rule})" if allowed is not None else ""
             raise ImportError(
-                f"importing {fullname!r} is not allowed in a submission: write the function yourself "
-                "(NumPy, SciPy and the standard library are available)"
+                f"importing 'lab' is not allowed in a submission: write the function yourself{also}",
+                name=fullname,
             )
-        return None
+        note(f"import {top}: {rule}")
+        raise ImportError(f"importing {top!r} is not allowed in a submission: {rule}", name=fullname)
+
+    class Finder:
+        """First on ``sys.meta_path``: any import of a module not loaded yet."""
+
+        def find_spec(self, fullname, path=None, target=None):
+            check(fullname, here().f_back)
+
+    real_import = builtins.__import__
+
+    def guarded_import(name, globals=None, locals=None, fromlist=(), level=0):
+        """Import statements and ``__import__``, also of modules already loaded (``import os``)."""
+        if level == 0 and name:
+            check(name, here().f_back, False)  # the statement's own frame: importlib's are trusted here
+        return real_import(name, globals, locals, fromlist, level)
+
+    return check, Finder(), guarded_import
 
 
-_MAX_NOTES = 8
-_notes: list[str] = []
-
-
-def _note(text: str) -> None:
-    if text not in _notes and len(_notes) < _MAX_NOTES:
-        _notes.append(text)
-
-
-def _watch(allowed: tuple[str, ...]):
-    """An audit hook noting what the sandbox forbids (it observes; the sandbox refuses)."""
+def _watch(allowed: tuple[str, ...], check, note):
+    """The audit hook: notes what the sandbox forbids (it observes; the sandbox refuses), and refuses
+    itself what the import rules forbid (``check``): importing such a module even with the finder
+    removed, and opening the files of a package in site-packages the rules refuse (loading it by path,
+    reading its source). An audit hook cannot be removed."""
     procs = {
         "os.fork",
         "os.forkpty",
@@ -235,40 +333,59 @@ def _watch(allowed: tuple[str, ...]):
         "os.system",
         "subprocess.Popen",
     }
+    sites = tuple(os.path.join(os.path.realpath(p), "") for p in sys.path if p.endswith("-packages"))
+    normpath, join, getcwd, exists, dirname = (
+        os.path.normpath,
+        os.path.join,
+        os.getcwd,
+        os.path.exists,
+        os.path.dirname,
+    )
+    realpath, fsdecode = os.path.realpath, os.fsdecode
+
+    def package_file(p: str) -> None:
+        real = realpath(p)
+        for s in sites:
+            if real.startswith(s):
+                parts = real[len(s) :].split("/")
+                entry = parts[1] if parts[0] == "__pycache__" and len(parts) > 1 else parts[0]
+                try:
+                    check(entry.replace("-", ".").split(".")[0])
+                except ImportError as e:
+                    raise PermissionError(f"reading {p} refused: {e}") from None
 
     def hook(event: str, args: tuple) -> None:
         if event == "open":
             path = args[0]
             if isinstance(path, (str, bytes)):
-                p = os.path.normpath(os.path.join(os.getcwd(), os.fsdecode(path)))
+                p = normpath(join(getcwd(), fsdecode(path)))
+                package_file(p)
                 if "/__pycache__/" in p:  # the import system looking for a cached module: not the student
                     return
                 if not any(p == a or p.startswith(a + "/") for a in allowed):
-                    _note(f"open {p}: outside the submission")
-                elif p.startswith("/tmp/") and not os.path.exists(os.path.dirname(p)):
-                    _note(f"open {p}: not in the sandbox (its /tmp is its own)")
+                    note(f"open {p}: outside the submission")
+                elif p.startswith("/tmp/") and not exists(dirname(p)):
+                    note(f"open {p}: not in the sandbox (its /tmp is its own)")
+        elif event == "import":
+            check(args[0])
         elif event in ("socket.connect", "socket.sendto", "socket.sendmsg"):
-            _note(f"a network connection to {args[1]!r}: no network while grading")
+            note(f"a network connection to {args[1]!r}: no network while grading")
         elif event in procs:
-            _note(f"starting a process ({event}): not allowed while grading")
-        elif event == "import" and args[0].split(".")[0] == "lab":
-            _note("import lab: the course library is not available to a submission")
+            note(f"starting a process ({event}): not allowed while grading")
 
     return hook
 
 
 def _describe(exc: BaseException, module_file: str) -> dict:
-    """Type, message and the innermost frame of the submission's own file where it was raised."""
+    """Type, message and the innermost frames of the submission's own file where it was raised (only
+    its lines are looked up: no other file is opened for it)."""
     import linecache
     import traceback
 
-    frames = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename == module_file]
+    summary = traceback.StackSummary.extract(traceback.walk_tb(exc.__traceback__), lookup_lines=False)
+    frames = [f for f in summary if f.filename == module_file]
     where = [
-        {
-            "line": f.lineno,
-            "function": f.name,
-            "code": (f.line or linecache.getline(f.filename, f.lineno)).strip(),
-        }
+        {"line": f.lineno, "function": f.name, "code": linecache.getline(f.filename, f.lineno).strip()}
         for f in frames[-4:]
     ]
     msg = str(exc)
@@ -282,28 +399,47 @@ def _describe(exc: BaseException, module_file: str) -> dict:
     }
 
 
-def _serve(req_fd: int, resp_fd: int, module_path: str) -> int:
-    import importlib.util
+def _guard(config: dict, module_path: str, name: str, note) -> list:
+    """Put the import rules and the audit hook in place, before the student's code runs; returns the
+    list the student's module goes in (its imports are the student's own)."""
+    import traceback  # noqa: F401  (loaded now, for _describe: the rules are for the student's imports)
 
-    sys.meta_path.insert(0, _NoLab())
-    name = os.path.splitext(os.path.basename(module_path))[0]
+    student: list = []
+    check, finder, guarded_import = _rules(config, name, student, note)
     allowed = {os.path.dirname(module_path), "/tmp", "/dev/null", "/dev/urandom", "/proc/self", "/sys"}
     allowed |= {"/proc/cpuinfo", "/proc/meminfo", "/usr", "/etc/ld.so.cache", "/proc/" + str(os.getpid())}
     allowed |= {os.path.realpath(p) for p in (sys.prefix, sys.base_prefix, sys.exec_prefix) if p}
     allowed |= {p for p in (sys.prefix, sys.base_prefix, sys.exec_prefix) if p}
+    allowed.add(os.path.abspath(__file__))  # this file: the traceback of an exception may read it
+    sys.addaudithook(_watch(tuple(sorted(allowed)), check, note))
+    sys.meta_path.insert(0, finder)
+    builtins.__import__ = guarded_import
+    return student
+
+
+def _serve(req_fd: int, resp_fd: int, module_path: str) -> int:
+    import importlib.util
+
+    name = os.path.splitext(os.path.basename(module_path))[0]
+    config = json.loads(os.environ.pop("LAB_GRADE_RULES", "") or "{}")  # lab.grading.rules.child_rules
+    note, mark = _recorder(int(config.get("records_fd", -1)))
     try:
         import numpy  # noqa: F401  (before the student's code, so its import time is not theirs)
 
-        sys.addaudithook(_watch(tuple(sorted(allowed))))
+        student = _guard(config, module_path, name, note)
         spec = importlib.util.spec_from_file_location(name, module_path)
         module = importlib.util.module_from_spec(spec)
+        student.append(module)
         sys.modules[name] = module
         spec.loader.exec_module(module)
     except BaseException as e:  # noqa: BLE001 - SystemExit and KeyboardInterrupt at import too
-        write_message(resp_fd, {"ready": False, "error": _describe(e, module_path), "notes": _notes})
+        mark(0)
+        write_message(resp_fd, {"ready": False, "error": _describe(e, module_path)})
         return 0
     functions = sorted(k for k, v in vars(module).items() if callable(v) and not k.startswith("_"))
-    write_message(resp_fd, {"ready": True, "functions": functions, "notes": _notes})
+    mark(0)
+    write_message(resp_fd, {"ready": True, "functions": functions})
+    sent = 0
     while True:
         try:
             req = read_message(req_fd)
@@ -327,12 +463,15 @@ def _serve(req_fd: int, resp_fd: int, module_path: str) -> int:
                     "ok": False,
                     "error": {"type": "UnsendableResult", "message": str(e), "where": [], "memory": False},
                 }
-        answer["notes"] = _notes
+        sent += 1
+        mark(sent)
         write_message(resp_fd, answer)
 
 
 def main(argv: list[str]) -> int:
-    """``sandbox.py REQ_FD RESP_FD MODULE_PATH MEMORY_MB CPU_S [UID]`` (UID: become it first)."""
+    """``sandbox.py REQ_FD RESP_FD MODULE_PATH MEMORY_MB CPU_S [UID]`` (UID: become it first); the
+    environment variable ``LAB_GRADE_RULES`` holds the assignment's import rules and the record pipe's
+    file descriptor (JSON: :func:`lab.grading.rules.child_rules`, plus ``records_fd``)."""
     req_fd, resp_fd = int(argv[0]), int(argv[1])
     module_path, memory_mb, cpu_s = argv[2], int(argv[3]), int(argv[4])
     if len(argv) > 5 and int(argv[5]) >= 0:
