@@ -21,6 +21,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from lab.grading import seccomp
 from lab.grading.isolation import (
     ENTRY,
     SUBMISSION_DIR,
@@ -163,6 +164,8 @@ class ChildProcess:
         if sandbox.bubblewrap:
             cmd[1:1] = ["--info-fd", str(info_w)]  # bwrap says there the pid of the namespace's first process
         fds = (req_r, resp_w) + ((info_w,) if sandbox.bubblewrap else ())
+        if sandbox.secure:  # the seccomp filter, installed before any of the student's code runs
+            fds += (seccomp.attach(cmd, env, sandbox.bubblewrap),)
         try:
             self.proc = subprocess.Popen(
                 cmd,

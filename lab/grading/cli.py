@@ -23,7 +23,7 @@ def _pick(spec: str, root) -> list[Assignment]:
 def run_check_sandbox(args) -> int:
     """``lab grade --check-sandbox``: try from inside a sandboxed child what a cheating submission would;
     exit 0 when every attempt is stopped, 1 otherwise (or when there is no sandbox)."""
-    from lab.grading.isolation import check_sandbox
+    from lab.grading.sandbox_check import check_sandbox
 
     ok, lines = check_sandbox(getattr(args, "json", None))
     if not args.quiet:

@@ -40,7 +40,15 @@ import os
 import struct
 import sys
 
-__all__ = ["encode", "decode", "read_message", "write_message", "MAX_MESSAGE_BYTES", "WireError"]
+__all__ = [
+    "encode",
+    "decode",
+    "read_message",
+    "write_message",
+    "install_seccomp",
+    "MAX_MESSAGE_BYTES",
+    "WireError",
+]
 
 MAX_MESSAGE_BYTES = 256 << 20  # one answer may not exceed 256 MB
 _MAX_DEPTH = 32
@@ -203,6 +211,33 @@ def _apply_limits(memory_mb: int, cpu_s: int) -> None:
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write then fails with OSError(EFBIG) instead
 
 
+def install_seccomp() -> None:
+    """Install the grader's seccomp filter (:mod:`lab.grading.seccomp`) when it is handed over in
+    ``$LAB_SECCOMP_FD`` (the uid mode; bubblewrap installs it itself before this process starts):
+    ``no_new_privs``, then ``prctl(PR_SET_SECCOMP, SECCOMP_MODE_FILTER)``. Fails loudly: a child that
+    cannot confine itself must not run the student's code."""
+    fd = os.environ.pop("LAB_SECCOMP_FD", None)
+    if fd is None:
+        return
+    import ctypes
+
+    data = b""
+    while chunk := os.read(int(fd), 1 << 16):
+        data += chunk
+    os.close(int(fd))
+
+    class SockFprog(ctypes.Structure):
+        _fields_ = [("len", ctypes.c_ushort), ("filter", ctypes.c_char_p)]
+
+    buf = ctypes.create_string_buffer(data, len(data))
+    prog = SockFprog(len(data) // 8, ctypes.cast(buf, ctypes.c_char_p))
+    libc = ctypes.CDLL(None, use_errno=True)
+    ul = ctypes.c_ulong
+    set_nnp = libc.prctl(38, ul(1), ul(0), ul(0), ul(0))  # PR_SET_NO_NEW_PRIVS
+    if set_nnp != 0 or libc.prctl(22, ul(2), ctypes.byref(prog), ul(0), ul(0)) != 0:  # PR_SET_SECCOMP
+        raise SystemExit(f"sandbox: could not install the seccomp filter ({os.strerror(ctypes.get_errno())})")
+
+
 class _NoLab:
     """Meta-path finder that refuses ``import lab``: the assignment is to write it, not import it."""
 
@@ -338,6 +373,7 @@ def main(argv: list[str]) -> int:
     if len(argv) > 5 and int(argv[5]) >= 0:
         _drop_to(int(argv[5]))
     _apply_limits(memory_mb, cpu_s)
+    install_seccomp()
     sys.dont_write_bytecode = True
     return _serve(req_fd, resp_fd, module_path)
 
