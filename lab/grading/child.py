@@ -31,6 +31,7 @@ from lab.grading.isolation import (
     private_workdir,
     processes_of_uid,
 )
+from lab.grading.limits import error_info, function_names
 from lab.grading.sandbox import MAX_MESSAGE_BYTES, WireError, decode, encode
 from lab.grading.suite import Fail
 
@@ -70,8 +71,8 @@ class StudentError(SubmissionProblem):
     """A student function raised; ``info`` holds the type, message and the lines of their file."""
 
     def __init__(self, function: str, module: str, info: dict):
-        self.function, self.module, self.info = function, module, info
-        self.type = str(info.get("type", "Exception"))
+        self.function, self.module, self.info = function, module, error_info(info)
+        self.type = self.info["type"]
         super().__init__(self._message())
 
     def _message(self) -> str:
@@ -379,7 +380,7 @@ class Submission:
         finally:
             self._left_s -= time.monotonic() - t0
         self._child.take_notes(answer)
-        if not isinstance(answer, dict) or "ok" not in answer:
+        if not isinstance(answer, dict) or not isinstance(answer.get("ok"), bool):
             raise StudentCrash(f"{name} sent an answer the grader cannot read")
         if answer["ok"]:
             return answer.get("value")
@@ -409,8 +410,8 @@ def start_child(limits: ChildLimits, cpu_s: float, import_deadline: float) -> tu
         hello = child.receive(import_deadline)
         child.take_notes(hello)
         if not (isinstance(hello, dict) and hello.get("ready")):
-            info = hello.get("error", {}) if isinstance(hello, dict) else {}
-            t, m = info.get("type", "Exception"), info.get("message", "")
+            info = error_info(hello.get("error") if isinstance(hello, dict) else None)
+            t, m = info["type"], info["message"]
             raise ImportFailed(f"importing {limits.module} failed: {t}: {m}" + _where(info, limits.module))
     except _Timeout:
         child.close()
@@ -425,4 +426,4 @@ def start_child(limits: ChildLimits, cpu_s: float, import_deadline: float) -> tu
     except ImportFailed as e:
         child.close()
         raise ImportFailed(str(e), child.notes) from None
-    return child, list(hello.get("functions", []))
+    return child, function_names(hello.get("functions"))

@@ -9,8 +9,9 @@ small, packaged everywhere, needs no daemon, and gives in one command everything
   installation and its packages (the ``lab`` package, the assignments, the graded tests and the
   repository are masked if they lie inside those), the submission's private copy at
   ``/submission``, the child's entry point at ``/grader/sandbox.py``, a fresh ``/proc`` and ``/dev``
-  and a private ``/tmp`` (a 16 MB tmpfs) with an empty, read-only ``/dev/shm``. Nothing else exists: not the reference solutions, not the graded tests,
-  not a classmate's folder, not the grader's results file;
+  and a private ``/tmp`` (a 16 MB tmpfs) with an empty, read-only ``/dev/shm``. Nothing else
+  exists: not the reference solutions, not the graded tests, not a classmate's folder, not the
+  grader's results file;
 * **no network** (a network namespace with only a loopback interface), its own PID, IPC and UTS
   namespaces, a new session (no terminal injection), no capabilities and ``no_new_privs``;
 * **a smaller kernel surface**: a seccomp filter (:mod:`lab.grading.seccomp`, in every mode) refuses

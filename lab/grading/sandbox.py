@@ -50,8 +50,10 @@ __all__ = [
     "WireError",
 ]
 
-MAX_MESSAGE_BYTES = 256 << 20  # one answer may not exceed 256 MB
+MAX_MESSAGE_BYTES = 4 << 20  # one frame: far above any answer a graded test needs (a few KB)
 _MAX_DEPTH = 32
+_MAX_CONTAINERS = 200_000  # lists and dicts in one frame: what decoding may build stays bounded
+_MAX_INT_DIGITS = 20  # an int64 has 19 digits; 400 digits is not a number a graded test can use
 _ARRAY_KINDS = "biufc"  # bool, int, uint, float, complex: no objects, strings or structured dtypes
 _HEADER = struct.Struct(">I")
 
@@ -69,6 +71,8 @@ def _to_wire(x, depth: int = 0):
     if x is None or isinstance(x, (bool, str)):
         return x
     if isinstance(x, int):
+        if len(str(abs(x))) > _MAX_INT_DIGITS:
+            raise WireError(f"cannot send an integer of more than {_MAX_INT_DIGITS} digits")
         return x
     if isinstance(x, float):
         return x
@@ -136,13 +140,22 @@ def encode(obj) -> bytes:
 
 
 def decode(data: bytes):
-    """Inverse of :func:`encode`. Safe on untrusted bytes: raises :class:`WireError`, never runs code."""
+    """Inverse of :func:`encode`. Safe on untrusted bytes: raises :class:`WireError`, never runs code,
+    and builds at most a bounded number of lists and dicts and no integer too long for a graded test."""
+    if data.count(b"[") + data.count(b"{") > _MAX_CONTAINERS:
+        raise WireError(f"malformed message: more than {_MAX_CONTAINERS} lists and dicts")
     try:
-        return json.loads(data.decode("utf-8"), object_hook=_from_wire_hook)
+        return json.loads(data.decode("utf-8"), object_hook=_from_wire_hook, parse_int=_parse_int)
     except WireError:
         raise
     except (ValueError, TypeError, RecursionError, OverflowError, MemoryError) as e:
         raise WireError(f"malformed message: {type(e).__name__}: {str(e)[:200]}") from None
+
+
+def _parse_int(text: str) -> int:
+    if len(text.lstrip("-")) > _MAX_INT_DIGITS:
+        raise WireError(f"an integer of {len(text.lstrip('-'))} digits (at most {_MAX_INT_DIGITS})")
+    return int(text)
 
 
 def write_message(fd: int, obj) -> None:
