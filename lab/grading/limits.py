@@ -53,7 +53,10 @@ def clean(text, limit: int | None = None) -> str:
     text = text if isinstance(text, str) else str(text)
     if limit is None:
         return _UNSAFE.sub(_escape, text)
-    return _cut(_UNSAFE.sub(_escape, _cut(text, limit)), limit)
+    safe = _UNSAFE.sub(_escape, text[:limit])
+    if len(text) <= limit and len(safe) <= limit:
+        return safe
+    return safe[:limit] + f" ... [{len(text)} characters, cut to {limit}]"
 
 
 def error_info(info) -> dict:
