@@ -278,3 +278,96 @@ def test_decode_refuses_long_integers_and_container_bombs_but_not_arrays():
 
     a = np.arange(100_000, dtype=float)  # 800 kB: well under the frame limit
     assert len(encode(a)) < MAX_MESSAGE_BYTES and np.array_equal(decode(encode(a)), a)
+
+
+# ---- the seccomp filter, read by a small classic-BPF interpreter, against the kernel's own headers
+def _run_bpf(prog: bytes, nr: int, arch: int, args=(0, 0, 0, 0, 0, 0)) -> int:
+    """What the filter returns for one system call (the cBPF subset it uses: ld abs, jeq, jge, jset, ret)."""
+    import struct
+
+    insns = [struct.unpack("=HBBI", prog[i : i + 8]) for i in range(0, len(prog), 8)]
+    data = struct.pack("<iIQ6Q", nr, arch, 0, *args)
+    pc, acc = 0, 0
+    while True:
+        code, jt, jf, k = insns[pc]
+        if code == 0x20:
+            acc = struct.unpack_from("<I", data, k)[0]
+        elif code in (0x15, 0x35, 0x45):
+            hit = {0x15: acc == k, 0x35: acc >= k, 0x45: bool(acc & k)}[code]
+            pc += jt if hit else jf
+        elif code == 0x06:
+            return k
+        else:
+            raise AssertionError(f"unknown instruction {code:#x}")
+        pc += 1
+
+
+def _header_numbers(path: str, prefix: str) -> dict[str, int]:
+    import os
+
+    if not os.path.exists(path):
+        pytest.skip(f"no {path} on this machine (linux-libc-dev)")
+    found = {}
+    for line in open(path):
+        parts = line.split()
+        if len(parts) >= 3 and parts[0] == "#define" and parts[1].startswith(prefix) and parts[2].isdigit():
+            found[parts[1][len(prefix) :]] = int(parts[2])
+    return found
+
+
+@pytest.mark.parametrize(
+    "machine, arch, header",
+    [
+        ("x86_64", 0xC000003E, "/usr/include/x86_64-linux-gnu/asm/unistd_64.h"),
+        ("aarch64", 0xC00000B7, "/usr/include/asm-generic/unistd.h"),
+    ],
+)
+def test_the_filter_refuses_by_the_kernels_numbers(monkeypatch, machine, arch, header):
+    import platform
+
+    monkeypatch.setattr(platform, "machine", lambda: machine)
+    seccomp.program.cache_clear()
+    try:
+        prog = seccomp.program()
+    finally:
+        seccomp.program.cache_clear()
+    numbers = _header_numbers(header, "__NR_")
+    allow, errno = 0x7FFF0000, 0x00050000
+    checked = 0
+    for name in seccomp.REFUSED_NAMES:
+        if name not in numbers or " " in name:
+            continue  # newer than the headers here, or one of the flag checks below
+        got = _run_bpf(prog, numbers[name], arch)
+        assert got & 0xFFFF0000 == errno and got & 0xFFFF in (1, 30, 38), (name, hex(got))
+        checked += 1
+    assert checked > 60
+    for name in ("read", "write", "mmap", "munmap", "futex", "exit_group", "getpid"):
+        if name in numbers:
+            assert _run_bpf(prog, numbers[name], arch) == allow, name
+    clone, openat = numbers["clone"], numbers["openat"]
+    assert _run_bpf(prog, clone, arch, (0x3D0F00, 0, 0, 0, 0, 0)) == allow  # a thread's flags
+    assert _run_bpf(prog, clone, arch, (0x10000000 | 17, 0, 0, 0, 0, 0)) == errno | 1  # CLONE_NEWUSER
+    assert _run_bpf(prog, openat, arch, (0, 0, 0o2000000, 0, 0, 0)) == allow  # O_RDONLY | O_CLOEXEC
+    assert _run_bpf(prog, openat, arch, (0, 0, 0o101, 0, 0, 0)) == errno | 30  # O_WRONLY | O_CREAT
+    assert _run_bpf(prog, numbers["clone3"], arch) == errno | 38  # ENOSYS: the C library falls back
+    assert _run_bpf(prog, numbers["read"], 0x40000003) == 0x80000000  # i386's entry: killed
+    if machine == "x86_64":
+        assert _run_bpf(prog, 0x40000000 | numbers["read"], arch) == 0x80000000  # the x32 ABI: killed
+
+
+def test_check_sandbox_reports_the_new_limits(capsys, grading_mode):
+    from lab.cli import main
+
+    assert main(["grade", "--check-sandbox"]) == 0
+    out = capsys.readouterr().out
+    for line in (
+        "ok  seccomp filter on (Seccomp: 2)",
+        "ok  no user namespaces",
+        "ok  memory limit covers shared memory",
+        "ok  /tmp size: ",
+        "ok  make a user namespace (unshare CLONE_NEWUSER): stopped",
+        "ok  io_uring (io_uring_setup): stopped",
+    ):
+        assert line in out, out
+    if grading_mode == "bwrap":
+        assert "ok  /tmp size: private, 16 MB cap" in out

@@ -75,6 +75,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lab.errors import LabError
+from lab.grading import seccomp
 
 __all__ = [
     "Sandbox",
@@ -415,24 +416,35 @@ def _probe(sb: Sandbox) -> str | None:
     d = private_workdir(uid if sb.kind == "uid" else None, "lab-probe-")
     try:
         code = "import os, sys; "
+        if sb.kind == "uid":  # the child installs the seccomp filter itself, as a graded child does
+            code += "import importlib.util as u; s = u.spec_from_file_location('entry', sys.argv[1]); "
+            code += "e = u.module_from_spec(s); s.loader.exec_module(e); "
         if uid is not None:
             code += f"os.setgroups([]); os.setgid({uid}); os.setuid({uid}); "
         if sb.kind == "uid":
+            code += "e.install_seccomp(); "
             # no filesystem of its own: the Python installation and NumPy must be readable by any uid
             code += "import numpy; "
         else:  # NumPy found (not imported: that would take longer than the rest) proves it is there
             code += "import importlib.util as u; assert u.find_spec('numpy'), 'no numpy in the sandbox'; "
         code += "sys.stdout.write(str(os.getuid()))"
         what = sb.bwrap if sb.bubblewrap else "the uid mode"
+        cmd, env = sb.command(["-I", "-c", code, str(entry)], d, entry, uid), dict(os.environ)
         try:
-            r = subprocess.run(
-                sb.command(["-I", "-c", code], d, entry, uid),
-                capture_output=True,
-                text=True,
-                timeout=60,
-                stdin=subprocess.DEVNULL,
-                cwd=d,
-            )
+            fd = seccomp.attach(cmd, env, sb.bubblewrap)  # the filter every child runs under
+            try:
+                r = subprocess.run(
+                    cmd,
+                    capture_output=True,
+                    text=True,
+                    timeout=60,
+                    stdin=subprocess.DEVNULL,
+                    cwd=d,
+                    env=env,
+                    pass_fds=(fd,),
+                )
+            finally:
+                os.close(fd)
         except (OSError, subprocess.TimeoutExpired) as e:
             return f"{what} could not run: {e}"
         if r.returncode != 0:
