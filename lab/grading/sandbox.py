@@ -71,7 +71,7 @@ def _to_wire(x, depth: int = 0):
     if x is None or isinstance(x, (bool, str)):
         return x
     if isinstance(x, int):
-        if len(str(abs(x))) > _MAX_INT_DIGITS:
+        if abs(x) >= 10**_MAX_INT_DIGITS:
             raise WireError(f"cannot send an integer of more than {_MAX_INT_DIGITS} digits")
         return x
     if isinstance(x, float):
