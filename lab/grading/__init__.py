@@ -4,7 +4,8 @@
 * :mod:`lab.grading.suite`: how graded tests are written (points, visibility, checks with messages);
 * :mod:`lab.grading.runner`: grading one submission (the isolation design is in its docstring);
 * :mod:`lab.grading.isolation`: the isolation modes each child runs in (bubblewrap, or a throwaway uid
-  where namespaces are forbidden), ``--check-sandbox``;
+  where namespaces are forbidden); :mod:`lab.grading.seccomp`: the system calls a child may not make;
+  :mod:`lab.grading.sandbox_check`: ``lab grade --check-sandbox``;
 * :mod:`lab.grading.sandbox`: the child process and its wire format;
 * :mod:`lab.grading.rules`: an assignment's import rules, its oracles, a submission the grader could import;
 * :mod:`lab.grading.records`: the record of refused attempts, read from a pipe as they happen;

@@ -21,6 +21,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from lab.grading import seccomp
 from lab.grading.isolation import (
     ENTRY,
     SUBMISSION_DIR,
@@ -30,6 +31,7 @@ from lab.grading.isolation import (
     private_workdir,
     processes_of_uid,
 )
+from lab.grading.limits import error_info, function_names
 from lab.grading.records import Records
 from lab.grading.sandbox import MAX_MESSAGE_BYTES, WireError, decode, encode
 from lab.grading.suite import Fail
@@ -70,8 +72,8 @@ class StudentError(SubmissionProblem):
     """A student function raised; ``info`` holds the type, message and the lines of their file."""
 
     def __init__(self, function: str, module: str, info: dict):
-        self.function, self.module, self.info = function, module, info
-        self.type = str(info.get("type", "Exception"))
+        self.function, self.module, self.info = function, module, error_info(info)
+        self.type = self.info["type"]
         super().__init__(self._message())
 
     def _message(self) -> str:
@@ -116,6 +118,24 @@ class _Timeout(Exception):
     pass
 
 
+def _child_env(sandbox: Sandbox, home: str, rules: dict | None, records_fd: int) -> dict:
+    """The child's whole environment: nothing of the grader's but a ``PATH``; one thread per numeric
+    library; the import rules and the record pipe's descriptor (``LAB_GRADE_RULES``)."""
+    return {
+        "PATH": "/usr/bin:/bin" if sandbox.secure else os.environ.get("PATH", "/usr/bin:/bin"),
+        "HOME": home,
+        "TMPDIR": home,
+        "MPLCONFIGDIR": home,
+        "MPLBACKEND": "Agg",
+        "OPENBLAS_NUM_THREADS": "1",
+        "OMP_NUM_THREADS": "1",
+        "MKL_NUM_THREADS": "1",
+        "PYTHONHASHSEED": "0",
+        "LC_ALL": "C.UTF-8",
+        "LAB_GRADE_RULES": json.dumps({**(rules or {}), "records_fd": records_fd}),
+    }
+
+
 class ChildProcess:
     """A running ``sandbox.py`` (in the sandbox) with its private request and answer pipes."""
 
@@ -146,19 +166,7 @@ class ChildProcess:
         rec_r, rec_w = os.pipe()  # the record of refused attempts (lab.grading.records)
         self.records = Records(rec_r, self.notes)
         home = "/tmp" if sandbox.bubblewrap else str(self.dir)
-        env = {
-            "PATH": "/usr/bin:/bin" if sandbox.secure else os.environ.get("PATH", "/usr/bin:/bin"),
-            "HOME": home,
-            "TMPDIR": home,
-            "MPLCONFIGDIR": home,
-            "MPLBACKEND": "Agg",
-            "OPENBLAS_NUM_THREADS": "1",
-            "OMP_NUM_THREADS": "1",
-            "MKL_NUM_THREADS": "1",
-            "PYTHONHASHSEED": "0",
-            "LC_ALL": "C.UTF-8",
-            "LAB_GRADE_RULES": json.dumps({**(rules or {}), "records_fd": rec_w}),
-        }
+        env = _child_env(sandbox, home, rules, rec_w)
         args = [
             "-I",  # isolated: no PYTHON* variables, no user site, no script folder on sys.path
             "-u",  # unbuffered: what the student printed before a crash or a timeout is not lost
@@ -174,6 +182,8 @@ class ChildProcess:
         if sandbox.bubblewrap:
             cmd[1:1] = ["--info-fd", str(info_w)]  # bwrap says there the pid of the namespace's first process
         fds = (req_r, resp_w, rec_w) + ((info_w,) if sandbox.bubblewrap else ())
+        if sandbox.secure:  # the seccomp filter, installed before any of the student's code runs
+            fds += (seccomp.attach(cmd, env, sandbox.bubblewrap),)
         try:
             self.proc = subprocess.Popen(
                 cmd,
@@ -384,7 +394,7 @@ class Submission:
             raise StudentCrash(self._dead) from None
         finally:
             self._left_s -= time.monotonic() - t0
-        if not isinstance(answer, dict) or "ok" not in answer:
+        if not isinstance(answer, dict) or not isinstance(answer.get("ok"), bool):
             raise StudentCrash(f"{name} sent an answer the grader cannot read")
         if answer["ok"]:
             return answer.get("value")
@@ -420,8 +430,8 @@ def start_child(limits: ChildLimits, cpu_s: float, import_deadline: float) -> tu
     try:
         hello = child.receive(import_deadline)
         if not (isinstance(hello, dict) and hello.get("ready")):
-            info = hello.get("error", {}) if isinstance(hello, dict) else {}
-            t, m = info.get("type", "Exception"), info.get("message", "")
+            info = error_info(hello.get("error") if isinstance(hello, dict) else None)
+            t, m = info["type"], info["message"]
             raise ImportFailed(f"importing {limits.module} failed: {t}: {m}" + _where(info, limits.module))
     except _Timeout:
         child.close()
@@ -436,4 +446,4 @@ def start_child(limits: ChildLimits, cpu_s: float, import_deadline: float) -> tu
     except ImportFailed as e:
         child.close()
         raise ImportFailed(str(e), child.notes) from None
-    return child, list(hello.get("functions", []))
+    return child, function_names(hello.get("functions"))

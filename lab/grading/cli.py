@@ -8,6 +8,7 @@ from pathlib import Path
 from lab.errors import ConfigError
 from lab.grading.assignments import Assignment, get_assignment, list_assignments
 from lab.grading.isolation import make_grader_private
+from lab.grading.limits import clean
 from lab.grading.report import GradeReport, write_scores_csv
 from lab.grading.runner import choose_sandbox, grade_submission
 
@@ -23,7 +24,7 @@ def _pick(spec: str, root) -> list[Assignment]:
 def run_check_sandbox(args) -> int:
     """``lab grade --check-sandbox``: try from inside a sandboxed child what a cheating submission would;
     exit 0 when every attempt is stopped, 1 otherwise (or when there is no sandbox)."""
-    from lab.grading.isolation import check_sandbox
+    from lab.grading.sandbox_check import check_sandbox
 
     ok, lines = check_sandbox(getattr(args, "json", None))
     if not args.quiet:
@@ -113,7 +114,7 @@ def _batch(chosen: list[Assignment], folder: Path, args) -> int:
             parts = ", ".join(f"{r.assignment.name} {r.score:g}/{r.max_score:g}" for r in reports)
             total, top = sum(r.score for r in reports), sum(r.max_score for r in reports)
             secs = sum(r.execution_time_s for r in reports)
-            print(f"{s.name}: {parts}; total {total:g}/{top:g} ({secs:.1f} s)", flush=True)
+            print(f"{clean(s.name, 200)}: {parts}; total {total:g}/{top:g} ({secs:.1f} s)", flush=True)
     csv_path = write_scores_csv(args.csv or folder / "scores.csv", rows)
     if not args.quiet:
         print(f"wrote {csv_path} ({len(rows)} students)")

@@ -9,10 +9,14 @@ small, packaged everywhere, needs no daemon, and gives in one command everything
   installation and its packages (the ``lab`` package, the assignments, the graded tests and the
   repository are masked if they lie inside those), the submission's private copy at
   ``/submission``, the child's entry point at ``/grader/sandbox.py``, a fresh ``/proc`` and ``/dev``
-  and a private ``/tmp``. Nothing else exists: not the reference solutions, not the graded tests,
-  not a classmate's folder, not the grader's results file;
+  and a private ``/tmp`` (a 16 MB tmpfs) with an empty, read-only ``/dev/shm``. Nothing else
+  exists: not the reference solutions, not the graded tests, not a classmate's folder, not the
+  grader's results file;
 * **no network** (a network namespace with only a loopback interface), its own PID, IPC and UTS
   namespaces, a new session (no terminal injection), no capabilities and ``no_new_privs``;
+* **a smaller kernel surface**: a seccomp filter (:mod:`lab.grading.seccomp`, in every mode) refuses
+  new namespaces, io_uring, ``bpf``, shared memory, new files and what else grading never needs, and
+  ``bwrap-userns`` passes ``--disable-userns``;
 * **an end**: with ``--die-with-parent`` and its own PID namespace, every process the test started
   dies with it; the grader kills the namespace's first process and waits until it is gone (and, as
   root, until no process of the test's uid is left) before it records the result.
@@ -48,16 +52,15 @@ on Gradescope: no ``CAP_SYS_ADMIN``), needs no namespace at all:
 :func:`find_sandbox` picks the strongest mode that works here (``bwrap-uid``, ``bwrap-userns``, then
 ``uid``; ``$LAB_GRADE_SANDBOX`` = ``bwrap`` or ``uid`` restricts the choice) and says which. When none
 works it says why, and ``lab grade`` refuses to grade for scores unless ``--insecure`` (practice only;
-every result then says so). ``lab grade --check-sandbox`` runs :func:`check_sandbox`: a real sandboxed child
-that tries what a cheating submission would, and reports each attempt.
+every result then says so). ``lab grade --check-sandbox`` runs
+:func:`lab.grading.sandbox_check.check_sandbox`: a real sandboxed child that tries what a cheating
+submission would, and reports each attempt.
 """
 
 from __future__ import annotations
 
-import contextlib
 import ctypes
 import functools
-import json
 import os
 import secrets
 import shutil
@@ -72,22 +75,26 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lab.errors import LabError
+from lab.grading import seccomp
 
 __all__ = [
     "Sandbox",
     "SandboxUnavailable",
     "find_sandbox",
-    "check_sandbox",
     "make_undumpable",
+    "secret_folders",
     "make_private",
     "make_grader_private",
     "MODES",
     "SUBMISSION_DIR",
     "ENTRY",
+    "TMP_BYTES",
+    "SHM_BYTES",
 ]
 
 SUBMISSION_DIR = "/submission"  # where the child sees its copy of the submission
 ENTRY = "/grader/sandbox.py"  # where the child sees its entry point
+TMP_BYTES, SHM_BYTES = 16 << 20, 4096  # the sizes of the sandbox's private /tmp and /dev/shm
 _UID_LOW, _UID_HIGH = 1 << 30, (1 << 31) - 2  # throwaway uids: far above any real account
 _PR_SET_DUMPABLE, _PR_GET_DUMPABLE = 4, 3
 _handed_out: set[int] = set()
@@ -101,7 +108,13 @@ _PROCESSES = (
     "the process list: the student's code sees the machine's processes in /proc and their command "
     "lines (not their memory, files or environment); give the grader a command line with no secrets"
 )
-_CANNOT_STOP = {"uid": (_NETWORK, _PROCESSES)}
+_SHARED_TMP = (
+    "the machine's /tmp and /dev/shm filling up: they are shared (no mount namespace) and the grader "
+    "cannot cap their size; the seccomp filter refuses the student's code every new file, folder, link "
+    "and extended attribute, so it cannot fill them itself, but cap them where the grader runs "
+    "(docker run --tmpfs /tmp:size=64m --shm-size=1m)"
+)
+_CANNOT_STOP = {"uid": (_NETWORK, _PROCESSES, _SHARED_TMP)}
 
 
 class SandboxUnavailable(LabError):
@@ -171,7 +184,7 @@ class Sandbox:
         return [*_bwrap_args(self, scratch, entry, hide), "--", sys.executable, *python_args]
 
 
-def _secrets() -> list[Path]:
+def secret_folders() -> list[Path]:
     """Folders the child must never see even when they lie inside what it is given."""
     from lab.grading.assignments import assignments_dir
     from lab.paths import repo_root
@@ -210,8 +223,11 @@ def _bwrap_fixed(sb: Sandbox, entry: str, hide: tuple[str, ...]) -> tuple[str, .
     """Everything of the bwrap command but the submission's folder (the same for every child)."""
     args = [sb.bwrap]
     # first the private mounts, so that a Python installation under /tmp is bound over them, not hidden
-    args.extend(["--proc", "/proc", "--dev", "/dev", "--perms", "1777", "--tmpfs", "/tmp"])
-    made: set[str] = {"/", "/proc", "/dev", "/tmp"}
+    # size-capped: a tmpfs is memory no limit of the child counts (and the seccomp filter refuses new
+    # files anyway); /dev/shm, where POSIX shared memory lives, is empty and read-only
+    args.extend(["--proc", "/proc", "--dev", "/dev", "--size", str(SHM_BYTES), "--tmpfs", "/dev/shm"])
+    args.extend(["--remount-ro", "/dev/shm", "--perms", "1777", "--size", str(TMP_BYTES), "--tmpfs", "/tmp"])
+    made: set[str] = {"/", "/proc", "/dev", "/dev/shm", "/tmp"}
 
     def parents(target: str) -> None:
         # bwrap makes missing folders 0700 (root-only) when it runs as root: make them readable
@@ -239,14 +255,14 @@ def _bwrap_fixed(sb: Sandbox, entry: str, hide: tuple[str, ...]) -> tuple[str, .
     if os.path.exists("/etc/ld.so.cache"):
         parents("/etc/ld.so.cache")
         args.extend(["--ro-bind", "/etc/ld.so.cache", "/etc/ld.so.cache"])
-    for s in sorted({*map(str, _secrets()), *hide}):  # masked over the binds: never readable
+    for s in sorted({*map(str, secret_folders()), *hide}):  # masked over the binds: never readable
         if any(s == r or s.startswith(r.rstrip("/") + "/") for r in roots):
             args.extend(["--tmpfs", s])
     parents(ENTRY)
     args.extend(["--ro-bind", entry, ENTRY])
     args.extend(["--unshare-ipc", "--unshare-pid", "--unshare-net", "--unshare-uts", "--unshare-cgroup-try"])
     if sb.kind == "bwrap-userns":
-        args.extend(["--unshare-user", "--cap-drop", "ALL"])
+        args.extend(["--unshare-user", "--disable-userns", "--cap-drop", "ALL"])
     else:  # root: keep only what the child needs to become its throwaway uid, then it has nothing
         args.extend(["--cap-drop", "ALL", "--cap-add", "CAP_SETUID", "--cap-add", "CAP_SETGID"])
     args.extend(["--die-with-parent", "--new-session", "--chdir", SUBMISSION_DIR])
@@ -375,7 +391,7 @@ def make_grader_private(extra=()) -> list[str]:
     assignment's folder, a class's submissions, the results)."""
     from lab.paths import repo_root
 
-    return make_private([*_secrets(), repo_root() / "tests", *extra])
+    return make_private([*secret_folders(), repo_root() / "tests", *extra])
 
 
 def private_workdir(uid: int | None, prefix: str) -> Path:
@@ -400,24 +416,35 @@ def _probe(sb: Sandbox) -> str | None:
     d = private_workdir(uid if sb.kind == "uid" else None, "lab-probe-")
     try:
         code = "import os, sys; "
+        if sb.kind == "uid":  # the child installs the seccomp filter itself, as a graded child does
+            code += "import importlib.util as u; s = u.spec_from_file_location('entry', sys.argv[1]); "
+            code += "e = u.module_from_spec(s); s.loader.exec_module(e); "
         if uid is not None:
             code += f"os.setgroups([]); os.setgid({uid}); os.setuid({uid}); "
         if sb.kind == "uid":
+            code += "e.install_seccomp(); "
             # no filesystem of its own: the Python installation and NumPy must be readable by any uid
             code += "import numpy; "
         else:  # NumPy found (not imported: that would take longer than the rest) proves it is there
             code += "import importlib.util as u; assert u.find_spec('numpy'), 'no numpy in the sandbox'; "
         code += "sys.stdout.write(str(os.getuid()))"
         what = sb.bwrap if sb.bubblewrap else "the uid mode"
+        cmd, env = sb.command(["-I", "-c", code, str(entry)], d, entry, uid), dict(os.environ)
         try:
-            r = subprocess.run(
-                sb.command(["-I", "-c", code], d, entry, uid),
-                capture_output=True,
-                text=True,
-                timeout=60,
-                stdin=subprocess.DEVNULL,
-                cwd=d,
-            )
+            fd = seccomp.attach(cmd, env, sb.bubblewrap)  # the filter every child runs under
+            try:
+                r = subprocess.run(
+                    cmd,
+                    capture_output=True,
+                    text=True,
+                    timeout=60,
+                    stdin=subprocess.DEVNULL,
+                    cwd=d,
+                    env=env,
+                    pass_fds=(fd,),
+                )
+            finally:
+                os.close(fd)
         except (OSError, subprocess.TimeoutExpired) as e:
             return f"{what} could not run: {e}"
         if r.returncode != 0:
@@ -478,123 +505,3 @@ def _find(choice: str) -> Sandbox:
             return sb
         why.append(f"{kind}: {problem}" + (" (namespaces forbidden here?)" if sb.bubblewrap else ""))
     raise SandboxUnavailable("; ".join(why) + "; check with lab grade --check-sandbox")
-
-
-# ------------------------------------------------------------------------------- check-sandbox
-_CHECKS = r"""
-import json, os, socket, sys
-uid = int(sys.argv[1])
-if uid >= 0:
-    os.setgroups([]); os.setgid(uid); os.setuid(uid)
-secrets, grader_pid, results, token = json.loads(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5]
-out = {}
-def attempt(name, fn):
-    try:
-        fn()
-        out[name] = "NOT stopped"
-    except Exception as e:
-        out[name] = f"stopped ({type(e).__name__}: {e})"
-for s in secrets:
-    attempt(f"read {s}", lambda s=s: os.listdir(s) if os.path.isdir(s) else open(s).read())
-def write_results():
-    with open(results, "a") as f:
-        f.write(token)
-attempt(f"write {results}", write_results)
-attempt(f"see the grader (pid {grader_pid}) in /proc", lambda: open(f"/proc/{grader_pid}/status").read())
-attempt(f"signal the grader (pid {grader_pid})", lambda: os.kill(grader_pid, 0))
-def net():
-    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM); s.settimeout(2)
-    s.connect(("1.1.1.1", 53))
-attempt("open a network connection (1.1.1.1:53)", net)
-attempt("become root (setuid 0)", lambda: os.setuid(0))
-attempt("write outside /tmp (/usr)", lambda: open("/usr/lab-sandbox-check", "w").close())
-out["uid"] = os.getuid()
-sys.stdout.write(json.dumps(out))
-"""
-
-
-def check_sandbox(results_path: str | Path | None = None) -> tuple[bool, list[str]]:
-    """Start a real sandboxed child and try, from inside, what a cheating submission would.
-
-    Returns ``(ok, lines)``: ``ok`` is True when a sandbox works and stops every attempt it can;
-    what the mode cannot stop is a ``WARNING`` line (with the platform setting that stops it), not a
-    failure. The write to the results file is judged by the real file: a write that lands in the
-    sandbox's private ``/tmp`` is stopped, from whatever folder this runs.
-    """
-    lines = []
-    undumpable = make_undumpable()
-    lines.append(f"{'ok ' if undumpable else 'BAD'} the grader is not dumpable (prctl PR_SET_DUMPABLE 0)")
-    try:
-        sb = find_sandbox()
-    except SandboxUnavailable as e:
-        return False, [*lines, f"BAD no sandbox: {e}"]
-    lines.append(f"ok  sandbox: {sb.kind}: {sb.describe()}" + (f" ({sb.bwrap})" if sb.bwrap else ""))
-    from lab.grading.assignments import assignments_dir
-    from lab.paths import repo_root
-
-    repo = repo_root().resolve()  # not a target: it holds the venv's folder when the venv is inside it
-    targets = [str(p) for p in _secrets() if p != repo]
-    a_dir = assignments_dir()
-    for name in ("ekf/ekf.py", "ekf/hidden_tests.py"):
-        if (a_dir / name).exists():
-            targets.append(str((a_dir / name).resolve()))
-    results = Path(results_path or Path.cwd() / "results.json").resolve()
-    if sb.kind == "uid":  # as lab grade would (not the results' folder: a check changes no folder of yours)
-        for p in make_grader_private():
-            lines.append(f"ok  made private (chmod go-rwx): {p}")
-    entry = Path(__file__).with_name("sandbox.py")
-    ok = undumpable
-    token = secrets.token_hex(8)
-    created = _canary(results)
-    uid = sb.new_uid()
-    d = private_workdir(uid if sb.kind == "uid" else None, "lab-check-")
-    try:
-        args = ["-I", "-c", _CHECKS, str(-1 if uid is None else uid), json.dumps(targets)]
-        cmd = sb.command([*args, str(os.getpid()), str(results), token], d, entry, uid)
-        r = subprocess.run(cmd, capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL, cwd=d)
-        if uid is not None and sb.kind == "uid":
-            end_all(None, uid)
-        try:
-            landed = token in results.read_text(errors="replace")
-        except OSError:
-            landed = False
-    finally:
-        shutil.rmtree(d, ignore_errors=True)
-        if created:
-            with contextlib.suppress(OSError):
-                results.unlink()
-    try:
-        found = json.loads(r.stdout)
-    except ValueError:
-        return False, [*lines, f"BAD the check did not run: {r.stderr.strip()[-300:]}"]
-    child_uid = found.pop("uid")
-    if uid is not None:
-        good = child_uid == uid
-        ok &= good
-        lines.append(f"{'ok ' if good else 'BAD'} the student's code runs as uid {child_uid}, not root")
-    else:
-        lines.append(f"ok  the student's code runs as uid {child_uid} in a user namespace")
-    limits = {"network": _NETWORK, "/proc": _PROCESSES}
-    for what, res in found.items():
-        if what == f"write {results}":
-            res = "NOT stopped" if landed else "stopped (the real file is unchanged)"
-        good = res.startswith("stopped")
-        known = next((v for k, v in limits.items() if k in what and v in sb.cannot_stop), None)
-        if not good and known:
-            lines.append(f"WARN {what}: {res} (this mode cannot stop it; see the WARNING below)")
-            continue
-        ok &= good
-        lines.append(f"{'ok ' if good else 'BAD'} {what}: {res}")
-    lines += [f"WARNING {sb.kind} mode cannot stop {c}" for c in sb.cannot_stop]
-    return ok, lines
-
-
-def _canary(results: Path) -> bool:
-    """Make the results file (empty, 0600) if it is not there, so that the check's write to it is judged
-    by the real file whatever folder it is in; True if this made it (the check removes it again)."""
-    try:
-        fd = os.open(results, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
-    except OSError:
-        return False
-    os.close(fd)
-    return True

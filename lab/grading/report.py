@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from lab.grading.limits import TEST_OUTPUT_CHARS, clean, fit_results
 from lab.grading.suite import GradedTest
 from lab.io import atomic_output
 
@@ -106,13 +107,13 @@ class GradeReport:
                 "score": round(r.score, 6),
                 "max_score": r.test.points,
                 "status": r.status,
-                "output": r.output,
+                "output": clean(r.output, TEST_OUTPUT_CHARS),
                 "visibility": r.test.visibility.value,
                 "tags": sorted({r.test.target, *r.test.uses}),
                 "extra_data": {
                     "id": r.test.id,
                     "duration_s": round(r.duration_s, 3),
-                    **({"refused": list(r.refused)} if r.refused else {}),
+                    **({"refused": [clean(n, 300) for n in r.refused]} if r.refused else {}),
                 },
             }
             for i, r in enumerate(self.tests)
@@ -121,7 +122,7 @@ class GradeReport:
         if self.sandbox == "none":
             head = f"{INSECURE}\n{head}"
         if self.error:
-            head += f"\n{self.error}"
+            head += f"\n{clean(self.error, TEST_OUTPUT_CHARS)}"
         hidden = sum(1 for r in self.tests if r.test.visibility.value != "visible")
         if hidden:
             head += f"\n{hidden} of {len(self.tests)} tests are shown after the due date or not at all."
@@ -135,10 +136,10 @@ class GradeReport:
             "tests": tests,
             "extra_data": {
                 "assignment": self.assignment.name,
-                "submission": self.submission,
+                "submission": clean(self.submission, 1000),
                 "sandbox": self.sandbox,
                 "secure": self.sandbox != "none",
-                "refused": self.refused,
+                "refused": [clean(n, 300) for n in self.refused],
             },
         }
 
@@ -165,10 +166,10 @@ class GradeReport:
 
     def write_json(self, path: str | Path) -> Path:
         """Write results.json atomically (a temporary file, flushed to disk, renamed over the target),
-        then read it back: an error if what is there is not what was meant to be written."""
+        then read it back: an error if what is there is not what was meant to be written. It stays
+        under 1 MB whatever the submission sent (:func:`~lab.grading.limits.fit_results`)."""
         path = Path(path)
-        data = self.to_gradescope()
-        text = json.dumps(data, indent=2) + "\n"
+        text = fit_results(self.to_gradescope())
         with atomic_output(path) as tmp, open(tmp, "w") as f:
             f.write(text)
             f.flush()
@@ -178,10 +179,11 @@ class GradeReport:
         return path
 
     def summary(self) -> str:
-        """A readable summary for the terminal: one line per test, the message under each failure."""
+        """A readable summary for the terminal: one line per test, the message under each failure (no
+        control character of the submission's reaches the terminal: :func:`~lab.grading.limits.clean`)."""
         lines = [
             f"{self.assignment.name} ({self.assignment.title})",
-            f"submission: {self.submission}",
+            f"submission: {clean(self.submission, 1000)}",
             f"isolation: {self.sandbox}" + (" (INSECURE)" if self.sandbox == "none" else ""),
         ]
         if self.sandbox == "none":
@@ -192,13 +194,13 @@ class GradeReport:
             mark = "PASS" if r.status == "passed" else "FAIL"
             lines.append(f"  {mark} {r.score:4g}/{r.test.points:<3g} {r.test.name:<{width}}  [{r.test.id}]")
             if r.status != "passed" and r.output:
-                for ln in r.output.splitlines()[:12]:
+                for ln in clean(r.output, TEST_OUTPUT_CHARS).splitlines()[:12]:
                     lines.append(f"         {ln}")
         pct = 100.0 * self.score / self.max_score if self.max_score else 0.0
         lines.append(
             f"score: {self.score:g} / {self.max_score:g} ({pct:.0f} %) in {self.execution_time_s:.1f} s"
         )
-        return "\n".join(lines)
+        return clean("\n".join(lines))
 
 
 def write_scores_csv(path: str | Path, rows: list[tuple[str, list[GradeReport]]]) -> Path:
@@ -220,5 +222,5 @@ def write_scores_csv(path: str | Path, rows: list[tuple[str, list[GradeReport]]]
             scores = [f"{r.score:g}" for rep in reports for r in rep.tests]
             total = sum(rep.score for rep in reports)
             top = sum(rep.max_score for rep in reports)
-            w.writerow([student, mode, *scores, f"{total:g}", f"{top:g}"])
+            w.writerow([clean(student, 200), mode, *scores, f"{total:g}", f"{top:g}"])
     return path

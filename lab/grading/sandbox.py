@@ -43,10 +43,20 @@ import os
 import struct
 import sys
 
-__all__ = ["encode", "decode", "read_message", "write_message", "MAX_MESSAGE_BYTES", "WireError"]
+__all__ = [
+    "encode",
+    "decode",
+    "read_message",
+    "write_message",
+    "install_seccomp",
+    "MAX_MESSAGE_BYTES",
+    "WireError",
+]
 
-MAX_MESSAGE_BYTES = 256 << 20  # one answer may not exceed 256 MB
+MAX_MESSAGE_BYTES = 4 << 20  # one frame: far above any answer a graded test needs (a few KB)
 _MAX_DEPTH = 32
+_MAX_CONTAINERS = 200_000  # lists and dicts in one frame: what decoding may build stays bounded
+_MAX_INT_DIGITS = 20  # an int64 has 19 digits; 400 digits is not a number a graded test can use
 _ARRAY_KINDS = "biufc"  # bool, int, uint, float, complex: no objects, strings or structured dtypes
 _HEADER = struct.Struct(">I")
 
@@ -64,6 +74,8 @@ def _to_wire(x, depth: int = 0):
     if x is None or isinstance(x, (bool, str)):
         return x
     if isinstance(x, int):
+        if abs(x) >= 10**_MAX_INT_DIGITS:
+            raise WireError(f"cannot send an integer of more than {_MAX_INT_DIGITS} digits")
         return x
     if isinstance(x, float):
         return x
@@ -131,13 +143,22 @@ def encode(obj) -> bytes:
 
 
 def decode(data: bytes):
-    """Inverse of :func:`encode`. Safe on untrusted bytes: raises :class:`WireError`, never runs code."""
+    """Inverse of :func:`encode`. Safe on untrusted bytes: raises :class:`WireError`, never runs code,
+    and builds at most a bounded number of lists and dicts and no integer too long for a graded test."""
+    if data.count(b"[") + data.count(b"{") > _MAX_CONTAINERS:
+        raise WireError(f"malformed message: more than {_MAX_CONTAINERS} lists and dicts")
     try:
-        return json.loads(data.decode("utf-8"), object_hook=_from_wire_hook)
+        return json.loads(data.decode("utf-8"), object_hook=_from_wire_hook, parse_int=_parse_int)
     except WireError:
         raise
     except (ValueError, TypeError, RecursionError, OverflowError, MemoryError) as e:
         raise WireError(f"malformed message: {type(e).__name__}: {str(e)[:200]}") from None
+
+
+def _parse_int(text: str) -> int:
+    if len(text.lstrip("-")) > _MAX_INT_DIGITS:
+        raise WireError(f"an integer of {len(text.lstrip('-'))} digits (at most {_MAX_INT_DIGITS})")
+    return int(text)
 
 
 def write_message(fd: int, obj) -> None:
@@ -204,6 +225,33 @@ def _apply_limits(memory_mb: int, cpu_s: int) -> None:
     if hasattr(resource, "RLIMIT_NPROC"):
         lower(resource.RLIMIT_NPROC, 0)  # no new processes or threads (not enforced for root)
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write then fails with OSError(EFBIG) instead
+
+
+def install_seccomp() -> None:
+    """Install the grader's seccomp filter (:mod:`lab.grading.seccomp`) when it is handed over in
+    ``$LAB_SECCOMP_FD`` (the uid mode; bubblewrap installs it itself before this process starts):
+    ``no_new_privs``, then ``prctl(PR_SET_SECCOMP, SECCOMP_MODE_FILTER)``. Fails loudly: a child that
+    cannot confine itself must not run the student's code."""
+    fd = os.environ.pop("LAB_SECCOMP_FD", None)
+    if fd is None:
+        return
+    import ctypes
+
+    data = b""
+    while chunk := os.read(int(fd), 1 << 16):
+        data += chunk
+    os.close(int(fd))
+
+    class SockFprog(ctypes.Structure):
+        _fields_ = [("len", ctypes.c_ushort), ("filter", ctypes.c_char_p)]
+
+    buf = ctypes.create_string_buffer(data, len(data))
+    prog = SockFprog(len(data) // 8, ctypes.cast(buf, ctypes.c_char_p))
+    libc = ctypes.CDLL(None, use_errno=True)
+    ul = ctypes.c_ulong
+    set_nnp = libc.prctl(38, ul(1), ul(0), ul(0), ul(0))  # PR_SET_NO_NEW_PRIVS
+    if set_nnp != 0 or libc.prctl(22, ul(2), ctypes.byref(prog), ul(0), ul(0)) != 0:  # PR_SET_SECCOMP
+        raise SystemExit(f"sandbox: could not install the seccomp filter ({os.strerror(ctypes.get_errno())})")
 
 
 # ------------------------------------------------------------------------------- records and rules
@@ -477,6 +525,7 @@ def main(argv: list[str]) -> int:
     if len(argv) > 5 and int(argv[5]) >= 0:
         _drop_to(int(argv[5]))
     _apply_limits(memory_mb, cpu_s)
+    install_seccomp()
     sys.dont_write_bytecode = True
     return _serve(req_fd, resp_fd, module_path)
 
