@@ -109,24 +109,35 @@ def project_matches_opencv(sub):
     uses=("triangulate",),
 )
 def round_trip(sub):
-    """Each way is checked against values known here, not only against the other function: a wrong
+    """The two ways must undo each other, and each is also checked against values known here: a wrong
     pair can undo itself (triangulate keeping the pixels, project dropping the depth), and a pair can
-    remember what it was asked."""
+    remember what it was asked within one test."""
     rng = np.random.default_rng(3)
     uv = rng.uniform([0, 0], [320, 240], (30, 2))
     d = rng.uniform(2, 60, 30)
     p = as_array(sub.triangulate(uv, d, F, CX, CY, B), "triangulate", (30, 3))
-    Z = F * B / d  # the points' depths, from the definition of disparity
+    back = as_array(sub.project(p, F, CX, CY), "project", (30, 2))
+    check_close(back, uv, "project(triangulate(uv, d))", atol=1e-9, rtol=1e-12)
+    points, *_ = _scene(rng, n=30)  # points at known positions: the way back must find them again
+    seen = as_array(sub.project(points, F, CX, CY), "project", (30, 2))
+    again = as_array(sub.triangulate(seen, F * B / points[:, 2], F, CX, CY, B), "triangulate", (30, 3))
+    check_close(
+        again,
+        points,
+        "triangulate(project(p), f b / z)",
+        rtol=1e-9,
+        atol=1e-9,
+        hint="The two must be inverses for points in front of the camera, depth included.",
+    )
+    # undoing each other is not enough: the values themselves
     check_close(
         p[:, 2],
-        Z,
+        F * B / d,
         "the depth column of triangulate(uv, d)",
         rtol=1e-9,
         atol=1e-9,
         hint="Z = f b / d: the depth of a point whose disparity is d.",
     )
-    back = as_array(sub.project(p, F, CX, CY), "project", (30, 2))
-    check_close(back, uv, "project(triangulate(uv, d))", atol=1e-9, rtol=1e-12)
     right = as_array(sub.project(p - [B, 0.0, 0.0], F, CX, CY), "project", (30, 2))
     check_close(
         right,
@@ -136,21 +147,10 @@ def round_trip(sub):
         rtol=1e-12,
         hint="The right camera sits b along x: it sees each point at (u - d, v), d being the disparity.",
     )
-    points, *_ = _scene(rng, n=30)  # points at known positions: the way back must find them again
     K = np.array([[F, 0, CX], [0, F, CY], [0, 0, 1.0]])
     want, _ = cv2.projectPoints(points, np.zeros(3), np.zeros(3), K, None)
-    seen = as_array(sub.project(points, F, CX, CY), "project", (30, 2))
     check_close(
         seen, want.reshape(-1, 2), "project(p) (against OpenCV's projectPoints)", rtol=1e-9, atol=1e-9
-    )
-    again = as_array(sub.triangulate(seen, F * B / points[:, 2], F, CX, CY, B), "triangulate", (30, 3))
-    check_close(
-        again,
-        points,
-        "triangulate(project(p), f b / z)",
-        rtol=1e-9,
-        atol=1e-9,
-        hint="The two must be inverses for points in front of the camera, depth included.",
     )
 
 
