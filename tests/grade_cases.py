@@ -165,9 +165,19 @@ CASES = [
         "    else:\n"
         "        lik = np.full(shape, 1.0 - beta, dtype=float)\n"
         "        lik[u, v] = alpha",
-        frozenset({"detection_likelihood_eq2", "map_update_miss", "map_update_hit", "map_update_sequence"}),
+        frozenset(
+            {
+                "detection_likelihood_eq2",
+                "map_update_normalised",
+                "map_update_miss",
+                "map_update_hit",
+                "map_update_other_cells",
+                "map_update_sequence",
+            }
+        ),
         {
             "detection_likelihood_eq2": "alpha and beta swapped",
+            "map_update_normalised": "alpha and beta swapped",
             "map_update_miss": "alpha and beta swapped",
             "map_update_sequence": "alpha and beta swapped",
         },

@@ -5,6 +5,8 @@ rotations, central differences, the Kalman equations written out densely here, S
 normal, and a simulated static object whose true pose is known. All data are seeded.
 """
 
+import math
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2, multivariate_normal
@@ -142,7 +144,7 @@ def jacobian_shape_and_translation(sub):
         Rb = b @ R_ref(*X[3:]).T  # R b_j, one row per feature
         rot = C[:, 3:].reshape(n, 3, 3)
         for j in range(n):
-            if np.abs(rot[j]).max() < 1e-6 * np.linalg.norm(b[j]):
+            if not np.abs(rot[j]).max() >= 1e-6 * np.linalg.norm(b[j]):
                 fail(
                     f"the rotation columns C[:, 3:] are zero for feature {j} (n = {n}): turning the object "
                     "moves every feature off its centre, d d_j / d theta = (dR/dtheta) b_j"
@@ -258,21 +260,21 @@ def kalman_update_covariance(sub):
             fail("kalman_update must return a pair (mu, Sigma)")
         Sigma = as_array(out[1], "Sigma from kalman_update", (6, 6))
         top = np.abs(Sigma).max()
-        if np.abs(Sigma - Sigma.T).max() > 1e-9 * top:
+        if not np.abs(Sigma - Sigma.T).max() <= 1e-9 * top:
             fail(
                 "Sigma from kalman_update is not symmetric (|Sigma - Sigma^T| up to "
                 f"{fmt(np.abs(Sigma - Sigma.T).max(), 3)}"
                 f" with Sigma_m ~ {scale_m:g}): the Joseph form keeps it symmetric"
             )
         ev = np.linalg.eigvalsh(0.5 * (Sigma + Sigma.T))
-        if ev.min() <= 0:
+        if not ev.min() > 0:
             fail(
                 f"Sigma from kalman_update is not positive definite (smallest eigenvalue {fmt(ev.min(), 3)} "
                 "with "
                 f"Sigma_m ~ {scale_m:g}): use the Joseph form"
             )
         shrink = np.linalg.eigvalsh(Sigma_bar - 0.5 * (Sigma + Sigma.T)).min()
-        if shrink < -1e-9 * np.abs(Sigma_bar).max():
+        if not shrink >= -1e-9 * np.abs(Sigma_bar).max():
             fail(
                 "Sigma from kalman_update is larger than Sigma_bar in some direction: a measurement can only "
                 "reduce uncertainty"
@@ -313,7 +315,7 @@ def log_likelihood_eq9(sub):
         )
         if abs(got - want) <= 1e-6 * max(1.0, abs(want)):
             continue
-        if abs(got + want) <= 1e-6 * max(1.0, abs(want)):
+        if math.isclose(got, -want, rel_tol=1e-6, abs_tol=1e-6):
             fail(f"data_log_likelihood has the wrong sign (got {got:.4f}, expected {want:.4f})")
         fail(
             f"data_log_likelihood for m = {3 * n} stacked "
@@ -329,6 +331,12 @@ def _static_object(rng, n=8):
     b = random_features(rng, n)
     Sigma_m = block_diag_cov(rng, n, 0.004)
     return X, b, Sigma_m
+
+
+EKF_HINT = (
+    "ekf_update: y = (d_C - measurement_model(mu_bar, b_O)).reshape(-1) (feature by feature), "
+    "C = measurement_jacobian(mu_bar, b_O), then kalman_update."
+)
 
 
 @suite.test(
@@ -350,16 +358,13 @@ def ekf_update_one_step(sub):
     Sigma = as_array(out[1], "Sigma from ekf_update", (6, 6))
     y = (d - H_ref(mu_bar, b)).reshape(-1)
     mu_want, Sigma_want = kalman_ref(mu_bar, Sigma_bar, y, C_fd(mu_bar, b), Sigma_m)
-    hint = (
-        "ekf_update: y = (d_C - measurement_model(mu_bar, b_O)).reshape(-1) (feature by feature), "
-        "C = measurement_jacobian(mu_bar, b_O), then kalman_update."
-    )
-    check_close(mu, mu_want, "mu from ekf_update", rtol=1e-6, atol=1e-8, hint=hint)
-    check_close(Sigma, Sigma_want, "Sigma from ekf_update", rtol=1e-5, atol=1e-12, hint=hint)
+    check_close(mu, mu_want, "mu from ekf_update", rtol=1e-6, atol=1e-8, hint=EKF_HINT)
+    check_close(Sigma, Sigma_want, "Sigma from ekf_update", rtol=1e-5, atol=1e-12, hint=EKF_HINT)
 
 
 @suite.test(
-    "ekf_update is consistent: NEES over 30 seeded runs of a static object stays near 6",
+    "ekf_update is consistent: each update equals the EKF written out here, and NEES over 30 seeded runs "
+    "of a static object stays near 6",
     points=3,
     target="ekf_update",
     uses=("measurement_model", "measurement_jacobian", "kalman_update"),
@@ -381,8 +386,15 @@ def ekf_consistency(sub):
             out = sub.ekf_update(mu, Sigma_bar, d, b, Sigma_m)
             if not (isinstance(out, list) and len(out) == 2):
                 fail("ekf_update must return a pair (mu, Sigma)")
+            y = (d - H_ref(mu, b)).reshape(-1)
+            mu_want, Sigma_want = kalman_ref(mu, Sigma_bar, y, C_fd(mu, b), Sigma_m)  # from the same input
             mu = as_array(out[0], "mu from ekf_update", (6,))
             Sigma = as_array(out[1], "Sigma from ekf_update", (6, 6))
+            where = f"run {len(final_err) + 1}, update {len(nees) % steps + 1}"
+            check_close(mu, mu_want, f"mu from ekf_update ({where})", rtol=1e-6, atol=1e-8, hint=EKF_HINT)
+            check_close(
+                Sigma, Sigma_want, f"Sigma from ekf_update ({where})", rtol=1e-5, atol=1e-12, hint=EKF_HINT
+            )
             e = mu - X
             try:
                 nees.append(float(e @ np.linalg.solve(Sigma, e)))
@@ -392,7 +404,7 @@ def ekf_consistency(sub):
     mean = float(np.mean(nees))
     lo, hi = (chi2.ppf([0.0005, 0.9995], dim * runs) / runs) * [0.8, 1.25]  # correlated steps: widened
     err_mm = 1000 * float(np.median(final_err))
-    if not (lo <= mean <= hi) or err_mm > 10:
+    if not (lo <= mean <= hi and err_mm <= 10):
         msg = (
             f"average NEES (e^T Sigma^-1 e, e = mu - X_true) over {runs} runs x {steps} updates is "
             f"{mean:.3g}; "

@@ -19,6 +19,8 @@ def test_a_miss_moves_probability_away_from_the_cell():
     Q = update_probability_map(P, (2, 2), False, alpha=0.05, beta=0.2)
     assert Q.sum() == pytest.approx(1.0)
     assert Q[2, 2] < P[2, 2] and Q[0, 0] > P[0, 0]
+    # Bayes by hand: beta P / (beta P + (1 - alpha)(1 - P)) with P = 1/25
+    assert Q[2, 2] == pytest.approx(0.2 / 25 / (0.2 / 25 + 0.95 * 24 / 25))
 
 
 def test_a_perfect_sensor_finds_the_object_at_once():
@@ -44,7 +46,8 @@ def test_astar_goes_round_a_wall():
     path, total = astar(cost, (0, 0), (6, 0))
     assert tuple(path[0]) == (0, 0) and tuple(path[-1]) == (6, 0)
     assert all(np.isfinite(cost[tuple(p)]) for p in path)
-    assert total > 6
+    # the only way is through the gap at column 6 and back: 4 diagonal steps and 10 straight ones
+    assert total == pytest.approx(10 + 4 * math.sqrt(2))
 
 
 def test_astar_without_a_path():

@@ -102,19 +102,23 @@ def project_matches_opencv(sub):
 
 
 @suite.test(
-    "project(triangulate(uv, d)) gives back uv, and triangulate(project(p), f b / z) gives back p",
+    "project(triangulate(uv, d)) gives back uv in the left camera and (u - d, v) in the right one, and "
+    "triangulate(project(p), f b / z) gives back p",
     points=1,
     target="project",
     uses=("triangulate",),
 )
 def round_trip(sub):
+    """The two ways must undo each other, and each is also checked against values known here: a wrong
+    pair can undo itself (triangulate keeping the pixels, project dropping the depth), and a pair can
+    remember what it was asked within one test."""
     rng = np.random.default_rng(3)
     uv = rng.uniform([0, 0], [320, 240], (30, 2))
     d = rng.uniform(2, 60, 30)
     p = as_array(sub.triangulate(uv, d, F, CX, CY, B), "triangulate", (30, 3))
     back = as_array(sub.project(p, F, CX, CY), "project", (30, 2))
     check_close(back, uv, "project(triangulate(uv, d))", atol=1e-9, rtol=1e-12)
-    points, *_ = _scene(rng, n=30)  # points at known depths: the way back must find them again
+    points, *_ = _scene(rng, n=30)  # points at known positions: the way back must find them again
     seen = as_array(sub.project(points, F, CX, CY), "project", (30, 2))
     again = as_array(sub.triangulate(seen, F * B / points[:, 2], F, CX, CY, B), "triangulate", (30, 3))
     check_close(
@@ -124,6 +128,29 @@ def round_trip(sub):
         rtol=1e-9,
         atol=1e-9,
         hint="The two must be inverses for points in front of the camera, depth included.",
+    )
+    # undoing each other is not enough: the values themselves
+    check_close(
+        p[:, 2],
+        F * B / d,
+        "the depth column of triangulate(uv, d)",
+        rtol=1e-9,
+        atol=1e-9,
+        hint="Z = f b / d: the depth of a point whose disparity is d.",
+    )
+    right = as_array(sub.project(p - [B, 0.0, 0.0], F, CX, CY), "project", (30, 2))
+    check_close(
+        right,
+        uv - np.column_stack([d, np.zeros(30)]),
+        "project(triangulate(uv, d) - [b, 0, 0]), the points as the right camera sees them",
+        atol=1e-9,
+        rtol=1e-12,
+        hint="The right camera sits b along x: it sees each point at (u - d, v), d being the disparity.",
+    )
+    K = np.array([[F, 0, CX], [0, F, CY], [0, 0, 1.0]])
+    want, _ = cv2.projectPoints(points, np.zeros(3), np.zeros(3), K, None)
+    check_close(
+        seen, want.reshape(-1, 2), "project(p) (against OpenCV's projectPoints)", rtol=1e-9, atol=1e-9
     )
 
 

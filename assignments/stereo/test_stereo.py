@@ -12,6 +12,12 @@ def test_a_point_on_the_optical_axis():
     np.testing.assert_allclose(p, [[0.0, 0.0, 2.0]])
 
 
+def test_a_point_off_the_axis():
+    # u - cx = f / 2 at depth 2 m: x = (u - cx) Z / f = 1 m
+    p = triangulate([[CX + F / 2, CY]], [F * B / 2.0], F, CX, CY, B)
+    np.testing.assert_allclose(p, [[1.0, 0.0, 2.0]])
+
+
 def test_zero_disparity_has_no_depth():
     p = triangulate([[10.0, 20.0], [CX, CY]], [0.0, 12.0], F, CX, CY, B)
     assert np.all(np.isnan(p[0])) and np.all(np.isfinite(p[1]))
@@ -21,6 +27,13 @@ def test_projection_inverts_triangulation():
     uv = np.array([[30.0, 40.0], [300.0, 200.0]])
     p = triangulate(uv, [5.0, 20.0], F, CX, CY, B)
     np.testing.assert_allclose(project(p, F, CX, CY), uv)
+
+
+def test_the_right_camera_sees_the_point_shifted_by_the_disparity():
+    # inverting each other is not enough: the right camera, b along x, sees the point at (u - d, v)
+    uv, d = np.array([[30.0, 40.0], [300.0, 200.0]]), np.array([5.0, 20.0])
+    p = triangulate(uv, d, F, CX, CY, B)
+    np.testing.assert_allclose(project(p - [B, 0.0, 0.0], F, CX, CY), uv - np.column_stack([d, [0.0, 0.0]]))
 
 
 def test_depth_error_grows_with_the_square_of_the_distance():

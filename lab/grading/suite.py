@@ -179,21 +179,25 @@ def as_float(value, what: str, finite: bool = True) -> float:
 def check_close(actual, expected, what: str, rtol: float = 1e-7, atol: float = 1e-9, hint: str = "") -> None:
     """Fail unless ``actual`` equals ``expected`` entry-wise within ``atol + rtol * |expected|``.
 
-    The message names the worst entry, its value and the expected one, and adds ``hint``.
+    NaN-safe: a NaN in either fails, and so does an infinity not matched by the same one. The message
+    names the worst entry (a NaN first), its value and the expected one, and adds ``hint``.
     """
     a = np.asarray(actual, dtype=float)
     e = np.asarray(expected, dtype=float)
     if a.shape != e.shape:
         fail(f"{what} has shape {a.shape}; expected {e.shape}")
-    err = np.abs(a - e)
-    tol = atol + rtol * np.abs(e)
-    if np.all(err <= tol):
-        return
-    k = np.unravel_index(int(np.argmax(err - tol)), err.shape) if a.ndim else ()
+    with np.errstate(invalid="ignore"):  # inf - inf is NaN: fails below like any NaN
+        err = np.abs(a - e)
+        tol = atol + rtol * np.abs(e)
+        ok = np.where(np.isinf(e), a == e, err <= tol)  # False where either is NaN: a NaN never passes
+        if np.all(ok):
+            return
+        excess = np.where(ok, -np.inf, np.nan_to_num(err - tol, nan=np.inf, posinf=np.inf))
+    k = np.unravel_index(int(np.argmax(excess)), err.shape)
     where = f" at index {tuple(int(i) for i in k)}" if a.ndim else ""
     msg = (
         f"{what} is wrong{where}: got {fmt(a[k])}, expected {fmt(e[k])} "
-        f"({int(np.count_nonzero(err > tol))} of {err.size} entries off; largest error {fmt(err.max(), 3)}, "
+        f"({int(np.count_nonzero(~ok))} of {err.size} entries off; largest error {fmt(np.max(err), 3)}, "
         f"tolerance {fmt(atol, 3)} + {fmt(rtol, 3)} * |expected|)"
     )
     fail(msg + (f"\n{hint}" if hint else ""))
