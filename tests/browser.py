@@ -275,6 +275,10 @@ class Browser:
                 e = params["entry"]
                 line = f"{e.get('text')} {e.get('url', '')}".strip()
                 (self.network_errors if e.get("source") == "network" else self.errors).append(line)
+            elif method == "Page.javascriptDialogOpening":  # leaving JupyterLab asks; nobody to answer
+                if params.get("type") != "beforeunload":
+                    self.errors.append(f"dialog {params.get('type')}: {params.get('message')}")
+                self._post("Page.handleJavaScriptDialog", {"accept": True}, session)
             elif method == "Page.loadEventFired" and session == getattr(self, "_session", None):
                 self._loads += 1
         except BrowserError:
