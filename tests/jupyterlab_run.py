@@ -145,17 +145,20 @@ PANEL = (
 READY = f"""(() => {{ const p = {PANEL};
   return !!(p && p.content && p.sessionContext && p.sessionContext.session && p.sessionContext.session.kernel
             && p.sessionContext.session.kernel.status === 'idle' && p.content.widgets.length > 0); }})()"""
-#: JavaScript: the run's state: kernel status, prompts, and whether an error output stopped the run.
+#: JavaScript: the run's progress, polled (small: no outputs): kernel status, execution counts, cells
+#: queued or running ("[*]"), and whether an error output stopped the run.
 STATE = f"""(() => {{ const p = {PANEL}; const cells = p.content.widgets.filter(c => c.model.type === 'code');
-  const outs = cells.map(c => c.model.outputs.toJSON());
+  const prompt = c => c.node.querySelector('.jp-InputPrompt')?.textContent || '';
+  const kinds = c => Array.from({{length: c.model.outputs.length}}, (_, i) => c.model.outputs.get(i).type);
   return JSON.stringify({{
     kernel: p.sessionContext.session ? p.sessionContext.session.kernel.status : 'none',
     counts: cells.map(c => c.model.executionCount),
-    running: cells.filter(c => /\\[\\*\\]/.test(c.node.querySelector('.jp-InputPrompt')?.textContent || ''))
-      .length,
-    error: outs.some(o => o.some(x => x.output_type === 'error')),
-    sources: cells.map(c => c.model.sharedModel.getSource()),
-    outputs: outs }}); }})()"""
+    running: cells.filter(c => prompt(c).includes('[*]')).length,
+    error: cells.some(c => kinds(c).includes('error')) }}); }})()"""
+#: JavaScript: the finished run: every code cell's source and outputs (nbformat JSON).
+CELLS = f"""(() => {{ const p = {PANEL}; const cells = p.content.widgets.filter(c => c.model.type === 'code');
+  return JSON.stringify({{ sources: cells.map(c => c.model.sharedModel.getSource()),
+                          outputs: cells.map(c => c.model.outputs.toJSON()) }}); }})()"""
 #: JavaScript: how the outputs look on the page: widget views, their failures, 3D view frames.
 RENDERED = """(() => {
   const nodes = [...document.querySelectorAll('.jp-Notebook .jp-OutputArea-output')];
@@ -214,7 +217,10 @@ def run_notebook(b, lab: JupyterLab, name: str, timeout: float, shots: Path) -> 
     then read the run back (and look at each 3D view: see :func:`look_at_views`)."""
     t0 = time.monotonic()
     b.open(lab.page(name), timeout=120)
-    js = {k: v.replace("NAME", json.dumps(name)) for k, v in (("ready", READY), ("state", STATE))}
+    js = {
+        k: v.replace("NAME", json.dumps(name))
+        for k, v in (("ready", READY), ("state", STATE), ("cells", CELLS))
+    }
     b.wait_for(js["ready"], 120, what=f"{name} open with an idle kernel")
     # the menu's Run > Run All Cells: the command, on this notebook made the current one
     panel = PANEL.replace("NAME", json.dumps(name))
@@ -235,6 +241,7 @@ def run_notebook(b, lab: JupyterLab, name: str, timeout: float, shots: Path) -> 
                 f"{name}: not done after {timeout} s: kernel {state['kernel']}, counts {state['counts']}"
             )
     wall = time.monotonic() - t0
+    state.update(json.loads(b.evaluate(js["cells"])))
     views = look_at_views(b, name, shots)
     rendered = json.loads(b.evaluate(RENDERED))
     b.screenshot(path=shots / f"notebook_{Path(name).stem}.png")
