@@ -4,9 +4,10 @@
   the back-projection (window means), the peaks projected onto ``M_p``, and the growing beta of one
   peak (the paper's Fig. 2).
 * :func:`fig5_trial`: the probability map after the first global search (the trial's log colour scale,
-  its colour peaks circled) with the first planned path and its goal, the costmap (when given) with the robot's path -- the wheel odometry's, the localized one
-  (``landmarks`` localization) and the true one (where the truth is known) --, and the 6D pose drawn on
-  the image of the successful local search (the paper's Fig. 5).
+  its colour peaks circled) with the first planned path and its goal, the costmap (when given) with
+  the robot's path -- the wheel odometry's, the localized one (``landmarks`` localization) and the
+  true one (where the truth is known) --, and the 6D pose drawn on the image of the successful local
+  search (the paper's Fig. 5).
 * :func:`fig6_snapshots`: the panorama of the first scan and, in a grid, the map after every global scan
   and every failed local search and at the end (:func:`trial_panels`), on one log colour scale
   (:func:`map_norm`), each with the robot, its path, the cells searched and the object (the paper's
@@ -509,8 +510,9 @@ def write_figures(result, out, costmap_state: np.ndarray | None = None, costmap_
     Files: ``fig2_global_search.png`` (the first global search, when there was one),
     ``fig5_trial.png`` (map with the first planned path; costmap, when given, with the trajectory; the
     6D pose on the image), ``fig6_snapshots.png`` (panorama and the map after every global scan and
-    failed local search, and at the end), and ``map_NN.png`` for every map snapshot in order (the probability map after each global
-    search and each failed local search, with the trajectory so far).
+    failed local search, and at the end), and ``map_NN.png`` for every map snapshot in order (the
+    probability map after each global search and each failed local search, with the trajectory so
+    far).
 
     Returns
     -------
