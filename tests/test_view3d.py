@@ -264,6 +264,102 @@ def test_search_view_has_one_step_per_event_and_the_heat_map_is_the_agents_map(t
         assert screenshot(tmp_path / "s.html", tmp_path / "s.png", 4000).std() > 10
 
 
+@pytest.fixture(scope="module")
+def search_run(tmp_path_factory):
+    """A search long enough for a global scan and a local search, recorded in 3D, with the agent's map
+    and its last local search kept at every event (for the test only)."""
+    from lab.runs.search import navigator_factory, run_search
+
+    out = tmp_path_factory.mktemp("view3d_search")
+    seen = {"maps": [], "locals": [], "cameras": []}
+
+    def attach(agent):
+        viewer = agent.observer
+        capture = agent.robot.capture_stereo
+
+        def capture_and_keep():  # every stereo frame's camera, where the robot's head had it
+            f = capture()
+            seen["cameras"].append((f.t, (f.odom.G() @ f.G_RC)[:3, 3]))
+            return f
+
+        agent.robot.capture_stereo = capture_and_keep
+
+        def observer(a, event):
+            viewer(a, event)
+            seen["maps"].append(np.array(a.pmap.P, float))
+            seen["locals"].append(a.last_local)
+            seen["spec"], seen["robot"] = a.pmap.spec, a.robot
+
+        agent.observer = observer
+
+    res = run_search(
+        "toy_block", 3, max_time=40.0, navigate=navigator_factory, view3d=out / "s.html", attach=attach
+    )
+    return res, seen, (out / "s.html").read_text()
+
+
+def test_search_view_draws_the_map_on_the_shelf_and_table_tops_at_their_height(search_run):
+    """Every table and shelf top of the scene carries the map's cells whose centres lie on it (found
+    here from the scene file's poses and sizes), at the top's height, in the heat map's colours of the
+    agent's map at that event (decoded from the page)."""
+    from matplotlib import colormaps
+
+    from lab.scene import load_scene
+
+    res, seen, html = search_run
+    _, messages = recording(html)
+    spec, P = seen["spec"], seen["maps"][-1]
+    X, Y = spec.cell_centers()
+    tops = [b for b in load_scene("lab_room").bodies if b.supports]
+    assert {b.shape for b in tops} >= {"table", "shelf"}
+    want_rgb = (255 * colormaps["viridis"](np.clip(1 + np.log10(P / P.max()) / 4, 0, 1))[..., :3]).astype(
+        np.uint8
+    )
+    for b in tops:
+        x, y, z0, yaw = b.pose
+        c, s_ = np.cos(np.radians(yaw)), np.sin(np.radians(yaw))
+        u, v = c * (X - x) + s_ * (Y - y), -s_ * (X - x) + c * (Y - y)  # the cell centres in the body's frame
+        on = (np.abs(u) <= b.size[0] / 2 + 1e-6) & (np.abs(v) <= b.size[1] / 2 + 1e-6)  # edges included
+        clouds = [
+            m
+            for _, m in messages
+            if m["type"] == "PointCloudMessage" and m["name"] == f"/map/surface/{b.name}"
+        ]
+        assert len(clouds) == len(res.events), b.name  # redrawn with the map at every event
+        pts = np.asarray(clouds[-1]["props"]["points"], np.float32).reshape(-1, 3).astype(float)
+        cols = np.asarray(clouds[-1]["props"]["colors"], np.uint8).reshape(-1, 3)
+        ij = np.rint((pts[:, :2] - np.asarray(spec.origin_xy)) / spec.resolution - 0.5).astype(int)
+        assert sorted(map(tuple, ij)) == sorted(map(tuple, np.argwhere(on))), b.name
+        assert np.allclose(pts[:, 2], z0 + b.height + 0.01, atol=2e-3)  # the page keeps points in float16
+        assert np.array_equal(cols, want_rgb[ij[:, 0], ij[:, 1]])
+
+
+def test_search_view_shows_the_local_searchs_views(search_run):
+    """One frustum per view of the last local search, each where a stereo frame of that search was
+    taken from (the frame's odometry and its head's measured pan and tilt)."""
+    res, seen, html = search_run
+    local = next((lc for lc in reversed(seen["locals"]) if lc is not None), None)
+    assert local is not None and any(e.kind == "local" for e in res.events), "no local search in the run"
+    _, messages = recording(html)
+    frustums = {}
+    for _, m in messages:
+        name = m.get("name", "")
+        if m["type"] == "CameraFrustumMessage" and name.startswith("/camera/local/"):
+            frustums[name] = m
+        elif m["type"] == "RemoveSceneNodeMessage" and name.startswith("/camera/local/"):
+            frustums.pop(name, None)
+    assert len(frustums) == len(local.views) >= 3
+    pos = np.array([last_position(messages, n) for n in frustums])
+    # each view's camera is where a frame of that local search was taken from (the head's measured state)
+    cams = np.array([p for t, p in seen["cameras"] if local.t_start - 1e-6 <= t <= local.t_end + 1e-6])
+    assert len(cams) >= len(local.views)
+    gap = np.linalg.norm(pos[:, None, :] - cams[None, :, :], axis=2).min(axis=1)
+    # drawn from where the robot believed it stood at the end; a landmark correction during the search
+    # moves that belief by a centimetre or so
+    assert gap.max() < 0.03 and np.median(gap) < 1e-4, gap
+    assert np.ptp(pos, axis=0).max() > 0.02  # the views differ: the head panned or tilted
+
+
 def test_lab_search_view3d_flag_writes_the_page_and_keeps_stdout_json(tmp_path):
     import json
 

@@ -130,7 +130,7 @@ def _add(scene, name: str, node, chart_scale: float = 1.0) -> None:
                 np.asarray(p["points"], np.float32),
                 p["colors"],
                 point_size=p.get("size", 0.02),
-                point_shape="circle",
+                point_shape=p.get("shape", "circle"),
             )
         else:
             scene.remove_by_name(name)
