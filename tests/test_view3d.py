@@ -360,6 +360,36 @@ def test_search_view_shows_the_local_searchs_views(search_run):
     assert np.ptp(pos, axis=0).max() > 0.02  # the views differ: the head panned or tilted
 
 
+def test_a_callers_own_steps_are_written_in_time_order(tmp_path):
+    """``add_step`` (the notebooks' one-update views): the caller's nodes on the timeline, decoded from
+    the page at their times; a step back in time is refused."""
+    from lab.errors import ConfigError
+    from lab.viz.view3d import Node, View3D, ellipsoid_mesh
+
+    v = View3D()
+    Sigma = np.diag([4e-4, 1e-4, 2.5e-5])
+    for t, scale in ((0.0, 1.0), (1.5, 0.25)):
+        v.add_step(
+            t,
+            f"t {t}",
+            {
+                "/e": Node(
+                    "mesh", ellipsoid_mesh((1.0, 2.0, 0.5), scale * Sigma).props | {"color": (0, 0, 255)}
+                )
+            },
+        )
+    with pytest.raises(ConfigError, match="go back"):
+        v.add_step(1.0, "late", {})
+    duration, messages = recording(v.save(tmp_path / "steps.html").read_text())
+    assert duration == pytest.approx(1.5)
+    meshes = [(t, m) for t, m in messages if m["type"] == "MeshMessage" and m["name"] == "/e"]
+    assert [t for t, _ in meshes] == pytest.approx([0.0, 1.5])
+    for (_, m), scale in zip(meshes, (1.0, 0.25), strict=True):
+        v_ = np.asarray(m["props"]["vertices"], np.float32).reshape(-1, 3).astype(float) - (1.0, 2.0, 0.5)
+        d2 = np.einsum("ij,jk,ik->i", v_, np.linalg.inv(scale * Sigma), v_)  # on the 3-sigma surface
+        assert np.allclose(np.sqrt(d2), 3.0, rtol=2e-3)
+
+
 def test_lab_search_view3d_flag_writes_the_page_and_keeps_stdout_json(tmp_path):
     import json
 

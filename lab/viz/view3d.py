@@ -37,31 +37,35 @@ from pathlib import Path
 import numpy as np
 
 from lab.errors import ConfigError
-from lab.viz.view3d_nodes import N_SIGMA, Node, Step3D, cmap_rgb, ellipsoid_axes, ellipsoid_mesh, frustum_node
+from lab.viz.view3d_nodes import (
+    N_SIGMA,
+    Node,
+    Step3D,
+    cmap_rgb,
+    ellipse_xy,
+    ellipsoid_axes,
+    ellipsoid_mesh,
+    frustum_node,
+)
 from lab.viz.view3d_page import CHART_LENGTH_M, INSTALL_HINT, iframe, require_viser, show_page, write_page
 from lab.viz.view3d_search import SearchScene
 
 __all__ = [
     "INSTALL_HINT",
+    "N_SIGMA",
     "Node",
     "Step3D",
     "View3D",
+    "ellipse_xy",
     "ellipsoid_axes",
+    "ellipsoid_mesh",
+    "frustum_node",
     "body_node_name",
     "require_viser",
     "show_page",
 ]
 
 MODEL_RGB = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75))
-
-
-def _ellipse_xy(centre_xy, Sigma_xy, z: float, n: int = 36) -> np.ndarray:
-    """Segments (n, 2, 3) of the ``N_SIGMA`` ellipse of a 2-D covariance [m^2] at height ``z``."""
-    w, V = np.linalg.eigh(0.5 * (Sigma_xy + Sigma_xy.T))
-    a = np.linspace(0, 2 * math.pi, n + 1)
-    pts = (V @ (N_SIGMA * np.sqrt(np.maximum(w, 0))[:, None] * np.stack([np.cos(a), np.sin(a)]))).T
-    pts = np.column_stack([pts + np.asarray(centre_xy, float), np.full(n + 1, z)])
-    return np.stack([pts[:-1], pts[1:]], axis=1)
 
 
 def _body_rgb(name: str, rgba) -> tuple[tuple[int, int, int], float]:
@@ -149,6 +153,14 @@ class View3D:
                 then(agent)
 
         return attach
+
+    def add_step(self, t: float, label: str, nodes: dict) -> None:
+        """A step of the caller's own on the timeline (a notebook's one update, before and after): the
+        ``nodes`` (name -> :class:`Node`, or None to remove one) at time ``t`` [s], with the world's
+        bodies that moved since the last step."""
+        if self.steps and t < self.steps[-1].t:
+            raise ConfigError(f"a step's time must not go back: {t} after {self.steps[-1].t}")
+        self.steps.append(Step3D(float(t), str(label), self._bodies() | dict(nodes)))
 
     def _hook(self, agent, kind: str, attribute: str) -> None:
         self.agent, self.kind = agent, kind
@@ -246,7 +258,7 @@ class View3D:
         if est is not None:
             out["/robot/ellipse"] = Node(
                 "lines",
-                {"segments": _ellipse_xy((pose.x, pose.y), est.Sigma[:2, :2], 0.03), "color": (30, 160, 60)},
+                {"segments": ellipse_xy((pose.x, pose.y), est.Sigma[:2, :2], 0.03), "color": (30, 160, 60)},
             )
         return out
 

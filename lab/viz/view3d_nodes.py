@@ -9,7 +9,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["N_SIGMA", "Node", "Step3D", "ellipsoid_axes", "ellipsoid_mesh", "cmap_rgb", "frustum_node"]
+__all__ = [
+    "N_SIGMA",
+    "Node",
+    "Step3D",
+    "ellipsoid_axes",
+    "ellipsoid_mesh",
+    "cmap_rgb",
+    "ellipse_xy",
+    "frustum_node",
+]
 
 N_SIGMA = 3.0  # the ellipses' and ellipsoids' size in standard deviations
 
@@ -88,3 +97,12 @@ def frustum_node(G_WC: np.ndarray, camera, color=(255, 140, 0), scale: float = 0
         "frustum",
         {"G_W": G_WC, "fov": fov, "aspect": camera.width / camera.height, "scale": scale, "color": color},
     )
+
+
+def ellipse_xy(centre_xy, Sigma_xy, z: float, n: int = 36) -> np.ndarray:
+    """Segments (n, 2, 3) of the ``N_SIGMA`` ellipse of a 2-D covariance [m^2] at height ``z``."""
+    w, V = np.linalg.eigh(0.5 * (Sigma_xy + Sigma_xy.T))
+    a = np.linspace(0, 2 * math.pi, n + 1)
+    pts = (V @ (N_SIGMA * np.sqrt(np.maximum(w, 0))[:, None] * np.stack([np.cos(a), np.sin(a)]))).T
+    pts = np.column_stack([pts + np.asarray(centre_xy, float), np.full(n + 1, z)])
+    return np.stack([pts[:-1], pts[1:]], axis=1)

@@ -44,12 +44,17 @@ def show_page(path, height: int = 520):
 
 
 def iframe(page: str, height: int):
+    """The page inline, in an iframe of its own (its scripts apart from the notebook's)."""
+    import warnings
+
     from IPython.display import HTML
 
-    return HTML(
-        f'<iframe srcdoc="{html_module.escape(page, quote=True)}" width="100%" '
-        f'height="{int(height)}" style="border:1px solid #ddd"></iframe>'
-    )
+    with warnings.catch_warnings():  # IPython suggests IFrame, which needs a URL: the page has none
+        warnings.filterwarnings("ignore", message="Consider using IPython.display.IFrame")
+        return HTML(
+            f'<iframe srcdoc="{html_module.escape(page, quote=True)}" width="100%" '
+            f'height="{int(height)}" style="border:1px solid #ddd"></iframe>'
+        )
 
 
 def _wxyz(R: np.ndarray) -> np.ndarray:
