@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 viser = pytest.importorskip("viser", reason="the optional extra view3d (viser) is not installed")
+from lab.viz.view3d_page import LAST_STEP_HOLD_S  # noqa: E402
+
 zstandard = pytest.importorskip("zstandard")
 msgspec = pytest.importorskip("msgspec")
 
@@ -119,7 +121,8 @@ def test_identify_view_has_one_step_per_frame_and_the_files_poses_are_the_worlds
     assert res["view3d"].endswith("identify.html")
     duration, messages = recording(html)
     t = [s.t for s in viewer.steps]
-    assert duration == pytest.approx(t[-1] - t[0], abs=1e-6)  # the time slider spans the episode
+    # the time slider spans the episode, and holds its last step (the player never shows its very end)
+    assert duration == pytest.approx(t[-1] - t[0] + LAST_STEP_HOLD_S, abs=1e-6)
     frustums = [m for _, m in messages if m["type"] == "CameraFrustumMessage"]
     assert len(frustums) == n  # one camera per frame
     # every body at the last step, as written into the file, is where the simulator had it (the robot
@@ -381,7 +384,7 @@ def test_a_callers_own_steps_are_written_in_time_order(tmp_path):
     with pytest.raises(ConfigError, match="go back"):
         v.add_step(1.0, "late", {})
     duration, messages = recording(v.save(tmp_path / "steps.html").read_text())
-    assert duration == pytest.approx(1.5)
+    assert duration == pytest.approx(1.5 + LAST_STEP_HOLD_S)
     meshes = [(t, m) for t, m in messages if m["type"] == "MeshMessage" and m["name"] == "/e"]
     assert [t for t, _ in meshes] == pytest.approx([0.0, 1.5])
     for (_, m), scale in zip(meshes, (1.0, 0.25), strict=True):

@@ -17,9 +17,20 @@ import numpy as np
 
 from lab.errors import ConfigError
 
-__all__ = ["CHART_LENGTH_M", "INSTALL_HINT", "iframe", "require_viser", "show_page", "write_page"]
+__all__ = [
+    "CHART_LENGTH_M",
+    "INSTALL_HINT",
+    "LAST_STEP_HOLD_S",
+    "iframe",
+    "require_viser",
+    "show_page",
+    "write_page",
+]
 
 CHART_LENGTH_M = 3.0  # the time series chart: its time axis spans the whole run [m]
+#: The page's timeline runs this long past the last step [s]: viser's player stops at the end of the
+#: recording without applying the messages stamped exactly there, so the last step would never show.
+LAST_STEP_HOLD_S = 1.0
 
 #: The one line a user reads when the viewer library is missing.
 INSTALL_HINT = (
@@ -89,6 +100,7 @@ def write_page(steps, camera) -> str:
                         scene.remove_by_name(name)
                     else:
                         _add(scene, name, node, chart_scale)
+            rec.insert_sleep(LAST_STEP_HOLD_S)  # the player never applies what falls on its very end
         return rec.as_html()
     finally:
         with contextlib.redirect_stdout(quiet):
