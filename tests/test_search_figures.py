@@ -84,7 +84,7 @@ def test_fig6_follows_the_whole_trial(trial):
         assert np.allclose(p.peaks_xy, [q.p_W[:2] for q in g.used_peaks])
     if trial.found:
         end = panels[-1]
-        found = [e for e in locals_ if e.detail.startswith("found")]
+        found = [e for e in locals_ if "found:" in e.detail and "not found" not in e.detail]
         assert len(panels) == len(snaps) + 1 and end.found_cell == found[-1].cell
         assert np.array_equal(end.P, agent.P_final)
     fig = fig6_snapshots(trial)
@@ -118,7 +118,7 @@ def _longer_trial(trial):
         SearchEvent(2.5, "local", (3, 4), "side look: not found"),
         SearchEvent(3.0, "local", (5, 6), "not found"),
         SearchEvent(4.0, "global"),
-        SearchEvent(5.0, "local", (7, 8), "found: 4 confirming updates"),
+        SearchEvent(5.0, "local", (7, 8), "side look: found: 4 confirming updates"),  # found by a side look
     )
     agent = dataclasses.replace(
         agent, snapshots=snaps, events=events, globals_=(agent.globals_[0],) * 2, P_final=maps[3]

@@ -323,7 +323,8 @@ def trial_panels(result) -> list[MapPanel]:
             peaks = np.array(used, float).reshape(-1, 2)
         what = "global scan" if s.cell is None else f"cell {s.cell} searched, not found"
         panels.append(MapPanel(s.t, s.P, what, s.cell, s.pose, before, peaks_xy=peaks))
-    found = next((e for e in agent.events if e.kind == "local" and e.detail.startswith("found")), None)
+    # the search that found it: the run's last local search (a side look's too)
+    found = next((e for e in reversed(agent.events) if e.kind == "local"), None) if agent.found else None
     P_end = agent.P_final
     changed = P_end is not None and (not panels or not np.array_equal(P_end, panels[-1].P))
     if P_end is not None and (found is not None or changed):
