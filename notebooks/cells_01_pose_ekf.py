@@ -300,6 +300,59 @@ plt.tight_layout()
     ),
     (
         "md",
+        r"""## The update in 3D
+
+The same update in the recorded 3D view (`lab.viz.view3d`, the page `lab identify --view3d` writes):
+the camera where the robot believes it is (it stands still at its start), the box at its true pose
+(grey wireframe, for checking), the matches the gate kept (green), and the 3-sigma ellipsoid of the
+box's position before the update (blue: the prediction) and after it (green). Play it or drag the
+time slider: the ellipsoid shrinks to the update's, mostly along the line of sight, where stereo is
+weakest. Scroll to zoom in on the box: the ellipsoids are millimetres to centimetres across.""",
+    ),
+    (
+        "code",
+        """\
+from pathlib import Path
+from lab.errors import ConfigError
+from lab.viz.view3d import Node, View3D, ellipsoid_mesh, frustum_node, show_page
+
+try:
+    v3 = View3D()
+except ConfigError as e:                              # the optional viewer is missing: the line says how to get it
+    print(e)
+else:
+    G_WC = Pose2D(-1.1, 0.1, 0.0).G() @ recording[2][0]   # the robot's start and the head's pose at the update
+    R_WC = G_WC[:3, :3]
+
+    def to_W(p_C):                                    # points in C, placed in W
+        return np.asarray(p_C) @ R_WC.T + G_WC[:3, 3]
+
+    G_WO_true = G_WC @ G_CO_true
+    scene3d = {
+        "/camera": frustum_node(G_WC, fr.camera, scale=0.25),
+        "/box/truth": Node("box", {"G_W": G_WO_true, "size": tuple(float(v) for v in db.extent),
+                                   "color": (90, 90, 90), "opacity": 1.0, "wireframe": True}),
+        "/features": Node("points", {"points": to_W(d_C), "colors": np.tile(np.uint8([0, 200, 0]), (len(d_C), 1)),
+                                     "size": 0.008}),
+    }
+    axes = []
+    for t3, label, centre, Sig, rgb in ((0.0, "prediction", t_bar, Sigma_bar, (31, 119, 180)),
+                                        (1.0, "after the update", t_post, Sigma_post, (44, 160, 44))):
+        ell = ellipsoid_mesh(to_W(centre), R_WC @ Sig[:3, :3] @ R_WC.T)   # the position's covariance, turned into W
+        axes.append(ell.props["axes"])
+        v3.add_step(t3, label, scene3d | {
+            "/estimate/ellipsoid": Node("mesh", ell.props | {"color": rgb, "opacity": 0.5}),
+            "/estimate/label": Node("label", {"text": f"{label}: 3-sigma position", "position": to_W(centre) + (0, 0, 0.15)}),
+        })
+    v3.camera = (tuple(G_WO_true[:3, 3] + (-0.3, -0.35, 0.2)), tuple(G_WO_true[:3, 3]))
+    page = v3.save(Path("out") / "ekf_update_3d.html")
+    print(f"3-sigma semi-axes [mm]: prediction {np.sort(1e3 * axes[0]).round(1)}, after {np.sort(1e3 * axes[1]).round(1)}")
+    assert np.all(np.sort(axes[1]) <= np.sort(axes[0]) + 1e-12)      # an update never grows the ellipsoid
+    display(show_page(page))
+""",
+    ),
+    (
+        "md",
         r"""## Over an episode: NEES and NIS against their chi-square bands
 
 A filter is **consistent** when its errors are as large as its covariance says. Two tests:

@@ -621,9 +621,11 @@ they differ when a weaker peak lies much nearer.""",
 
 The same search recorded as a 3D scene (`run_search(..., view3d=path)`, or `lab search --view3d FILE.html`):
 the room, the robot's true (black) and estimated (green) paths with the localizer's 3-sigma ellipse, the
-global scan's cameras and colour peaks (red), and the map $M_p$ as a heat map on the floor (log colour
-scale), one step per event. Drag the time slider to watch the mass move as each cell is searched. The
-page is self-contained: open the saved file in any browser, offline.""",
+global scan's cameras and colour peaks (red), each local search's views (blue cameras), and the map
+$M_p$ as a heat map (log colour scale) on the floor and again on the table and shelf tops at their
+height (the map is a floor grid: a cell under the shelf holds the belief that the object is anywhere
+in that column, on the shelf too), one step per event. Drag the time slider to watch the mass move as
+each cell is searched. The page is self-contained: open the saved file in any browser, offline.""",
     ),
     (
         "code",

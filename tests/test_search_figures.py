@@ -14,6 +14,7 @@ from lab.viz.search import (
     fig5_trial,
     fig6_snapshots,
     panorama,
+    trial_panels,
     write_figures,
 )
 
@@ -63,30 +64,177 @@ def test_fig5_and_fig6(trial, tmp_path):
     assert pano.shape == (240, 6 * 320, 3)
 
 
-def test_fig6_maps_share_one_scale_and_every_mark_is_named(trial):
-    """One colour scale over all snapshots (one colourbar, log), axes in metres, and a legend entry for
-    every kind of mark; the true object only where the truth is known."""
+def test_fig6_follows_the_whole_trial(trial):
+    """One panel per map snapshot (every global scan and every failed local search changed the map), in
+    order, then the end: the cells each searched, the cells the local searches covered before it (from
+    the run's events), and the found cell."""
+    agent = trial.trace.agent
+    panels = trial_panels(trial)
+    snaps = agent.snapshots
+    assert len(snaps) >= 1
+    assert [(p.t, p.cell) for p in panels[: len(snaps)]] == [(s.t, s.cell) for s in snaps]
+    assert all(p.P is s.P for p, s in zip(panels, snaps, strict=False))
+    locals_ = [e for e in agent.events if e.kind == "local" and e.cell is not None]
+    for p in panels[: len(snaps)]:
+        want = {e.cell for e in locals_ if e.t <= p.t} - {p.cell}
+        assert set(p.searched_before) == want
+    scans = [p for p in panels if p.cell is None and p.found_cell is None]
+    assert len(scans) == len(agent.globals_)
+    for p, g in zip(scans, agent.globals_, strict=True):  # each scan's used colour peaks
+        assert np.allclose(p.peaks_xy, [q.p_W[:2] for q in g.used_peaks])
+    if trial.found:
+        end = panels[-1]
+        found = [e for e in locals_ if "found:" in e.detail and "not found" not in e.detail]
+        assert len(panels) == len(snaps) + 1 and end.found_cell == found[-1].cell
+        assert np.array_equal(end.P, agent.P_final)
+    fig = fig6_snapshots(trial)
+    maps = [a for a in fig.axes if a.images and a.images[0].get_array().shape == panels[0].P.T.shape]
+    assert len(maps) == len(panels)  # every panel drawn, nothing else looks like a map
+    assert [a.get_title().split("\n")[0] for a in maps] == [f"t = {p.t:.0f} s" for p in panels]
+
+
+def _longer_trial(trial):
+    """The trial with a longer record made up from its own maps: a scan, two failed local searches (the
+    first with a side look at its cell), a second scan, then the found search."""
+    import dataclasses
+
+    from lab.search.records import MapSnapshot, SearchEvent
+
+    agent = trial.trace.agent
+    P0 = agent.snapshots[0].P
+    rng = np.random.default_rng(0)
+    maps = [P0 * rng.uniform(0.5, 2.0, P0.shape) for _ in range(4)]
+    maps = [m / m.sum() for m in maps]
+    pose = agent.snapshots[0].pose
+    snaps = (
+        MapSnapshot(1.0, maps[0], "global search", None, pose),
+        MapSnapshot(2.0, maps[1], "local search failed", (3, 4), pose),
+        MapSnapshot(3.0, maps[2], "local search failed", (5, 6), pose),
+        MapSnapshot(4.0, maps[3], "global search", None, pose),
+    )
+    events = (
+        SearchEvent(1.0, "global"),
+        SearchEvent(2.0, "local", (3, 4), "not found"),
+        SearchEvent(2.5, "local", (3, 4), "side look: not found"),
+        SearchEvent(3.0, "local", (5, 6), "not found"),
+        SearchEvent(4.0, "global"),
+        SearchEvent(5.0, "local", (7, 8), "side look: found: 4 confirming updates"),  # found by a side look
+    )
+    agent = dataclasses.replace(
+        agent, snapshots=snaps, events=events, globals_=(agent.globals_[0],) * 2, P_final=maps[3]
+    )
+    return dataclasses.replace(trial, trace=dataclasses.replace(trial.trace, agent=agent))
+
+
+def test_fig6_panels_of_a_longer_record(trial):
+    """Every snapshot a panel, the cells searched before each (side looks too, no repeats), the end
+    panel at the found search, and a grid with no empty slot but the legend's."""
+    longer = _longer_trial(trial)
+    panels = trial_panels(longer)
+    assert [p.t for p in panels] == [1.0, 2.0, 3.0, 4.0, 5.0]
+    assert [p.searched_before for p in panels] == [(), (), ((3, 4),), ((3, 4), (5, 6)), ((3, 4), (5, 6))]
+    assert [p.cell for p in panels] == [None, (3, 4), (5, 6), None, None]
+    assert panels[-1].found_cell == (7, 8) and panels[-1].what == "found at cell (7, 8)"
+    assert [p.peaks_xy is not None for p in panels] == [True, False, False, True, False]
+    fig = fig6_snapshots(longer)
+    maps = [a for a in fig.axes if a.images and a.images[0].get_array().shape == panels[0].P.T.shape]
+    assert len(maps) == 5
+    boxes = sorted({(round(a.get_position().x0, 3), round(a.get_position().y0, 3)) for a in maps})
+    assert len({y for _, y in boxes}) == 2 and len({x for x, _ in boxes}) == 3  # 3 across, 2 rows
+    slot = [a for a in fig.axes if a.get_legend() is not None and not a.images]
+    assert len(slot) == 1  # the legend fills the grid's one empty slot
+    norm = maps[0].images[0].norm
+    assert norm.vmin == pytest.approx(min(float(p.P.min()) for p in panels))
+
+
+def test_fig6_maps_share_one_log_scale_spanning_the_data(trial):
+    """One colour scale over all panels (one colourbar, log), its limits the smallest and the largest
+    cell of the maps drawn; no panel is one colour on it."""
+    from matplotlib.colors import LogNorm
+
+    fig = fig6_snapshots(trial)
+    panels = trial_panels(trial)
+    maps = [a for a in fig.axes if a.images and a.images[0].get_array().shape == panels[0].P.T.shape]
+    assert len(maps) == len(panels)
+    norms = {id(a.images[0].norm) for a in maps}
+    assert len(norms) == 1
+    norm = maps[0].images[0].norm
+    assert isinstance(norm, LogNorm)
+    assert norm.vmax == pytest.approx(max(float(p.P.max()) for p in panels))
+    assert norm.vmin == pytest.approx(min(float(p.P.min()) for p in panels))
+    for a, p in zip(maps, panels, strict=True):
+        colours = a.images[0].to_rgba(a.images[0].get_array(), bytes=True).reshape(-1, 4)
+        assert len(np.unique(colours, axis=0)) >= 2, a.get_title()
+        assert np.array_equal(np.asarray(a.images[0].get_array()), np.maximum(p.P.T, norm.vmin))
+    assert sum(1 for a in fig.axes if a.get_label() == "<colorbar>") == 1
+
+
+def test_map_norm_spans_the_maps_and_ignores_zero_cells():
+    from lab.viz.search import MAX_DECADES, map_norm
+
+    a = np.full((3, 3), 0.1)
+    b = np.array([[0.0, 1e-3], [0.5, 0.2]])
+    n = map_norm([a, b])
+    assert (n.vmin, n.vmax) == (pytest.approx(1e-3), pytest.approx(0.5))
+    n = map_norm([np.array([[1.0, 1e-30]])])  # at most MAX_DECADES decades
+    assert n.vmin == pytest.approx(10.0**-MAX_DECADES)
+    n = map_norm([np.full((2, 2), 0.25)])  # a uniform map still has a scale
+    assert 0 < n.vmin < n.vmax == 0.25
+
+
+def test_fig6_marks_are_named_and_the_truth_only_where_known(trial):
     import dataclasses
 
     fig = fig6_snapshots(trial)
-    maps = [a for a in fig.axes if a.images and a.get_xlabel() == "x [m]"]
-    assert maps
-    norms = {(a.images[0].norm.vmin, a.images[0].norm.vmax) for a in maps}
-    assert len(norms) == 1
-    vmin, vmax = norms.pop()
-    snaps = trial.trace.agent.snapshots
-    shown = [s for s in snaps if s.label == "global search"][:1] + [
-        s for s in snaps if s.label == "local search failed"
-    ][:6]
-    assert vmax == pytest.approx(max(float(s.P.max()) for s in shown)) and vmin == pytest.approx(1e-4 * vmax)
-    assert type(maps[0].images[0].norm).__name__ == "LogNorm"
-    assert sum(1 for a in fig.axes if a.get_label() == "<colorbar>") == 1
-    assert maps[0].get_ylabel() == "y [m]"
-    labels = [t.get_text() for t in fig.legends[0].get_texts()]
-    assert labels[:3] == ["robot (line: heading)", "cell just searched", "cells searched before"]
-    assert "true object" in labels
+    labels = [
+        t.get_text()
+        for a in [*fig.axes, fig]
+        for lg in [a.get_legend() if hasattr(a, "get_legend") else None, *getattr(a, "legends", [])]
+        if lg is not None
+        for t in lg.get_texts()
+    ]
+    for want in (
+        "robot (arrow: heading)",
+        "robot's path so far",
+        "cell just searched",
+        "cells searched before",
+        "colour peaks",
+        "object (truth)",
+    ):
+        assert want in labels, want
     no_truth = dataclasses.replace(trial, true_pose=None)
-    assert "true object" not in [t.get_text() for t in fig6_snapshots(no_truth).legends[0].get_texts()]
+    fig = fig6_snapshots(no_truth)
+    labels = [
+        t.get_text()
+        for a in [*fig.axes, fig]
+        for lg in [a.get_legend() if hasattr(a, "get_legend") else None, *getattr(a, "legends", [])]
+        if lg is not None
+        for t in lg.get_texts()
+    ]
+    assert "object (truth)" not in labels and "cell just searched" in labels
+
+
+def test_fig5_first_map_is_on_the_trials_log_scale(trial):
+    """The map after the first global search on the trial's log scale (the snapshots' range), with a
+    colourbar: the prior's level and the colour peaks' cells get different colours, and the peaks are
+    circled."""
+    fig = fig5_trial(trial)
+    a = fig.axes[0]
+    im = a.images[0]
+    snaps = trial.trace.agent.snapshots
+    first = next(s for s in snaps if s.label == "global search")
+    assert type(im.norm).__name__ == "LogNorm"
+    assert im.norm.vmin == pytest.approx(min(float(s.P.min()) for s in snaps))
+    assert im.norm.vmax == pytest.approx(max(float(s.P.max()) for s in snaps))
+    colours = im.to_rgba(first.P, bytes=True).reshape(-1, 4)
+    assert len(np.unique(colours, axis=0)) >= 2
+    g = trial.trace.agent.globals_[0]
+    lo, hi = im.norm(first.P.min()), im.norm(first.P.max())
+    if g.used_peaks:
+        assert hi - lo > 0.1  # a peak's cell stands out from the prior's level
+        circles = [ln for ln in a.lines if ln.get_label() == "colour peaks"]
+        assert np.allclose(circles[0].get_xydata(), [p.p_W[:2] for p in g.used_peaks])
+    assert sum(1 for ax in fig.axes if ax.get_label() == "<colorbar>") == 1
 
 
 def _path_lines(fig):

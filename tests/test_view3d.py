@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 viser = pytest.importorskip("viser", reason="the optional extra view3d (viser) is not installed")
+from lab.viz.view3d_page import LAST_STEP_HOLD_S  # noqa: E402
+
 zstandard = pytest.importorskip("zstandard")
 msgspec = pytest.importorskip("msgspec")
 
@@ -98,7 +100,8 @@ def test_identify_view_has_one_step_per_frame_and_the_files_poses_are_the_worlds
     assert res["view3d"].endswith("identify.html")
     duration, messages = recording(html)
     t = [s.t for s in viewer.steps]
-    assert duration == pytest.approx(t[-1] - t[0], abs=1e-6)  # the time slider spans the episode
+    # the time slider spans the episode, and holds its last step (the player never shows its very end)
+    assert duration == pytest.approx(t[-1] - t[0] + LAST_STEP_HOLD_S, abs=1e-6)
     frustums = [m for _, m in messages if m["type"] == "CameraFrustumMessage"]
     assert len(frustums) == n  # one camera per frame
     # every body at the last step, as written into the file, is where the simulator had it (the robot
@@ -246,6 +249,132 @@ def test_search_view_has_one_step_per_event_and_the_heat_map_is_the_agents_map(s
     if peaks[-1]:
         clouds = [m for _, m in messages if m["type"] == "PointCloudMessage" and m["name"] == "/map/peaks"]
         assert np.asarray(clouds[-1]["props"]["points"]).size // 3 == peaks[-1]
+
+
+@pytest.fixture(scope="module")
+def search_run(tmp_path_factory):
+    """A search long enough for a global scan and a local search, recorded in 3D, with the agent's map
+    and its last local search kept at every event (for the test only)."""
+    from lab.runs.search import navigator_factory, run_search
+
+    out = tmp_path_factory.mktemp("view3d_search")
+    seen = {"maps": [], "locals": [], "cameras": []}
+
+    def attach(agent):
+        viewer = agent.observer
+        capture = agent.robot.capture_stereo
+
+        def capture_and_keep():  # every stereo frame's camera, where the robot's head had it
+            f = capture()
+            seen["cameras"].append((f.t, (f.odom.G() @ f.G_RC)[:3, 3]))
+            return f
+
+        agent.robot.capture_stereo = capture_and_keep
+
+        def observer(a, event):
+            viewer(a, event)
+            seen["maps"].append(np.array(a.pmap.P, float))
+            seen["locals"].append(a.last_local)
+            seen["spec"], seen["robot"] = a.pmap.spec, a.robot
+
+        agent.observer = observer
+
+    res = run_search(
+        "toy_block", 3, max_time=40.0, navigate=navigator_factory, view3d=out / "s.html", attach=attach
+    )
+    return res, seen, (out / "s.html").read_text()
+
+
+def test_search_view_draws_the_map_on_the_shelf_and_table_tops_at_their_height(search_run):
+    """Every table and shelf top of the scene carries the map's cells whose centres lie on it (found
+    here from the scene file's poses and sizes), at the top's height, in the heat map's colours of the
+    agent's map at that event (decoded from the page)."""
+    from matplotlib import colormaps
+
+    from lab.scene import load_scene
+
+    res, seen, html = search_run
+    _, messages = recording(html)
+    spec, P = seen["spec"], seen["maps"][-1]
+    X, Y = spec.cell_centers()
+    tops = [b for b in load_scene("lab_room").bodies if b.supports]
+    assert {b.shape for b in tops} >= {"table", "shelf"}
+    want_rgb = (255 * colormaps["viridis"](np.clip(1 + np.log10(P / P.max()) / 4, 0, 1))[..., :3]).astype(
+        np.uint8
+    )
+    for b in tops:
+        x, y, z0, yaw = b.pose
+        c, s_ = np.cos(np.radians(yaw)), np.sin(np.radians(yaw))
+        u, v = c * (X - x) + s_ * (Y - y), -s_ * (X - x) + c * (Y - y)  # the cell centres in the body's frame
+        on = (np.abs(u) <= b.size[0] / 2 + 1e-6) & (np.abs(v) <= b.size[1] / 2 + 1e-6)  # edges included
+        clouds = [
+            m
+            for _, m in messages
+            if m["type"] == "PointCloudMessage" and m["name"] == f"/map/surface/{b.name}"
+        ]
+        assert len(clouds) == len(res.events), b.name  # redrawn with the map at every event
+        pts = np.asarray(clouds[-1]["props"]["points"], np.float32).reshape(-1, 3).astype(float)
+        cols = np.asarray(clouds[-1]["props"]["colors"], np.uint8).reshape(-1, 3)
+        ij = np.rint((pts[:, :2] - np.asarray(spec.origin_xy)) / spec.resolution - 0.5).astype(int)
+        assert sorted(map(tuple, ij)) == sorted(map(tuple, np.argwhere(on))), b.name
+        assert np.allclose(pts[:, 2], z0 + b.height + 0.01, atol=2e-3)  # the page keeps points in float16
+        assert np.array_equal(cols, want_rgb[ij[:, 0], ij[:, 1]])
+
+
+def test_search_view_shows_the_local_searchs_views(search_run):
+    """One frustum per view of the last local search, each where a stereo frame of that search was
+    taken from (the frame's odometry and its head's measured pan and tilt)."""
+    res, seen, html = search_run
+    local = next((lc for lc in reversed(seen["locals"]) if lc is not None), None)
+    assert local is not None and any(e.kind == "local" for e in res.events), "no local search in the run"
+    _, messages = recording(html)
+    frustums = {}
+    for _, m in messages:
+        name = m.get("name", "")
+        if m["type"] == "CameraFrustumMessage" and name.startswith("/camera/local/"):
+            frustums[name] = m
+        elif m["type"] == "RemoveSceneNodeMessage" and name.startswith("/camera/local/"):
+            frustums.pop(name, None)
+    assert len(frustums) == len(local.views) >= 3
+    pos = np.array([last_position(messages, n) for n in frustums])
+    # each view's camera is where a frame of that local search was taken from (the head's measured state)
+    cams = np.array([p for t, p in seen["cameras"] if local.t_start - 1e-6 <= t <= local.t_end + 1e-6])
+    assert len(cams) >= len(local.views)
+    gap = np.linalg.norm(pos[:, None, :] - cams[None, :, :], axis=2).min(axis=1)
+    # drawn from where the robot believed it stood at the end; a landmark correction during the search
+    # moves that belief by a centimetre or so
+    assert gap.max() < 0.03 and np.median(gap) < 1e-4, gap
+    assert np.ptp(pos, axis=0).max() > 0.02  # the views differ: the head panned or tilted
+
+
+def test_a_callers_own_steps_are_written_in_time_order(tmp_path):
+    """``add_step`` (the notebooks' one-update views): the caller's nodes on the timeline, decoded from
+    the page at their times; a step back in time is refused."""
+    from lab.errors import ConfigError
+    from lab.viz.view3d import Node, View3D, ellipsoid_mesh
+
+    v = View3D()
+    Sigma = np.diag([4e-4, 1e-4, 2.5e-5])
+    for t, scale in ((0.0, 1.0), (1.5, 0.25)):
+        v.add_step(
+            t,
+            f"t {t}",
+            {
+                "/e": Node(
+                    "mesh", ellipsoid_mesh((1.0, 2.0, 0.5), scale * Sigma).props | {"color": (0, 0, 255)}
+                )
+            },
+        )
+    with pytest.raises(ConfigError, match="go back"):
+        v.add_step(1.0, "late", {})
+    duration, messages = recording(v.save(tmp_path / "steps.html").read_text())
+    assert duration == pytest.approx(1.5 + LAST_STEP_HOLD_S)
+    meshes = [(t, m) for t, m in messages if m["type"] == "MeshMessage" and m["name"] == "/e"]
+    assert [t for t, _ in meshes] == pytest.approx([0.0, 1.5])
+    for (_, m), scale in zip(meshes, (1.0, 0.25), strict=True):
+        v_ = np.asarray(m["props"]["vertices"], np.float32).reshape(-1, 3).astype(float) - (1.0, 2.0, 0.5)
+        d2 = np.einsum("ij,jk,ik->i", v_, np.linalg.inv(scale * Sigma), v_)  # on the 3-sigma surface
+        assert np.allclose(np.sqrt(d2), 3.0, rtol=2e-3)
 
 
 def test_lab_search_view3d_flag_writes_the_page_and_keeps_stdout_json(tmp_path):

@@ -312,8 +312,9 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
         robot = localize(run.robot, kind, room, start_pose, seed)
         t0 = 0.0 if kind is RobotKind.SIM else robot.now()
         hook = _with_progress(opts.attach, t0) if opts.progress else opts.attach
-        if viewer is not None:  # the world's bodies for the 3D view: display only
+        if viewer is not None:  # the world's bodies and the tables' and shelves' tops: display only
             viewer.world, hook = run.world, viewer.attach_search(hook)
+            viewer.set_surfaces([(s.name, s.z, s.polygon) for s in supports(scene) if s.kind != "floor"])
         parts = (db, opts.navigate, spec, cfg, seed, recorder, hook, (opts.max_time, opts.max_wall_time))
         out, truth_end, budget, odom, track, report_reloc = _search(robot, truth_of, *parts)
         profile, applies = run.sensing, tuple(run.sensing_applies_to)

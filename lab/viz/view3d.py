@@ -16,8 +16,10 @@ What a step shows (the run's own records; the truth only where the simulator kno
   coloured by the model's probability; the ring of candidate views coloured by expected information
   gain (gold: the chosen goal); the model probabilities and the normalised entropy as time series on a
   chart standing behind the scene;
-* search: the probability map ``M_p`` as a heat map on the floor (log colour scale), the global search's
-  colour peaks (red), the target cell (gold), the local search's view and its pose estimate.
+* search (:mod:`lab.viz.view3d_search`): the probability map ``M_p`` as a heat map on the floor (log
+  colour scale) and again on the table and shelf tops at their height (:meth:`View3D.set_surfaces`),
+  the global scan's views and colour peaks (red), the target cell (gold), the local search's views
+  (blue), its last frame and its pose estimate.
 
 The recorder keeps a neutral log while the run goes (:attr:`View3D.steps`: small numpy copies, no
 library call); :meth:`View3D.html` turns it into the viewer's scene with `viser <https://viser.studio>`_
@@ -27,105 +29,43 @@ and writes them with its client inlined. Algorithms never import this module.
 
 from __future__ import annotations
 
-import functools
 import math
 import os
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from lab.errors import ConfigError
+from lab.viz.view3d_nodes import (
+    N_SIGMA,
+    Node,
+    Step3D,
+    cmap_rgb,
+    ellipse_xy,
+    ellipsoid_axes,
+    ellipsoid_mesh,
+    frustum_node,
+)
 from lab.viz.view3d_page import CHART_LENGTH_M, INSTALL_HINT, iframe, require_viser, show_page, write_page
+from lab.viz.view3d_search import SearchScene
 
 __all__ = [
     "INSTALL_HINT",
+    "N_SIGMA",
     "Node",
     "Step3D",
     "View3D",
+    "ellipse_xy",
     "ellipsoid_axes",
+    "ellipsoid_mesh",
+    "frustum_node",
     "body_node_name",
     "require_viser",
     "show_page",
 ]
 
-N_SIGMA = 3.0  # the ellipses' and ellipsoids' size in standard deviations
 MODEL_RGB = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75))
-
-
-@dataclass(frozen=True)
-class Node:
-    """One object of the scene: ``kind`` (box, cylinder, lines, points, frustum, mesh, image, label)
-    and its properties in the world frame W (positions [m], colours RGB 0-255)."""
-
-    kind: str
-    props: dict = field(repr=False)
-
-
-@dataclass(frozen=True)
-class Step3D:
-    """One step of the timeline: the sim time ``t`` [s], what happened, and the nodes it adds or replaces
-    (by name; None removes the node)."""
-
-    t: float
-    label: str
-    nodes: dict = field(repr=False)
-
-
-def ellipsoid_axes(Sigma: np.ndarray, n_sigma: float = N_SIGMA) -> tuple[np.ndarray, np.ndarray]:
-    """Semi-axes [m] and their directions (columns) of the ``n_sigma`` ellipsoid of a 3-D covariance.
-
-    The ellipsoid ``x^T Sigma^-1 x = n_sigma^2`` has semi-axes ``n_sigma * sqrt(lambda_k)`` along the
-    eigenvectors of ``Sigma`` [m^2]."""
-    w, V = np.linalg.eigh(0.5 * (Sigma + Sigma.T))
-    return n_sigma * np.sqrt(np.maximum(w, 0.0)), V
-
-
-def _sphere(n_lat: int = 8, n_lon: int = 14) -> tuple[np.ndarray, np.ndarray]:
-    """A unit UV sphere: vertices (n, 3), triangle faces (m, 3)."""
-    lat = np.linspace(0, math.pi, n_lat + 1)
-    lon = np.linspace(0, 2 * math.pi, n_lon, endpoint=False)
-    v = np.array(
-        [[math.sin(a) * math.cos(b), math.sin(a) * math.sin(b), math.cos(a)] for a in lat for b in lon]
-    )
-    f = []
-    for i in range(n_lat):
-        for j in range(n_lon):
-            a, b = i * n_lon + j, i * n_lon + (j + 1) % n_lon
-            c, d = a + n_lon, b + n_lon
-            f += [(a, c, b), (b, c, d)]
-    return v, np.array(f, dtype=np.uint32)
-
-
-_SPHERE = _sphere()
-
-
-def _ellipsoid_mesh(centre, Sigma) -> Node:
-    axes, V = ellipsoid_axes(Sigma)
-    verts = _SPHERE[0] @ (V * axes).T + np.asarray(centre, float)
-    return Node("mesh", {"vertices": verts, "faces": _SPHERE[1], "axes": axes, "directions": V})
-
-
-@functools.cache
-def _colormap(name: str):
-    from matplotlib import colormaps
-
-    return colormaps[name]  # a copy each time it is looked up: once per name
-
-
-def _rgb(cmap: str, x: float) -> tuple[int, int, int]:
-    r, g, b, _ = _colormap(cmap)(float(np.clip(x, 0.0, 1.0)))
-    return int(255 * r), int(255 * g), int(255 * b)
-
-
-def _ellipse_xy(centre_xy, Sigma_xy, z: float, n: int = 36) -> np.ndarray:
-    """Segments (n, 2, 3) of the ``N_SIGMA`` ellipse of a 2-D covariance [m^2] at height ``z``."""
-    w, V = np.linalg.eigh(0.5 * (Sigma_xy + Sigma_xy.T))
-    a = np.linspace(0, 2 * math.pi, n + 1)
-    pts = (V @ (N_SIGMA * np.sqrt(np.maximum(w, 0))[:, None] * np.stack([np.cos(a), np.sin(a)]))).T
-    pts = np.column_stack([pts + np.asarray(centre_xy, float), np.full(n + 1, z)])
-    return np.stack([pts[:-1], pts[1:]], axis=1)
 
 
 def _body_rgb(name: str, rgba) -> tuple[tuple[int, int, int], float]:
@@ -181,8 +121,7 @@ class View3D:
         self._n_track = 0
         self._last_P = None
         self._n_decisions = 0
-        self._n_globals = 0
-        self._last_local = None
+        self.search = SearchScene()  # the search's nodes; set_surfaces adds the tables and shelves
         self._chart_origin = None
         self.recording_s = 0.0  # wall time spent recording during the run [s] (benchmarks/bench_view3d.py)
         self.writing_s = 0.0  # wall time spent writing the page [s]
@@ -214,6 +153,14 @@ class View3D:
                 then(agent)
 
         return attach
+
+    def add_step(self, t: float, label: str, nodes: dict) -> None:
+        """A step of the caller's own on the timeline (a notebook's one update, before and after): the
+        ``nodes`` (name -> :class:`Node`, or None to remove one) at time ``t`` [s], with the world's
+        bodies that moved since the last step."""
+        if self.steps and t < self.steps[-1].t:
+            raise ConfigError(f"a step's time must not go back: {t} after {self.steps[-1].t}")
+        self.steps.append(Step3D(float(t), str(label), self._bodies() | dict(nodes)))
 
     def _hook(self, agent, kind: str, attribute: str) -> None:
         self.agent, self.kind = agent, kind
@@ -311,24 +258,13 @@ class View3D:
         if est is not None:
             out["/robot/ellipse"] = Node(
                 "lines",
-                {"segments": _ellipse_xy((pose.x, pose.y), est.Sigma[:2, :2], 0.03), "color": (30, 160, 60)},
+                {"segments": ellipse_xy((pose.x, pose.y), est.Sigma[:2, :2], 0.03), "color": (30, 160, 60)},
             )
         return out
 
-    @staticmethod
-    def _frustum(frame, color=(255, 140, 0), scale: float = 0.35) -> Node:
-        """The camera of a stereo frame, placed where the robot believes it was (odometry at capture)."""
-        cam = frame.camera
-        G_WC = frame.odom.G() @ frame.G_RC
-        fov = 2.0 * math.atan(0.5 * cam.height / cam.fy)
-        return Node(
-            "frustum",
-            {"G_W": G_WC, "fov": fov, "aspect": cam.width / cam.height, "scale": scale, "color": color},
-        )
-
     # --- identification -------------------------------------------------------------------------------
     def _identification_nodes(self, agent, frame) -> dict:
-        out = {"/camera/frustum": self._frustum(frame)}
+        out = {"/camera/frustum": frustum_node(frame.odom.G() @ frame.G_RC, frame.camera)}
         G_WC = frame.odom.G() @ frame.G_RC
         out["/camera/features"] = self._features(agent, G_WC)
         P = np.asarray(agent.P, float)
@@ -340,7 +276,7 @@ class View3D:
                     f"/models/{name}/label"
                 ] = None
                 continue
-            rgb = _rgb("plasma", P[i])
+            rgb = cmap_rgb("plasma", P[i])
             G_WO = est_W[i]
             extent = getattr(agent.dbs[i], "extent", None)
             if extent is not None:
@@ -356,7 +292,7 @@ class View3D:
                 )
             R_WC = G_WC[:3, :3]
             Sigma_W = R_WC @ e.Sigma[:3, :3] @ R_WC.T  # the position of O: C's covariance turned into W [m^2]
-            ell = _ellipsoid_mesh(G_WO[:3, 3], Sigma_W)
+            ell = ellipsoid_mesh(G_WO[:3, 3], Sigma_W)
             out[f"/models/{name}/ellipsoid"] = Node(
                 "mesh", ell.props | {"color": rgb, "opacity": 0.45, "Sigma_W": Sigma_W}
             )
@@ -456,7 +392,7 @@ class View3D:
         colors = np.full((len(cand), 3), 128, np.uint8)
         if ok.any():
             lo, hi = float(g[ok].min()), float(g[ok].max())
-            colors[ok] = [_rgb("viridis", (v - lo) / (hi - lo + 1e-12)) for v in g[ok]]
+            colors[ok] = [cmap_rgb("viridis", (v - lo) / (hi - lo + 1e-12)) for v in g[ok]]
         pts = np.column_stack([cand[:, :2], np.full(len(cand), 0.05)])
         return {
             "/ring/candidates": Node("points", {"points": pts, "colors": colors, "gains": g, "size": 0.12}),
@@ -471,84 +407,13 @@ class View3D:
         }
 
     # --- search -----------------------------------------------------------------------------------------
+    def set_surfaces(self, surfaces) -> None:
+        """The tops an object may stand on besides the floor, as (name, z [m], footprint (k, 2) [m]):
+        the search's heat map is drawn on them too, at their height (:mod:`lab.viz.view3d_search`)."""
+        self.search = SearchScene(surfaces)
+
     def _search_nodes(self, agent, event) -> dict:
-        out = {"/map/heat": self._heat_map(agent.pmap)} | self._map_chart(agent.pmap, float(event.t))
-        globals_ = list(getattr(agent, "_globals", ()))
-        if len(globals_) > self._n_globals:  # a new global scan: its views and its colour peaks
-            self._n_globals = len(globals_)
-            g = globals_[-1]
-            for k in range(24):
-                out[f"/camera/scan/{k}"] = (
-                    self._frustum(g.views[k].frame, (200, 60, 60), 0.3) if k < len(g.views) else None
-                )
-            pk = [p for p in g.peaks if p.p_W is not None]
-            out["/map/peaks"] = Node(
-                "points",
-                {
-                    "points": np.array([p.p_W for p in pk], float).reshape(-1, 3),
-                    "colors": np.array(
-                        [(255, 0, 0) if p.used else (255, 160, 160) for p in pk], np.uint8
-                    ).reshape(-1, 3),
-                    "size": 0.1,
-                },
-            )
-        local = getattr(agent, "last_local", None)
-        if local is not None and local is not self._last_local:
-            self._last_local = local
-            if local.frame is not None:
-                out["/camera/frustum"] = self._frustum(local.frame)
-            if local.frame is not None and local.estimate is not None:
-                G_WC = local.frame.odom.G() @ local.frame.G_RC
-                G_WO = G_WC @ local.estimate.G_CO
-                Sigma_W = G_WC[:3, :3] @ local.estimate.Sigma[:3, :3] @ G_WC[:3, :3].T
-                rgb = (0, 200, 0) if local.found else (255, 150, 0)
-                out["/object/estimate"] = Node(
-                    "box",
-                    {
-                        "G_W": G_WO,
-                        "size": tuple(float(v) for v in agent.db.extent),
-                        "color": rgb,
-                        "opacity": 1.0,
-                        "wireframe": True,
-                    },
-                )
-                out["/object/ellipsoid"] = Node(
-                    "mesh",
-                    _ellipsoid_mesh(G_WO[:3, 3], Sigma_W).props
-                    | {"color": rgb, "opacity": 0.45, "Sigma_W": Sigma_W},
-                )
-        if event.cell is not None:
-            cx, cy = agent.pmap.centre(event.cell)
-            r = 0.5 * agent.pmap.spec.resolution
-            sq = np.array(
-                [[cx - r, cy - r], [cx + r, cy - r], [cx + r, cy + r], [cx - r, cy + r], [cx - r, cy - r]]
-            )
-            sq = np.column_stack([sq, np.full(5, 0.03)])
-            out["/map/target"] = Node(
-                "lines", {"segments": np.stack([sq[:-1], sq[1:]], 1), "color": (255, 200, 0)}
-            )
-        out["/status"] = Node(
-            "label",
-            {
-                "text": f"t = {event.t:.1f} s  {event.kind}",
-                "position": np.array([*agent.pmap.spec.extent[0::2], 2.8]),
-            },
-        )
-        return out
-
-    @staticmethod
-    def _heat_map(pmap) -> Node:
-        """``M_p`` as an RGB image on the floor, log colour scale over 4 decades below its peak."""
-        from matplotlib import colormaps
-
-        P = np.asarray(pmap.P, float)
-        L = np.log10(np.maximum(P, 1e-300) / P.max())
-        rgb = (255 * colormaps["viridis"](np.clip(1.0 + L / 4.0, 0.0, 1.0))[..., :3]).astype(np.uint8)
-        x0, x1, y0, y1 = pmap.spec.extent
-        img = rgb.transpose(1, 0, 2)[::-1].copy()  # rows: y from the top (max) down; columns: x
-        G = np.eye(4)
-        G[:3, 3] = (0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.005)
-        return Node("image", {"image": img, "width": x1 - x0, "height": y1 - y0, "G_W": G, "P": P.copy()})
+        return self.search.nodes(agent, event) | self._map_chart(agent.pmap, float(event.t))
 
     # --- the viewer --------------------------------------------------------------------------------------
     def html(self) -> str:

@@ -17,9 +17,20 @@ import numpy as np
 
 from lab.errors import ConfigError
 
-__all__ = ["CHART_LENGTH_M", "INSTALL_HINT", "iframe", "require_viser", "show_page", "write_page"]
+__all__ = [
+    "CHART_LENGTH_M",
+    "INSTALL_HINT",
+    "LAST_STEP_HOLD_S",
+    "iframe",
+    "require_viser",
+    "show_page",
+    "write_page",
+]
 
 CHART_LENGTH_M = 3.0  # the time series chart: its time axis spans the whole run [m]
+#: The page's timeline runs this long past the last step [s]: viser's player stops at the end of the
+#: recording without applying the messages stamped exactly there, so the last step would never show.
+LAST_STEP_HOLD_S = 1.0
 
 #: The one line a user reads when the viewer library is missing.
 INSTALL_HINT = (
@@ -44,12 +55,17 @@ def show_page(path, height: int = 520):
 
 
 def iframe(page: str, height: int):
+    """The page inline, in an iframe of its own (its scripts apart from the notebook's)."""
+    import warnings
+
     from IPython.display import HTML
 
-    return HTML(
-        f'<iframe srcdoc="{html_module.escape(page, quote=True)}" width="100%" '
-        f'height="{int(height)}" style="border:1px solid #ddd"></iframe>'
-    )
+    with warnings.catch_warnings():  # IPython suggests IFrame, which needs a URL: the page has none
+        warnings.filterwarnings("ignore", message="Consider using IPython.display.IFrame")
+        return HTML(
+            f'<iframe srcdoc="{html_module.escape(page, quote=True)}" width="100%" '
+            f'height="{int(height)}" style="border:1px solid #ddd"></iframe>'
+        )
 
 
 def _wxyz(R: np.ndarray) -> np.ndarray:
@@ -84,6 +100,7 @@ def write_page(steps, camera) -> str:
                         scene.remove_by_name(name)
                     else:
                         _add(scene, name, node, chart_scale)
+            rec.insert_sleep(LAST_STEP_HOLD_S)  # the player never applies what falls on its very end
         return rec.as_html()
     finally:
         with contextlib.redirect_stdout(quiet):
@@ -130,7 +147,7 @@ def _add(scene, name: str, node, chart_scale: float = 1.0) -> None:
                 np.asarray(p["points"], np.float32),
                 p["colors"],
                 point_size=p.get("size", 0.02),
-                point_shape="circle",
+                point_shape=p.get("shape", "circle"),
             )
         else:
             scene.remove_by_name(name)
