@@ -203,37 +203,14 @@ def test_the_view3d_path_must_be_an_html_page(tmp_path):
         View3D(tmp_path / "run.rrd")
 
 
-@pytest.fixture(scope="module")
-def search_run(tmp_path_factory):
-    """A short search recorded in 3D (long enough for a global scan, a drive and a local search: a
-    timeline of several steps), with the agent's map and the global scan's peak count at every event."""
-    from lab.runs.search import navigator_factory, run_search
-
-    page = tmp_path_factory.mktemp("view3d_search") / "search.html"
-    maps, peaks = [], []
-
-    def attach(agent):
-        viewer = agent.observer  # the 3D view, hooked by the run
-
-        def observer(a, event):
-            viewer(a, event)
-            maps.append(np.array(a.pmap.P, float))
-            g = list(getattr(a, "_globals", ()))
-            peaks.append(0 if not g else sum(p.p_W is not None for p in g[-1].peaks))
-
-        agent.observer = observer
-
-    res = run_search("toy_block", 1, max_time=30.0, navigate=navigator_factory, view3d=page, attach=attach)
-    return res, maps, peaks, page
-
-
 def test_search_view_has_one_step_per_event_and_the_heat_map_is_the_agents_map(search_run):
     """A short search: one timeline step per event; the floor's heat map at each event is the agent's
     probability map then (its colours decoded from the page), and the global scan's peaks are there."""
     import cv2
     from matplotlib import colormaps
 
-    res, maps, peaks, page = search_run
+    res, seen, _, page = search_run
+    maps, peaks = seen["maps"], seen["peaks"]
     assert len(res.events) == len(maps) >= 1
     _, messages = recording(page.read_text())
     heat = [m for _, m in messages if m["type"] == "ImageMessage" and m["name"] == "/map/heat"]
@@ -253,12 +230,13 @@ def test_search_view_has_one_step_per_event_and_the_heat_map_is_the_agents_map(s
 
 @pytest.fixture(scope="module")
 def search_run(tmp_path_factory):
-    """A search long enough for a global scan and a local search, recorded in 3D, with the agent's map
-    and its last local search kept at every event (for the test only)."""
+    """A search long enough for a global scan, a drive and a local search (a timeline of several steps),
+    recorded in 3D, with the agent's map, the global scan's peak count and its last local search kept
+    at every event (for the test only). Returns the result, what was kept, the page and its path."""
     from lab.runs.search import navigator_factory, run_search
 
     out = tmp_path_factory.mktemp("view3d_search")
-    seen = {"maps": [], "locals": [], "cameras": []}
+    seen = {"maps": [], "peaks": [], "locals": [], "cameras": []}
 
     def attach(agent):
         viewer = agent.observer
@@ -274,6 +252,8 @@ def search_run(tmp_path_factory):
         def observer(a, event):
             viewer(a, event)
             seen["maps"].append(np.array(a.pmap.P, float))
+            g = list(getattr(a, "_globals", ()))
+            seen["peaks"].append(0 if not g else sum(p.p_W is not None for p in g[-1].peaks))
             seen["locals"].append(a.last_local)
             seen["spec"], seen["robot"] = a.pmap.spec, a.robot
 
@@ -282,7 +262,7 @@ def search_run(tmp_path_factory):
     res = run_search(
         "toy_block", 3, max_time=40.0, navigate=navigator_factory, view3d=out / "s.html", attach=attach
     )
-    return res, seen, (out / "s.html").read_text()
+    return res, seen, (out / "s.html").read_text(), out / "s.html"
 
 
 def test_search_view_draws_the_map_on_the_shelf_and_table_tops_at_their_height(search_run):
@@ -293,7 +273,7 @@ def test_search_view_draws_the_map_on_the_shelf_and_table_tops_at_their_height(s
 
     from lab.scene import load_scene
 
-    res, seen, html = search_run
+    res, seen, html, _ = search_run
     _, messages = recording(html)
     spec, P = seen["spec"], seen["maps"][-1]
     X, Y = spec.cell_centers()
@@ -324,7 +304,7 @@ def test_search_view_draws_the_map_on_the_shelf_and_table_tops_at_their_height(s
 def test_search_view_shows_the_local_searchs_views(search_run):
     """One frustum per view of the last local search, each where a stereo frame of that search was
     taken from (the frame's odometry and its head's measured pan and tilt)."""
-    res, seen, html = search_run
+    res, seen, html, _ = search_run
     local = next((lc for lc in reversed(seen["locals"]) if lc is not None), None)
     assert local is not None and any(e.kind == "local" for e in res.events), "no local search in the run"
     _, messages = recording(html)
