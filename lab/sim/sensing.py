@@ -482,10 +482,9 @@ class SensingProfile:
             raise ConfigError(f"an error scale must be a finite number > 0, got {k!r}")
         if k == 1:
             return self
-        parts = {s: _times(getattr(self, s), k) for s in _SECTIONS}
-        parts["camera"] = dataclasses.replace(
-            parts["camera"], light_direction_deg=min(90.0, parts["camera"].light_direction_deg)
-        )
+        light = min(90.0 / k, self.camera.light_direction_deg)  # its tilt capped at 90 deg
+        cam = dataclasses.replace(self.camera, light_direction_deg=light)
+        parts = {s: _times(cam if s == "camera" else getattr(self, s), k) for s in _SECTIONS}
         return dataclasses.replace(self, name=f"{self.name} x{k:g}", **parts)
 
     def reported_camera(self, camera: StereoCamera) -> StereoCamera:
