@@ -1,21 +1,22 @@
 """Sensing error models of the simulator: camera, wheel odometry and pan-tilt, grouped into profiles.
 
-A :class:`SensingProfile` says how far the simulated sensors fall short of the truth. Two are named:
+A :class:`SensingProfile` says how far the simulated sensors fall short of the truth. Three are named:
 
 * ``ideal``: exact renders and pan-tilt angles, and the near-exact :class:`lab.sim.OdometryNoise`
   (the behaviour of the simulator before profiles existed), for teaching the mathematics step by step;
 * ``realistic``: the errors a USB stereo camera on a Create 2 with a PTU-D46 has (defaults below, each
   with its source) and the real room's (:mod:`lab.sim.room_errors`), for every reported figure: it tells
-  the robot only what a real robot would know.
+  the robot only what a real robot would know;
+* ``sensors``: realistic's sensors in an exact room (no room errors, no mismatch: ``realistic`` before
+  issue 52), for tests that check one component's exact behaviour on a seeded scene.
 
 The robot keeps *reporting* the nominal camera, the commanded pan-tilt angles and its wheel odometry,
 as a real one would; only the simulator knows the perturbed camera it rendered with, the axes' true
 angles and the true pose. Every per-episode draw comes from generators seeded by the robot's seed
 (:class:`lab.sim.episode.EpisodeSensing`), so the same seed gives the same images, bit for bit.
 
-Every figure is a stated one (a datasheet's, a survey's); the world draws the ones the robot is told at
-:attr:`SensingProfile.mismatch` times them (:meth:`SensingProfile.drawn`), and
-:meth:`SensingProfile.scaled` scales every error for a robustness curve (``lab eval --error-scale``).
+Every figure is a stated one; the world draws those the robot is told at :attr:`SensingProfile.mismatch`
+times them (:meth:`~SensingProfile.drawn`); :meth:`~SensingProfile.scaled` scales all (``--error-scale``).
 
 The models are separable from PyBullet: :func:`odometry_increment`, :func:`corrupt_stereo` and
 :func:`backlash` are plain numpy functions, tested on their own in ``tests/test_sensing.py``.
@@ -503,8 +504,9 @@ class SensingProfile:
 PROFILES: dict[str, SensingProfile] = {
     "ideal": SensingProfile("ideal", CameraErrors.none(), OdometryErrors.none(), PanTiltErrors.none()),
     "realistic": SensingProfile(
-        "realistic", CameraErrors(), OdometryErrors(), PanTiltErrors(), RoomErrors(), mismatch=1.5
+        "realistic", CameraErrors(), OdometryErrors(), PanTiltErrors(), RoomErrors(), 1.5
     ),
+    "sensors": SensingProfile("sensors", CameraErrors(), OdometryErrors(), PanTiltErrors()),
 }
 _SECTIONS = {
     "camera": CameraErrors,
@@ -577,10 +579,9 @@ def _from_file(path: Path) -> SensingProfile:
         raise ConfigError(f"{path}: not a readable TOML file ({e})") from None
     section = data.get("sensing", data)
     try:
-        profile = sensing_profile(section if isinstance(section, Mapping) else {"profile": section})
+        return sensing_profile(section if isinstance(section, Mapping) else {"profile": section})
     except ConfigError as e:
         raise ConfigError(f"{path}: {e}") from None
-    return profile
 
 
 def _named(name) -> SensingProfile:
