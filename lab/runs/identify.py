@@ -153,15 +153,13 @@ def run_identify(
     view3d : Path, optional
         Write the recorded 3D view there (:mod:`lab.viz.view3d`, one HTML page); the JSON's ``view3d``.
     """
-    hw, room, start_pose = _checked_setup(
-        true_model, robot_config, localization, start, view3d, sensing, seed
-    )
+    hw, room, start_at = _checked_setup(true_model, robot_config, localization, start, view3d, sensing, seed)
     config = _agent_config(max_actions, max_time_s, keep_direction)
     t_wall, t_cpu = time.perf_counter(), time.process_time()  # CPU: the episode's cost whatever the load
     with contextlib.ExitStack() as stack:
         session = _start(stack, hw, true_model, mover, seed, sensing)
         plan = _known_floor_plan(session)
-        robot, note = _localized(session, room, start_pose, seed)
+        robot, note = _localized(session, room, start_at, seed)
         tracked = TrackedRobot(robot, _truth_pose(session))  # the robot's path, for Fig. 6
         agent = build_agent(tracked, planner, seed, config, floor_plan=plan)
         recorder, viewer = _watch(agent, record, progress), _viewer(agent, session, view3d)

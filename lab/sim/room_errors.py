@@ -70,7 +70,8 @@ class RoomErrors:
         Standard deviation of the true pose's jump per axis (x, y along and across the heading; the
         heading) when the base bumps into something: the wheels scrub while the bumper closes and the
         motors stop. 2 cm and 2 deg, an estimate from the Create 2's bumper travel (about 1 cm) and
-        its stopping distance at 0.3 m/s, not a measurement: measure it on the robot (hardware/README).
+        its stopping distance at 0.3 m/s, not a measurement (tape the base's pose before and after a
+        bump to measure it).
     """
 
     survey_m: float = 0.015
