@@ -129,16 +129,31 @@ def test_the_report_tables_success_against_scale_and_draws_the_figure(tmp_path):
     rows = _rows(1.0, 9, 10, **cond) + _rows(2.0, 7, 10, **cond) + _rows(3.0, 2, 8, **cond)
     rows.append({**_rows(3.0, 0, 1, **cond)[0], "key": "broken", "error": "RuntimeError: x"})  # not counted
     pts = robustness_points(rows)
-    assert [(p.scale, p.successes, p.runs) for p in pts] == [(1.0, 9, 10), (2.0, 7, 10), (3.0, 2, 8)]
+    assert [(p.sensing, p.scale, p.successes, p.runs) for p in pts] == [
+        ("realistic", 1.0, 9, 10),
+        ("realistic", 2.0, 7, 10),
+        ("realistic", 3.0, 2, 8),
+    ]
     for p in pts:
         assert (p.low, p.high) == pytest.approx(_wilson(p.successes, p.runs), abs=1e-12)
     write_report(tmp_path, rows, IDENTIFY)
     text = (tmp_path / "report.md").read_text()
     assert "## Robustness: success against error scale" in text
     lo, hi = _wilson(7, 10)
-    assert f"| 2 | 7/10 | 70.0 % | [{100 * lo:.1f}, {100 * hi:.1f}] % |" in text
+    assert f"| realistic | 2 | 7/10 | 70.0 % | [{100 * lo:.1f}, {100 * hi:.1f}] % |" in text
     assert "| lut | evasive | realistic | 3.0 | 2/8 |" in text  # the conditions split by scale too
     assert (tmp_path / "robustness.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # one curve per profile: another profile's rows are counted apart
+    rows += [dict(r, sensing="sensors", key="s" + r["key"]) for r in _rows(1.0, 3, 3, **cond)]
+    assert [(p.sensing, p.scale, p.successes) for p in robustness_points(rows)][:2] == [
+        ("realistic", 1.0, 9),
+        ("realistic", 2.0, 7),
+    ]
+    assert ("sensors", 1.0, 3, 3) in [
+        (p.sensing, p.scale, p.successes, p.runs) for p in robustness_points(rows)
+    ]
+    write_report(tmp_path, rows, IDENTIFY)
+    assert "| sensors | 1 | 3/3 | 100.0 % |" in (tmp_path / "report.md").read_text()
 
 
 def test_one_scale_writes_the_report_as_before(tmp_path):

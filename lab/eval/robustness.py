@@ -61,9 +61,10 @@ def scale_suffix(k: float) -> str:
 
 @dataclass(frozen=True)
 class RobustnessPoint:
-    """Success at one error scale: ``successes`` of ``runs`` (jobs that ran), and the Wilson 95 %
-    interval ``low``..``high`` (fractions)."""
+    """Success of one sensing profile at one error scale: ``successes`` of ``runs`` (jobs that ran), and
+    the Wilson 95 % interval ``low``..``high`` (fractions)."""
 
+    sensing: str
     scale: float
     successes: int
     runs: int
@@ -76,27 +77,29 @@ class RobustnessPoint:
 
 
 def robustness_points(rows) -> list[RobustnessPoint]:
-    """Success per error scale over every job of the sweep that ran (its ``error_scale`` and
-    ``success`` columns; a row without ``error_scale`` is at scale 1), sorted by scale."""
+    """Success per sensing profile and error scale over every job of the sweep that ran (its
+    ``sensing``, ``error_scale`` and ``success`` columns; a row without ``error_scale`` is at scale 1;
+    every other condition pooled), sorted by profile and scale."""
     from lab.evaluation import wilson_interval
 
-    by: dict[float, list] = {}
+    by: dict[tuple[str, float], list] = {}
     for r in rows:
         if not r.get("error"):
-            by.setdefault(float(r.get("error_scale") or 1.0), []).append(bool(r["success"]))
+            key = (str(r.get("sensing", "")), float(r.get("error_scale") or 1.0))
+            by.setdefault(key, []).append(bool(r["success"]))
     out = []
-    for k in sorted(by):
-        n, s = len(by[k]), sum(by[k])
+    for sensing, k in sorted(by):
+        n, s = len(by[sensing, k]), sum(by[sensing, k])
         lo, hi = wilson_interval(s, n)
-        out.append(RobustnessPoint(k, s, n, lo, hi))
+        out.append(RobustnessPoint(sensing, k, s, n, lo, hi))
     return out
 
 
 def robustness_lines(out: Path, rows, what: str) -> list[str]:
-    """The report's section (a table: scale, success, Wilson 95 %) and ``out/robustness.png``, when
-    the sweep has more than one error scale; nothing otherwise."""
+    """The report's section (a table: profile, scale, success, Wilson 95 %) and ``out/robustness.png``,
+    when the sweep has more than one error scale; nothing otherwise."""
     points = robustness_points(rows)
-    if len(points) < 2:
+    if len({p.scale for p in points}) < 2:
         return []
     from lab.viz.robustness import robustness_figure
 
@@ -104,15 +107,15 @@ def robustness_lines(out: Path, rows, what: str) -> list[str]:
     lines = [
         "## Robustness: success against error scale",
         "",
-        "Every error of the sensing profile times the scale (all other conditions pooled); the figure: "
+        "Every error of the sensing profile times the scale (every other condition pooled); the figure: "
         "robustness.png.",
         "",
-        "| error scale | success | rate | Wilson 95 % |",
-        "|---|---|---|---|",
+        "| sensing | error scale | success | rate | Wilson 95 % |",
+        "|---|---|---|---|---|",
     ]
     for p in points:
         lines.append(
-            f"| {p.scale:g} | {p.successes}/{p.runs} | {100 * p.rate:.1f} % | "
+            f"| {p.sensing} | {p.scale:g} | {p.successes}/{p.runs} | {100 * p.rate:.1f} % | "
             f"[{100 * p.low:.1f}, {100 * p.high:.1f}] % |"
         )
     return [*lines, ""]
