@@ -24,6 +24,7 @@ from lab.localization.landmarks import LandmarkMap
 from lab.localization.models import odometry_increment
 from lab.localization.modes import LocalizationMode
 from lab.localization.observer import LandmarkObserver
+from lab.localization.stamps import OdometryHistory
 from lab.robot import Robot, RobotWrapper
 
 __all__ = ["LocalizedRobot"]
@@ -35,6 +36,12 @@ class LocalizedRobot(RobotWrapper):
     Its frames keep the base's wheel odometry in ``wheel_odom``: the object filters predict with the
     wheels' increment between two frames (:func:`lab.robot.frame_motion`), since a landmark update moves
     the estimate, not the robot.
+
+    A frame is used at its image's stamp ``frame.t``: a base whose head and odometry were read later
+    than the image was exposed (``frame.pan_tilt.t > frame.t``, a camera's latency) has its odometry
+    taken back to ``frame.t`` from the readings the localizer keeps (:attr:`odometry_history`,
+    :meth:`wheels_at_image`), and the frame's ``odom`` (what the search places objects from) is the
+    estimate at that stamp.
 
     Every call is passed on to ``base``. With ``mode=LANDMARKS`` each captured frame in which a landmark
     should be visible updates the filter; ``relocalize()`` points the head at landmarks until the pose
@@ -75,6 +82,8 @@ class LocalizedRobot(RobotWrapper):
         self.mode = LocalizationMode.parse(mode)
         self.config = config or LocalizerConfig()
         self._odom = base.odometry()
+        self.odometry_history = OdometryHistory()  # the base's stamped readings: wheels_at_image
+        self.odometry_history.add(base.now(), self._odom)
         self.localizer = Localizer(
             self._odom.as_array(), Sigma0, config=self.config, first_sighting=start_measured_by_hand
         )
@@ -90,7 +99,11 @@ class LocalizedRobot(RobotWrapper):
 
     # the estimate
     def _sync(self, odom: Pose2D | None = None) -> None:
-        odom = self.base.odometry() if odom is None else odom
+        """Predict the filter to the base's odometry now (kept in the history), or to ``odom`` (a
+        frame's: possibly older than the last, then the increment runs backwards)."""
+        if odom is None:
+            odom = self.base.odometry()
+            self.odometry_history.add(self.base.now(), odom)
         u = odometry_increment(self._odom, odom)
         if np.any(u != 0.0):
             self.localizer.predict(u)
@@ -133,11 +146,24 @@ class LocalizedRobot(RobotWrapper):
         """The base's wheel odometry, which the estimate starts from (in the base's frame)."""
         return self.base.odometry()
 
+    def wheels_at_image(self, frame) -> Pose2D:
+        """The base's wheel odometry at the image's stamp ``frame.t``.
+
+        The frame's own odometry (``frame.wheels``) was read at ``frame.pan_tilt.t``; when that is later
+        than the image (a camera's latency), the history of readings is interpolated back to the
+        image's stamp along the constant-velocity arc (:meth:`OdometryHistory.at`). A base that already
+        gives the odometry at the image's stamp (the hardware interpolates it,
+        ``lab.hardware.frame_time``) has ``pan_tilt.t == t``, and its reading is used as it is."""
+        t_read = frame.pan_tilt.t
+        self.odometry_history.add(t_read, frame.wheels)
+        return frame.wheels if t_read <= frame.t else self.odometry_history.at(frame.t)
+
     def capture_stereo(self, after=None):
         frame = self.base.capture_stereo(after)
-        self._sync(frame.odom)
-        if self.mode is LocalizationMode.ODOMETRY:
-            return frame
+        wheels = self.wheels_at_image(frame)
+        self._sync(wheels)
+        if self.mode is LocalizationMode.ODOMETRY:  # the wheels at the image's stamp
+            return frame if wheels is frame.wheels else replace(frame, odom=wheels)
         self.frames_seen += 1
         cands = self.observer.candidates(self.localizer.x, frame)
         for obs in self.observer.observe(frame, cands):
@@ -151,7 +177,7 @@ class LocalizedRobot(RobotWrapper):
                     f"localization: the start pose was {100 * math.hypot(dx, dy):.0f} cm and {abs(dth):.1f} "
                     f"deg off what {obs.landmark.name} says (NIS {rec.nis:.1f}): reset from it"
                 )
-        return replace(frame, odom=self._pose(), wheel_odom=frame.wheels)  # the wheels: frame_motion
+        return replace(frame, odom=self._pose(), wheel_odom=wheels)  # the wheels: frame_motion
 
     def certain(self, sigma_m: float | None = None, sigma_rad: float | None = None, at_W=None) -> bool:
         """Whether the pose is within the thresholds ``sigma_m``, ``sigma_rad`` (position: the larger
