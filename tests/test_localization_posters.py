@@ -14,12 +14,17 @@ import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
 from localization_helpers import NO_FLOOR, num_jac
+from nav_fakes import KinematicRobot
 from scipy.stats import chi2
 
 from lab.errors import ConfigError
-from lab.geometry import wrap_angle
+from lab.geometry import Pose2D, wrap_angle
 from lab.localization import (
     Landmark,
+    LandmarkMap,
+    LandmarkObservation,
+    LocalizationMode,
+    LocalizedRobot,
     Localizer,
     LocalizerConfig,
     measurement_model,
@@ -28,6 +33,7 @@ from lab.localization import (
 )
 from lab.localization.models import pose_from_observation
 from lab.localization.posters import landmark_jacobian, observe, pose_jacobian_in_landmark
+from lab.robot import StereoFrame
 from lab.training.landmarks import landmark_map_from_scene
 
 RNG = np.random.default_rng(52)
@@ -268,3 +274,54 @@ def test_a_map_surveyed_to_its_stated_accuracy_is_refined_consistently():
     assert nees_fixed.mean() > 2 * nees.mean()
     assert np.mean(err_slam) < 0.8 * np.mean(err_fixed) and sum(np.less(err_slam, err_fixed)) >= 7
     assert np.median(north_err) < 0.01
+
+
+class _FramedRobot(KinematicRobot):
+    """The kinematic robot with a (blank) stereo camera: frames carry its wheel odometry."""
+
+    def capture_stereo(self, after=None):
+        cam = self.camera
+        img = np.zeros((cam.height, cam.width, 3), np.uint8)
+        return StereoFrame(self.now(), img, img, cam, self.pan_tilt(), self.odometry())
+
+
+class _MapObserver:
+    """Sees every poster of ``truth`` exactly in each frame, reported against ``mapped`` (its map)."""
+
+    def __init__(self, truth: LandmarkMap, mapped: LandmarkMap):
+        self.truth, self.map = truth, mapped
+
+    def candidates(self, x, frame):
+        return list(self.map)
+
+    def observe(self, frame, candidates):
+        x = frame.odom.as_array()
+        Q = np.diag([1e-6, 1e-6, 1e-6])
+        return [
+            LandmarkObservation(lm, np.eye(4), measurement_model(x, self.truth.get(lm.name).planar), Q, 30)
+            for lm in candidates
+        ]
+
+
+def test_the_localized_robot_reports_what_it_learned_of_a_surveyed_map():
+    """Two posters, one 3 cm off in its surveyed map: ``refined_landmarks`` gives each one's refined pose,
+    its deviation and how far it moved from the map (the Localizer's ``landmark_estimates``); with an
+    exact map (held fixed) it is empty."""
+    truth = LandmarkMap((NORTH, replace(NORTH, name="n2", centre_W=(1.5, 3.94, 1.5))), (6.0, 8.0))
+    off = replace(truth.landmarks[0], centre_W=(0.03, 3.94, 1.5))
+    mapped = replace(truth, landmarks=(off, truth.landmarks[1])).surveyed(0.015, math.radians(0.7))
+    robot = LocalizedRobot(_FramedRobot(Pose2D(0.0, 0.0, math.pi / 2)), "odometry")
+    robot.mode, robot.observer = LocalizationMode.LANDMARKS, _MapObserver(truth, mapped)
+    for _ in range(3):
+        robot.capture_stereo()
+    out = robot.refined_landmarks()
+    assert set(out) == {"poster_north", "n2"}
+    l, L = robot.localizer.landmark_estimates()["poster_north"]
+    r = out["poster_north"]
+    assert r["x_m"] == round(l[0], 5) and r["sd_deg"] == round(math.degrees(math.sqrt(L[2, 2])), 4)
+    assert r["moved_m"] == round(math.hypot(l[0] - 0.03, l[1] - 3.94), 5) and 0.005 < r["moved_m"] < 0.03
+    assert 0.0 < r["sd_m"] < 0.015
+    exact = LocalizedRobot(_FramedRobot(Pose2D(0.0, 0.0, math.pi / 2)), "odometry")
+    exact.mode, exact.observer = LocalizationMode.LANDMARKS, _MapObserver(truth, truth)
+    exact.capture_stereo()
+    assert exact.refined_landmarks() == {} and exact.localizer.n_updates == 2

@@ -142,6 +142,28 @@ class LocalizedRobot(RobotWrapper):
             "curvature_sd_rad_per_m": round(sc, 5),
         }
 
+    def refined_landmarks(self) -> dict[str, dict]:
+        """What the filter learned of a surveyed map (:meth:`Localizer.landmark_estimates`), for a run's
+        JSON and the operator, by poster: its refined ``x_m``, ``y_m``, ``yaw_deg``, their standard
+        deviations ``sd_m`` (the larger axis) and ``sd_deg``, and how far it moved from the map
+        (``moved_m``, ``turned_deg``: a survey that far off). Empty for an exact map (held fixed) and
+        with ``mode=odometry``."""
+        if self.mode is LocalizationMode.ODOMETRY:
+            return {}
+        out = {}
+        for name, (l, L) in self.localizer.landmark_estimates().items():
+            mapped = self.observer.map.get(name).planar
+            out[name] = {
+                "x_m": round(float(l[0]), 5),
+                "y_m": round(float(l[1]), 5),
+                "yaw_deg": round(math.degrees(l[2]), 4),
+                "sd_m": round(math.sqrt(max(np.linalg.eigvalsh(L[:2, :2])[-1], 0.0)), 5),
+                "sd_deg": round(math.degrees(math.sqrt(L[2, 2])), 4),
+                "moved_m": round(math.hypot(l[0] - mapped[0], l[1] - mapped[1]), 5),
+                "turned_deg": round(math.degrees(wrap_angle(l[2] - mapped[2])), 4),
+            }
+        return out
+
     def wheel_odometry(self) -> Pose2D:
         """The base's wheel odometry, which the estimate starts from (in the base's frame)."""
         return self.base.odometry()
