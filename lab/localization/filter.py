@@ -403,7 +403,8 @@ class Localizer:
     through their correlation with the heading (a landmark sees the pose only: ``H = [H_x, 0]``).
 
     ``x`` and ``Sigma`` are the pose's mean and covariance (the first three of ``s`` and ``P``);
-    :attr:`calibration` the odometry's.
+    :attr:`calibration` the odometry's; :meth:`landmark_estimates` a surveyed map's posters, which join
+    ``s`` after these at their first sighting (:mod:`lab.localization.posters`).
 
     Parameters
     ----------
