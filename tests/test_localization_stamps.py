@@ -81,12 +81,13 @@ def test_the_history_interpolates_between_the_readings_around_a_stamp_and_keeps_
 
 
 class _LateCameraRobot(KinematicRobot):
-    """A base driven along the arc ``_arc`` whose frames are ``latency`` old: the image was exposed at
-    ``t - latency``, the head and odometry read at ``t`` (``pan_tilt.t``)."""
+    """A base driven along the arc ``_arc`` whose images are ``latency`` old: exposed at ``now - latency``,
+    the head and odometry read ``now``. ``stamped``: the frame's ``t`` is the image's exposure (a camera
+    that stamps its frames), else ``now`` (the simulator's: the robot is told the latency)."""
 
-    def __init__(self, latency: float):
+    def __init__(self, latency: float, stamped: bool):
         super().__init__(START)
-        self.latency = latency
+        self.latency, self.stamped = latency, stamped
 
     def odometry(self) -> Pose2D:
         return _arc(self._t)
@@ -97,44 +98,52 @@ class _LateCameraRobot(KinematicRobot):
     def capture_stereo(self, after=None):
         cam = self.camera
         img = np.zeros((cam.height, cam.width, 3), np.uint8)
-        return StereoFrame(
-            self._t - self.latency, img, img, cam, PanTiltState(0.0, 0.0, self._t), _arc(self._t)
-        )
+        t = self._t - self.latency if self.stamped else self._t
+        return StereoFrame(t, img, img, cam, PanTiltState(0.0, 0.0, self._t), _arc(self._t))
 
 
 class _TrueObserver:
-    """Sees one poster in every frame, exactly, from the true pose at the image's stamp."""
+    """Sees one poster in every frame, exactly, from the true pose when the image was exposed."""
 
-    def __init__(self):
+    def __init__(self, base: _LateCameraRobot):
+        self.base = base
         self.lm = Landmark("p", (0.0, 3.94, 1.5), 0.0, (1.4, 0.02, 1.0), (0.0, -1.0))
 
     def candidates(self, x, frame):
         return [self.lm]
 
     def observe(self, frame, candidates):
-        z = measurement_model(_arc(frame.t).as_array(), self.lm.planar)
+        z = measurement_model(_arc(self.base.now() - self.base.latency).as_array(), self.lm.planar)
         return [LandmarkObservation(self.lm, np.eye(4), z, np.diag([1e-6, 1e-6, 1e-6]), 30)]
 
 
+@pytest.mark.parametrize("stamped", [True, False])
 @pytest.mark.parametrize("latency", [0.03, 0.08])
-def test_a_late_frame_is_used_at_its_images_stamp(latency):
-    """The robot drives (0.3 m/s, 0.8 rad/s; the localizer steps every 50 ms) and its camera delivers
-    frames ``latency`` late. The frame's wheels and ``odom`` are the pose at the image's stamp (to 1e-9;
-    the newest reading is 2.4 cm and 3.8 deg from it at 80 ms), so an exact sighting from there is
-    accepted with a zero innovation and leaves the estimate on the truth, also once it is predicted on
-    to now."""
-    base = _LateCameraRobot(latency)
-    robot = LocalizedRobot(base, "odometry")
+def test_a_late_frame_is_used_at_its_images_stamp(latency, stamped):
+    """The robot drives (0.3 m/s, 0.8 rad/s; the localizer steps every 50 ms) and its camera's images are
+    ``latency`` old: stamped so, or stamped now with the latency told to the localizer. The frame's
+    wheels and ``odom`` are the pose when the image was exposed (to 1e-9; the newest reading is 2.4 cm
+    and 3.8 deg from it at 80 ms), so an exact sighting from there is accepted with a zero innovation
+    and leaves the estimate on the truth, also once it is predicted on to now."""
+    base = _LateCameraRobot(latency, stamped)
+    robot = LocalizedRobot(base, "odometry", camera_latency_s=0.0 if stamped else latency)
     robot.mode = LocalizationMode.LANDMARKS  # the observer below stands in for a trained map
-    robot.observer = _TrueObserver()
+    robot.observer = _TrueObserver(base)
     for k in range(40):
         robot.step(0.05)
         if k % 10 == 9:
             frame = robot.capture_stereo()
-            t_img = base.now() - latency
+            t_img = base.now() - latency  # when the image was exposed
             assert _close(frame.wheel_odom, _arc(t_img), 1e-9) and _close(frame.odom, _arc(t_img), 1e-9)
             rec = robot.localizer.history[-1]
             assert rec.accepted and rec.nis < 1e-9
             assert _close(robot.odometry(), _arc(base.now()), 1e-9)
     late = _arc(base.now())
     assert math.hypot(late.x - _arc(base.now() - latency).x, late.y - _arc(base.now() - latency).y) > 0.008
+
+
+def test_the_camera_latency_must_be_a_plausible_number_of_seconds():
+    base = _LateCameraRobot(0.05, False)
+    for bad in (-0.01, 2.0, math.nan):
+        with pytest.raises(ConfigError, match="camera_latency_s must be within"):
+            LocalizedRobot(base, "odometry", camera_latency_s=bad)

@@ -37,11 +37,12 @@ class LocalizedRobot(RobotWrapper):
     wheels' increment between two frames (:func:`lab.robot.frame_motion`), since a landmark update moves
     the estimate, not the robot.
 
-    A frame is used at its image's stamp ``frame.t``: a base whose head and odometry were read later
-    than the image was exposed (``frame.pan_tilt.t > frame.t``, a camera's latency) has its odometry
-    taken back to ``frame.t`` from the readings the localizer keeps (:attr:`odometry_history`,
-    :meth:`wheels_at_image`), and the frame's ``odom`` (what the search places objects from) is the
-    estimate at that stamp.
+    A frame is used at its image's stamp: ``frame.t - camera_latency_s``. When the head and odometry
+    were read later than that (``frame.pan_tilt.t``: a camera's latency, stated to the robot, or a base
+    that stamps its frames with the image's exposure but reads later), the odometry is taken back to the
+    image's stamp from the readings the localizer keeps (:attr:`odometry_history`,
+    :meth:`wheels_at_image`), and the frame's ``odom`` and ``wheel_odom`` (what the search places
+    objects from, what the object filters predict with) are the pose at the image's stamp.
 
     Every call is passed on to ``base``. With ``mode=LANDMARKS`` each captured frame in which a landmark
     should be visible updates the filter; ``relocalize()`` points the head at landmarks until the pose
@@ -61,6 +62,10 @@ class LocalizedRobot(RobotWrapper):
     Sigma0 : array_like, shape (3, 3), optional
         The covariance of the start, ``base.odometry()`` when this is made (default: the
         :class:`Localizer`'s, 1 cm and 0.5 deg: the simulator's odometry starts at the true pose).
+    camera_latency_s : float [s]
+        How much older an image is than its frame's stamp ``frame.t`` (a camera's measured mean latency:
+        a USB camera's frame is 30-100 ms old on arrival); 0 for a base whose frames are stamped at the
+        image's exposure (the hardware interpolates its readings to it, ``lab.hardware.frame_time``).
     start_measured_by_hand : bool
         The start is a pose an operator measured (a robot's): the first landmark sighting may correct it
         (:meth:`Localizer.first_sighting`).
@@ -77,11 +82,15 @@ class LocalizedRobot(RobotWrapper):
         *,
         Sigma0=None,
         start_measured_by_hand: bool = False,
+        camera_latency_s: float = 0.0,
     ):
         super().__init__(base)
         self.mode = LocalizationMode.parse(mode)
         self.config = config or LocalizerConfig()
         self._odom = base.odometry()
+        if not (math.isfinite(camera_latency_s) and 0.0 <= camera_latency_s <= 1.0):
+            raise ConfigError(f"camera_latency_s must be within [0, 1] s, got {camera_latency_s!r}")
+        self.camera_latency_s = float(camera_latency_s)
         self.odometry_history = OdometryHistory()  # the base's stamped readings: wheels_at_image
         self.odometry_history.add(base.now(), self._odom)
         self.localizer = Localizer(
@@ -169,16 +178,16 @@ class LocalizedRobot(RobotWrapper):
         return self.base.odometry()
 
     def wheels_at_image(self, frame) -> Pose2D:
-        """The base's wheel odometry at the image's stamp ``frame.t``.
+        """The base's wheel odometry at the image's stamp ``frame.t - camera_latency_s``.
 
         The frame's own odometry (``frame.wheels``) was read at ``frame.pan_tilt.t``; when that is later
-        than the image (a camera's latency), the history of readings is interpolated back to the
-        image's stamp along the constant-velocity arc (:meth:`OdometryHistory.at`). A base that already
-        gives the odometry at the image's stamp (the hardware interpolates it,
-        ``lab.hardware.frame_time``) has ``pan_tilt.t == t``, and its reading is used as it is."""
-        t_read = frame.pan_tilt.t
+        than the image, the history of readings is interpolated back to the image's stamp along the
+        constant-velocity arc (:meth:`OdometryHistory.at`). A base that gives the odometry at the
+        image's stamp (the hardware interpolates it, ``lab.hardware.frame_time``; no latency) has
+        ``pan_tilt.t == t``, and its reading is used as it is."""
+        t_read, t_image = frame.pan_tilt.t, frame.t - self.camera_latency_s
         self.odometry_history.add(t_read, frame.wheels)
-        return frame.wheels if t_read <= frame.t else self.odometry_history.at(frame.t)
+        return frame.wheels if t_read <= t_image else self.odometry_history.at(t_image)
 
     def capture_stereo(self, after=None):
         frame = self.base.capture_stereo(after)
