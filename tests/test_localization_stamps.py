@@ -147,3 +147,40 @@ def test_the_camera_latency_must_be_a_plausible_number_of_seconds():
     for bad in (-0.01, 2.0, math.nan):
         with pytest.raises(ConfigError, match="camera_latency_s must be within"):
             LocalizedRobot(base, "odometry", camera_latency_s=bad)
+
+
+class _SlowHeadRobot(_LateCameraRobot):
+    """The late camera on a standing base with a head that pans at 1 rad/s; ``arrived`` is when it
+    reached its target."""
+
+    def __init__(self, latency: float):
+        super().__init__(latency, stamped=False)
+        self.pan, self.target, self.arrived = 0.0, 0.0, 0.0
+
+    def odometry(self) -> Pose2D:
+        return START
+
+    def command_pan_tilt(self, pan, tilt, speed=None) -> None:
+        self.target = pan
+
+    def pan_tilt(self) -> PanTiltState:
+        return PanTiltState(self.pan, 0.0, self._t, self.target, 0.0, self.pan != self.target)
+
+    def step(self, dt: float) -> None:
+        self._t += dt
+        if self.pan != self.target:
+            self.pan = min(self.pan + dt, self.target)
+            self.arrived = self._t
+
+
+@pytest.mark.parametrize("latency", [0.0, 0.05])
+def test_after_the_head_stops_the_localized_robot_waits_until_an_image_shows_it_stopped(latency):
+    """``wait_pan_tilt`` returns when the head has arrived and, with a camera latency, once the next
+    frame's image (exposed ``latency`` before its stamp) is exposed after the arrival; without one it
+    returns at the arrival, as the plain robot does."""
+    base = _SlowHeadRobot(latency)
+    robot = LocalizedRobot(base, "odometry", camera_latency_s=latency)
+    robot.command_pan_tilt(0.5, 0.0)
+    state = robot.wait_pan_tilt(dt=0.01)
+    assert not state.moving and state.pan == 0.5
+    assert base.now() - latency >= base.arrived - 1e-12 and base.now() - base.arrived < latency + 1e-9

@@ -25,7 +25,7 @@ from lab.localization.models import odometry_increment
 from lab.localization.modes import LocalizationMode
 from lab.localization.observer import LandmarkObserver
 from lab.localization.stamps import OdometryHistory
-from lab.robot import Robot, RobotWrapper
+from lab.robot import PanTiltState, Robot, RobotWrapper
 
 __all__ = ["LocalizedRobot"]
 
@@ -328,7 +328,7 @@ class LocalizedRobot(RobotWrapper):
                     break
                 pan, tilt, _name = view
                 self.base.command_pan_tilt(pan, tilt)
-                self.base.wait_pan_tilt(timeout=15.0)  # a swing across the whole pan range takes > 5 s
+                self._settle(self.base.wait_pan_tilt(timeout=15.0))  # a whole pan swing takes > 5 s
                 n0 = len(self.localizer.history)
                 self.capture_stereo()
                 n_views += 1
@@ -364,6 +364,20 @@ class LocalizedRobot(RobotWrapper):
             passes=c.report_passes,
             at_W=at_W,
         )
+
+    def wait_pan_tilt(self, timeout: float = 10.0, dt: float = 0.05) -> PanTiltState:
+        """Step until the head reaches its targets (:meth:`lab.robot.Robot.wait_pan_tilt`), then, with a
+        camera latency, as long again as an image is old: the next frame's image is exposed with the head
+        where it stopped (at 60 deg/s, an image 50 ms old shows a head that has just arrived 3 deg short
+        of it, and the frame would pair it with the arrived angle)."""
+        return self._settle(super().wait_pan_tilt(timeout, dt))
+
+    def _settle(self, state: PanTiltState) -> PanTiltState:
+        """After the head stopped: wait ``camera_latency_s`` (see :meth:`wait_pan_tilt`)."""
+        if self.camera_latency_s > 0:
+            self.step(self.camera_latency_s)
+            state = self.base.pan_tilt()
+        return state
 
     # the rest of the Robot interface is RobotWrapper's: passed on to the base
     def step(self, dt: float) -> None:
