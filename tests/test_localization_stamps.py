@@ -166,6 +166,10 @@ class _SlowHeadRobot(_LateCameraRobot):
     def pan_tilt(self) -> PanTiltState:
         return PanTiltState(self.pan, 0.0, self._t, self.target, 0.0, self.pan != self.target)
 
+    def capture_stereo(self, after=None):
+        img = np.zeros((self.camera.height, self.camera.width, 3), np.uint8)
+        return StereoFrame(self._t, img, img, self.camera, self.pan_tilt(), START)
+
     def step(self, dt: float) -> None:
         self._t += dt
         if self.pan != self.target:
@@ -184,3 +188,21 @@ def test_after_the_head_stops_the_localized_robot_waits_until_an_image_shows_it_
     state = robot.wait_pan_tilt(dt=0.01)
     assert not state.moving and state.pan == 0.5
     assert base.now() - latency >= base.arrived - 1e-12 and base.now() - base.arrived < latency + 1e-9
+
+
+def test_a_frame_taken_while_the_head_slews_carries_the_heads_angle_when_its_image_was_exposed():
+    """The head pans at 1 rad/s, the localizer steps every 10 ms and its camera's images are 50 ms old:
+    a frame taken mid-slew carries the pan of 50 ms before (exact: the slew is linear), not the newest
+    reading (2.9 deg further); without a latency the frame's own reading is kept."""
+    base = _SlowHeadRobot(0.05)
+    robot = LocalizedRobot(base, "odometry", camera_latency_s=0.05)
+    robot.command_pan_tilt(1.0, 0.0)
+    for _ in range(30):
+        robot.step(0.01)
+    frame = robot.capture_stereo()
+    assert abs(base.pan - 0.3) < 1e-12
+    assert abs(frame.pan_tilt.pan - 0.25) < 1e-9 and abs(frame.pan_tilt.t - (base.now() - 0.05)) < 1e-12
+    plain = LocalizedRobot(_SlowHeadRobot(0.0), "odometry")
+    plain.command_pan_tilt(1.0, 0.0)
+    plain.step(0.1)
+    assert plain.capture_stereo().pan_tilt.pan == plain.base.pan

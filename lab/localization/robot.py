@@ -24,7 +24,7 @@ from lab.localization.landmarks import LandmarkMap
 from lab.localization.models import odometry_increment
 from lab.localization.modes import LocalizationMode
 from lab.localization.observer import LandmarkObserver
-from lab.localization.stamps import OdometryHistory
+from lab.localization.stamps import OdometryHistory, PanTiltHistory
 from lab.robot import PanTiltState, Robot, RobotWrapper
 
 __all__ = ["LocalizedRobot"]
@@ -92,6 +92,7 @@ class LocalizedRobot(RobotWrapper):
             raise ConfigError(f"camera_latency_s must be within [0, 1] s, got {camera_latency_s!r}")
         self.camera_latency_s = float(camera_latency_s)
         self.odometry_history = OdometryHistory()  # the base's stamped readings: wheels_at_image
+        self.pan_tilt_history = PanTiltHistory()  # the head's, with a camera latency: head_at_image
         self.odometry_history.add(base.now(), self._odom)
         self.localizer = Localizer(
             self._odom.as_array(), Sigma0, config=self.config, first_sighting=start_measured_by_hand
@@ -189,9 +190,23 @@ class LocalizedRobot(RobotWrapper):
         self.odometry_history.add(t_read, frame.wheels)
         return frame.wheels if t_read <= t_image else self.odometry_history.at(t_image)
 
+    def head_at_image(self, frame) -> PanTiltState:
+        """The head's state when the frame's image was exposed, ``frame.t - camera_latency_s``: the
+        frame's reading (``frame.pan_tilt``, at its ``t``) when it is not later, else the head's readings
+        (kept at every :meth:`step` when there is a camera latency) interpolated back to the image's
+        stamp: a head slewing at 60 deg/s is 3 deg past where a 50 ms old image shows it."""
+        t_image = frame.t - self.camera_latency_s
+        if frame.pan_tilt.t <= t_image:
+            return frame.pan_tilt
+        self.pan_tilt_history.add(frame.pan_tilt.t, frame.pan_tilt)
+        return self.pan_tilt_history.at(t_image)
+
     def capture_stereo(self, after=None):
         frame = self.base.capture_stereo(after)
-        wheels = self.wheels_at_image(frame)
+        wheels = self.wheels_at_image(frame)  # both read at frame.pan_tilt.t, taken to the image's stamp
+        head = self.head_at_image(frame)
+        if head is not frame.pan_tilt:  # G_RC at the image's stamp: for the landmarks and the search
+            frame = replace(frame, pan_tilt=head)
         self._sync(wheels)
         if self.mode is LocalizationMode.ODOMETRY:  # the wheels at the image's stamp
             return frame if wheels is frame.wheels else replace(frame, odom=wheels)
@@ -383,3 +398,5 @@ class LocalizedRobot(RobotWrapper):
     def step(self, dt: float) -> None:
         self.base.step(dt)
         self._sync()
+        if self.camera_latency_s > 0:  # the head's readings, for head_at_image (none without a latency)
+            self.pan_tilt_history.add(self.base.now(), self.base.pan_tilt())

@@ -25,8 +25,9 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D, wrap_angle
+from lab.robot import PanTiltState
 
-__all__ = ["OdometryHistory", "interpolate_pose"]
+__all__ = ["OdometryHistory", "PanTiltHistory", "interpolate_pose"]
 
 
 def _V(phi: float) -> np.ndarray:
@@ -52,7 +53,70 @@ def interpolate_pose(t: float, a: tuple[float, Pose2D], b: tuple[float, Pose2D])
     return Pose2D(pa.x + c * p[0] - s * p[1], pa.y + s * p[0] + c * p[1], wrap_angle(pa.theta + f * w))
 
 
-class OdometryHistory:
+class _StampedHistory:
+    """Readings of the last ``span_s`` seconds with their stamps, and the reading at any stamp among
+    them (:meth:`at`, by the subclass's :meth:`between`)."""
+
+    def __init__(self, span_s: float = 2.0):
+        if not (math.isfinite(span_s) and span_s > 0):
+            raise ConfigError(f"{type(self).__name__} span_s must be a finite number > 0 [s], got {span_s!r}")
+        self.span_s = float(span_s)
+        self.t: list[float] = []
+        self.poses: list = []
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def add(self, t: float, reading) -> None:
+        """Keep a reading taken at ``t`` [s]; one older than the newest is ignored (readings come in
+        order), one at the newest's stamp replaces it."""
+        if self.t and t < self.t[-1]:
+            return
+        if self.t and t == self.t[-1]:
+            self.poses[-1] = reading
+            return
+        self.t.append(float(t))
+        self.poses.append(reading)
+        while len(self.t) > 2 and self.t[1] < self.t[-1] - self.span_s:
+            del self.t[0], self.poses[0]
+
+    def at(self, t: float):
+        """The reading at stamp ``t`` [s]: interpolated between the readings around it
+        (:meth:`between`); before the oldest or after the newest reading, that reading (the history
+        does not guess motion it has not seen)."""
+        if not self.t:
+            raise ValueError(f"{type(self).__name__}.at: no reading kept yet")
+        if t <= self.t[0]:
+            return self.poses[0]
+        if t >= self.t[-1]:
+            return self.poses[-1]
+        i = bisect.bisect_right(self.t, t)  # t[i - 1] <= t < t[i]
+        return self.between(t, (self.t[i - 1], self.poses[i - 1]), (self.t[i], self.poses[i]))
+
+    def between(self, t: float, a, b):
+        """The reading at ``t`` between readings ``a`` and ``b``, each ``(stamp, reading)``."""
+        raise NotImplementedError
+
+
+class PanTiltHistory(_StampedHistory):
+    """The head's readings (:class:`~lab.robot.PanTiltState`, stamped by their ``t``) of the last
+    ``span_s`` seconds; :meth:`at` interpolates the angles linearly (a head slewing at a constant
+    speed), stamped ``t``."""
+
+    def between(self, t: float, a, b) -> PanTiltState:
+        (ta, sa), (tb, sb) = a, b
+        f = (t - ta) / (tb - ta)
+        return PanTiltState(
+            sa.pan + f * (sb.pan - sa.pan),
+            sa.tilt + f * (sb.tilt - sa.tilt),
+            t,
+            sb.pan_target,
+            sb.tilt_target,
+            sa.moving or sb.moving,
+        )
+
+
+class OdometryHistory(_StampedHistory):
     """The wheel odometry's readings of the last ``span_s`` seconds with their stamps, and the pose at
     any stamp among them (:meth:`at`).
 
@@ -63,38 +127,6 @@ class OdometryHistory:
         camera's latency.
     """
 
-    def __init__(self, span_s: float = 2.0):
-        if not (math.isfinite(span_s) and span_s > 0):
-            raise ConfigError(f"OdometryHistory span_s must be a finite number > 0 [s], got {span_s!r}")
-        self.span_s = float(span_s)
-        self.t: list[float] = []
-        self.poses: list[Pose2D] = []
-
-    def __len__(self) -> int:
-        return len(self.t)
-
-    def add(self, t: float, pose: Pose2D) -> None:
-        """Keep a reading ``pose`` taken at ``t`` [s]; a reading older than the newest is ignored (the
-        odometry is read in order), one at the newest's stamp replaces it."""
-        if self.t and t < self.t[-1]:
-            return
-        if self.t and t == self.t[-1]:
-            self.poses[-1] = pose
-            return
-        self.t.append(float(t))
-        self.poses.append(pose)
-        while len(self.t) > 2 and self.t[1] < self.t[-1] - self.span_s:
-            del self.t[0], self.poses[0]
-
-    def at(self, t: float) -> Pose2D:
-        """The odometry at stamp ``t`` [s]: interpolated between the readings around it
-        (:func:`interpolate_pose`); before the oldest or after the newest reading, that reading (the
-        history does not guess motion it has not seen)."""
-        if not self.t:
-            raise ValueError("OdometryHistory.at: no reading kept yet")
-        if t <= self.t[0]:
-            return self.poses[0]
-        if t >= self.t[-1]:
-            return self.poses[-1]
-        i = bisect.bisect_right(self.t, t)  # t[i - 1] <= t < t[i]
-        return interpolate_pose(t, (self.t[i - 1], self.poses[i - 1]), (self.t[i], self.poses[i]))
+    def between(self, t: float, a, b) -> Pose2D:
+        """:func:`interpolate_pose` between readings ``a`` and ``b``, ``(stamp, pose)``."""
+        return interpolate_pose(t, a, b)
