@@ -35,7 +35,7 @@ from lab.localization.modes import LocalizationMode
 from lab.localization.observer import LandmarkObservation, LandmarkObserver, face_share_in_image
 from lab.localization.posters import PosterStates
 from lab.localization.robot import LocalizedRobot
-from lab.localization.stamps import OdometryHistory, interpolate_pose
+from lab.localization.stamps import OdometryHistory, PanTiltHistory, interpolate_pose
 
 __all__ = [
     "Landmark",
@@ -47,6 +47,7 @@ __all__ = [
     "Localizer",
     "LocalizerConfig",
     "OdometryHistory",
+    "PanTiltHistory",
     "PlanarPoseEstimate",
     "PosterStates",
     "UpdateRecord",
