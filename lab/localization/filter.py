@@ -151,6 +151,9 @@ class LocalizerConfig:
         The landmark update's iterations (the iterated EKF: relinearise at the new mean until it stops
         moving, at most this many); 1 is the plain EKF. How it was chosen:
         docs/tuning/localizer-update-iterations.md.
+    camera_yaw_sigma_rad : float [rad]
+        Estimate the camera's yaw on the base (the pan zero and the mounts' yaw) in the state, from this
+        prior (:mod:`lab.localization.posters`); 0: assumed exact (not in the state).
     odometry_calibration : bool
         Estimate the odometry's turn scale ``k`` and curvature bias ``c`` in the state
         (:func:`calibrated_motion_model`); False: the pose alone, with the systematic errors left to the
@@ -204,6 +207,7 @@ class LocalizerConfig:
     turn_scale_walk_per_sqrt_rad: float = 0.002
     calibrated_heading_rad_per_sqrt_m: float = 0.02
     calibrated_heading_rad_per_sqrt_rad: float = 0.03
+    camera_yaw_sigma_rad: float = 0.0
     ransac: RansacConfig = field(default_factory=lambda: RansacConfig(min_matches=6, dist_max_m=0.25))
 
     def __post_init__(self):
@@ -226,6 +230,7 @@ class LocalizerConfig:
             "turn_scale_walk_per_sqrt_rad",
             "calibrated_heading_rad_per_sqrt_m",
             "calibrated_heading_rad_per_sqrt_rad",
+            "camera_yaw_sigma_rad",
         ):
             v = getattr(self, k)
             if not (math.isfinite(v) and v >= 0):
@@ -437,6 +442,9 @@ class Localizer:
         if n == 5:  # the calibration's prior: nominal odometry, give or take its sigmas
             self.s[3:] = (1.0, 0.0)
             self.P[3, 3], self.P[4, 4] = c.turn_scale_sigma**2, c.curvature_sigma_rad_per_m**2
+        self.camera_yaw = None  # its index in the state, when estimated (camera_yaw_sigma_rad)
+        if c.camera_yaw_sigma_rad > 0:
+            self.s, self.P, self.camera_yaw = self.posters.augment_yaw(self.s, self.P, c.camera_yaw_sigma_rad)
         self.history: list[UpdateRecord] = []
         self.rejected_in_a_row = 0
         self.n_inflations = 0
@@ -517,7 +525,7 @@ class Localizer:
         x_bar, Sigma_bar = self.x, self.Sigma
         s_bar, P_bar = self.s.copy(), self.P.copy()
         n, angles = len(s_bar), self.posters.angles()
-        h, H = observe(s_bar, landmark, j)
+        h, H = observe(s_bar, landmark, j, self.camera_yaw)
         nu = z - h  # innovation
         nu[2] = wrap_angle(nu[2])
         S = H @ P_bar @ H.T + Q  # innovation covariance
@@ -528,7 +536,7 @@ class Localizer:
             # and S), relinearise at each new mean until it stops moving
             s_i = s_bar.copy()
             for i in range(self.config.update_iterations):
-                h, H_i = observe(s_i, landmark, j)
+                h, H_i = observe(s_i, landmark, j, self.camera_yaw)
                 if i > 0:
                     H = H_i
                     S = H @ P_bar @ H.T + Q
@@ -659,7 +667,7 @@ class Localizer:
         x_bar, Sigma_bar = self.x, self.Sigma
         P_bar = self.P.copy()
         n = len(self.s)
-        x_z, Sigma_z, Jl = sighting_pose(self.s, z, Q, landmark, j)  # Sigma_z = J_z Q J_z^T
+        x_z, Sigma_z, Jl = sighting_pose(self.s, z, Q, landmark, j, self.camera_yaw)  # Sigma_z = J_z Q J_z^T
         d = x_z - x_bar
         d[2] = wrap_angle(d[2])
         Hf = -Jl  # d = x - x_z(l): H = [I, 0, -J_l] (no poster: [I, 0])

@@ -36,6 +36,17 @@ localizer (:class:`~lab.localization.filter.Localizer`) instead carries the plan
 
 A landmark with both survey sigmas 0 (an exact map, the simulator's own scene) is not added: the filter
 then is exactly the fixed-map one.
+
+**The camera's yaw on the base** (``LocalizerConfig.camera_yaw_sigma_rad`` above 0): the pan zero and
+the mounts' yaw turn every sighting by the same :math:`\beta` about the pan axis (at R's origin: the
+camera's ``mount_R`` has x = y = 0), which a standing robot cannot tell from its own heading; a drive
+can (the odometry moves the robot along its heading, the sightings show where it went). It is one
+more state element, constant, prior :math:`N(0, \sigma_\beta^2)`, and the measurement becomes::
+
+      h_beta = [R(-beta) h_xy, h_3 - beta],  dh_beta/ds = blockdiag(R(-beta), 1) dh/ds,
+      dh_beta/dbeta = [dR(-beta)/dbeta h_xy, -1]
+
+(the pose one sighting implies undoes it first: ``g(z_c, l)``, ``z_c = [R(beta) z_xy, z_3 + beta]``).
 """
 
 from __future__ import annotations
@@ -87,31 +98,52 @@ def pose_jacobian_in_landmark(z, l) -> np.ndarray:
     return np.array([[1.0, 0.0, s * z[0] + c * z[1]], [0.0, 1.0, -c * z[0] + s * z[1]], [0.0, 0.0, 1.0]])
 
 
-def observe(s, landmark: Landmark, j: int | None) -> tuple[np.ndarray, np.ndarray]:
+def observe(s, landmark: Landmark, j: int | None, b: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``h(s)`` (3,) and ``H = dh/ds`` (3, n) of a landmark observation on the state ``s`` (n,).
 
     The robot's pose is ``s[:3]``; the landmark's planar pose is the state's block ``s[j:j + 3]`` when it
-    is in the state (``j``), else its map pose (held fixed: ``H`` is zero there)."""
+    is in the state (``j``), else its map pose (held fixed: ``H`` is zero there); ``s[b]`` the camera's
+    yaw on the base when it is estimated (``b``; see the module docstring)."""
     s = np.asarray(s, float)
     l = landmark.planar if j is None else s[j : j + 3]
     H = np.zeros((3, len(s)))
     H[:, :3] = measurement_jacobian(s[:3], l)
     if j is not None:
         H[:, j : j + 3] = landmark_jacobian(s[:3], l)
-    return measurement_model(s[:3], l), H
+    h = measurement_model(s[:3], l)
+    if b is None:
+        return h, H
+    c, sn = math.cos(s[b]), math.sin(s[b])
+    R = np.array([[c, sn], [-sn, c]])  # R(-beta)
+    H[:2] = R @ H[:2]
+    H[:2, b] = np.array([[-sn, c], [-c, -sn]]) @ h[:2]  # dR(-beta)/dbeta h_xy
+    H[2, b] = -1.0
+    return np.array([*(R @ h[:2]), wrap_angle(h[2] - s[b])]), H
 
 
-def sighting_pose(s, z, Q, landmark: Landmark, j: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def sighting_pose(
+    s, z, Q, landmark: Landmark, j: int | None, b: int | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The robot pose ``x_z`` one observation ``z`` (covariance ``Q``) implies
     (:func:`~lab.localization.models.pose_from_observation`), its covariance ``J_z Q J_z^T`` through the
     observation, and ``J_l = dx_z/ds`` (3, n) through the state: the poster's block at ``j`` (zero when
-    the landmark is held fixed, ``j`` None)."""
+    the landmark is held fixed, ``j`` None) and the camera's yaw ``s[b]`` (when estimated)."""
     s = np.asarray(s, float)
+    z = np.asarray(z, float)
     l = landmark.planar if j is None else s[j : j + 3]
+    Rb = np.eye(3)
+    if b is not None:  # undo the camera's yaw: z_c = [R(beta) z_xy, z_3 + beta]
+        c, sn = math.cos(s[b]), math.sin(s[b])
+        Rb[:2, :2] = [[c, -sn], [sn, c]]
+        dz_db = np.array([-sn * z[0] - c * z[1], c * z[0] - sn * z[1], 1.0])
+        z = Rb @ z + [0.0, 0.0, s[b]]
     x_z, J = pose_from_observation(z, l)
     Jl = np.zeros((3, len(s)))
     if j is not None:
         Jl[:, j : j + 3] = pose_jacobian_in_landmark(z, l)
+    if b is not None:
+        Jl[:, b] = J @ dz_db
+        J = J @ Rb
     return x_z, J @ Q @ J.T, Jl
 
 
@@ -147,6 +179,19 @@ class PosterStates:
         P_new[n:, n:] = L
         self.index[landmark.name] = n
         return np.concatenate([s, l]), P_new, n
+
+    def augment_yaw(
+        self, s: np.ndarray, P: np.ndarray, sigma_rad: float
+    ) -> tuple[np.ndarray, np.ndarray, int]:
+        """The state and covariance with the camera's yaw on the base appended (prior ``N(0, sigma^2)``,
+        independent of the rest), and its index; before any poster (call it first)."""
+        if self.index:
+            raise ValueError("the camera's yaw joins the state before any poster")
+        n = len(s)
+        P_new = np.zeros((n + 1, n + 1))
+        P_new[:n, :n] = P
+        P_new[n, n] = float(sigma_rad) ** 2
+        return np.concatenate([s, [0.0]]), P_new, n
 
     def angles(self) -> list[int]:
         """The state's indices that are angles (wrapped after each step): the heading and each yaw."""
