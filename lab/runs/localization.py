@@ -17,7 +17,7 @@ import numpy as np
 
 from lab.geometry import wrap_angle
 from lab.localization import LocalizationMode, LocalizedRobot, LocalizerConfig
-from lab.runs.room import sim_start_sigma, surveyed_map
+from lab.runs.room import sim_localizer_told, surveyed_map
 from lab.training.landmarks import trained_landmark_map
 
 __all__ = ["DriveResult", "drive_loop_waypoints", "run_localization_drive"]
@@ -132,8 +132,7 @@ def run_localization_drive(
         base.enable()
         if landmarks is not None and not base.sensing.room.is_none:  # the room's errors: a surveyed map
             landmarks = surveyed_map(landmarks, base.sensing, seed)
-        Sigma0 = sim_start_sigma(base)  # the stated start sigma, first sighting allowed to correct it
-        told = {} if Sigma0 is None else {"Sigma0": Sigma0, "start_measured_by_hand": True}
+        told = sim_localizer_told(base)  # the stated start sigma and camera latency
         robot = LocalizedRobot(
             base, mode, landmarks, config, rng=np.random.default_rng([seed, 21]), log=lambda m: None, **told
         )

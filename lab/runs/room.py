@@ -45,6 +45,7 @@ __all__ = [
     "localize",
     "robot_start",
     "room_landmarks",
+    "sim_localizer_told",
     "sim_start_sigma",
     "surveyed_map",
 ]
@@ -163,7 +164,9 @@ def room_landmarks(
 def surveyed_map(landmarks: LandmarkMap, profile, seed: int) -> LandmarkMap:
     """The map a survey of the room gives in episode ``seed``: each landmark's centre and yaw off by
     :func:`lab.sim.room_errors.survey_error` (the profile's survey sigma times its mismatch factor), its
-    database unchanged (it is in the landmark's own frame). The renderer keeps drawing the true posters."""
+    database unchanged (it is in the landmark's own frame), each stated to be known to the profile's survey
+    sigma, so the localizer holds them in its state and refines them (:mod:`lab.localization.posters`).
+    The renderer keeps drawing the true posters."""
     from lab.localization import inward_normal
     from lab.sim.room_errors import survey_error
 
@@ -174,7 +177,21 @@ def surveyed_map(landmarks: LandmarkMap, profile, seed: int) -> LandmarkMap:
         out.append(
             replace(lm, centre_W=c, yaw=lm.yaw + dyaw, normal_W=inward_normal(c, lm.yaw + dyaw, lm.size))
         )
-    return LandmarkMap(tuple(out), landmarks.room_size, f"{landmarks.source} (surveyed)")
+    surveyed = LandmarkMap(tuple(out), landmarks.room_size, f"{landmarks.source} (surveyed)")
+    return surveyed.surveyed(*profile.room.survey_sigma)  # the localizer refines them from that accuracy
+
+
+def sim_localizer_told(robot) -> dict:
+    """What the localizer is told in the simulator, as :class:`~lab.localization.LocalizedRobot`'s keyword
+    arguments: the stated start sigma with the first sighting allowed to correct it
+    (:func:`sim_start_sigma`), and the camera's stated latency (its frames are stamped at arrival); empty
+    for a profile without the room's errors."""
+    Sigma0 = sim_start_sigma(robot)
+    told = {} if Sigma0 is None else {"Sigma0": Sigma0, "start_measured_by_hand": True}
+    room = getattr(getattr(robot, "sensing", None), "room", None)
+    if room is not None and room.latency_s > 0:
+        told["camera_latency_s"] = room.latency_s
+    return told
 
 
 def sim_start_sigma(robot) -> np.ndarray | None:
@@ -308,8 +325,7 @@ def localize(
     """
     rng = np.random.default_rng([seed, 20])
     if kind is RobotKind.SIM:
-        Sigma0 = sim_start_sigma(robot)
-        told = {} if Sigma0 is None else {"Sigma0": Sigma0, "start_measured_by_hand": True}
+        told = sim_localizer_told(robot)
         return LocalizedRobot(robot, room.mode, room.landmarks, rng=rng, log=log, **told)
     if start is None:
         return LocalizedRobot(robot, room.mode, room.landmarks, rng=rng, log=log)
