@@ -16,10 +16,10 @@ HELP_VIEW3D = (
 
 def _sensing(value: str) -> str:
     """``--sensing``'s value: a profile name or a ``.toml`` file (read and checked by the command)."""
-    if value in ("realistic", "ideal", "sensors") or value.endswith(".toml"):
+    if value in ("realistic", "ideal", "room") or value.endswith(".toml"):
         return value
     raise argparse.ArgumentTypeError(
-        f"unknown sensing profile {value!r}; allowed: realistic, ideal, sensors, "
+        f"unknown sensing profile {value!r}; allowed: realistic, ideal, room, "
         "or a .toml file with a [sensing] table"
     )
 
@@ -30,11 +30,11 @@ def _sensing_argument(p: argparse.ArgumentParser) -> None:
         "--sensing",
         default="realistic",
         type=_sensing,
-        metavar="{realistic,ideal,sensors,FILE.toml}",
+        metavar="{realistic,ideal,room,FILE.toml}",
         help="the simulator's sensor errors (default: realistic: camera noise, calibration error, odometry "
-        "drift, pan-tilt backlash, and the real room's: a surveyed map, the operator's start, mount errors, "
-        "camera latency, slip on a bump, errors 1.5 x what the robot is told; ideal: exact sensors, for "
-        "teaching the mathematics; sensors: realistic's sensors in an exact room; FILE.toml: a "
+        "drift, pan-tilt backlash; room: those in a real room: a surveyed map, the operator's start, mount "
+        "errors, camera latency, slip on a bump, errors 1.5 x what the robot is told; ideal: exact sensors, "
+        "for teaching the mathematics; FILE.toml: a "
         '[sensing] table, profile = "realistic" plus [sensing.camera], [sensing.odometry], '
         "[sensing.pan_tilt], [sensing.room] fields to change); with --robot on a rehearsal config, its "
         "rendered camera follows the camera section (odometry and pan-tilt are the emulators')",
@@ -467,7 +467,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ei.add_argument("--planners", help="comma-separated: lut, mc, random, circle (default lut,random)")
     ei.add_argument("--movers", "--mover", dest="movers", help="comma-separated (default evasive)")
-    ei.add_argument("--sensing", help="comma-separated: realistic, ideal, sensors (default realistic)")
+    ei.add_argument("--sensing", help="comma-separated: realistic, ideal, room (default realistic)")
     ei.add_argument("--max-actions", type=int, help="planning actions budget per episode (default 8)")
     ei.add_argument("--max-time", type=float, help="sim-time budget per episode [s] (default 240)")
     ei.add_argument("--keep-direction", type=float, help="the agent's keep_direction (default 0.5)")
@@ -490,7 +490,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--strategies", help="comma-separated: paper, rate, lawnmower, frontier (default all four)"
     )
     es.add_argument("--obstacles", help="no, yes or both (default both): boxes on the straight path")
-    es.add_argument("--sensing", help="comma-separated: realistic, ideal, sensors (default realistic)")
+    es.add_argument("--sensing", help="comma-separated: realistic, ideal, room (default realistic)")
     es.add_argument("--localization", help="comma-separated: landmarks, odometry (default landmarks)")
     es.add_argument("--max-time", type=float, help="sim-time budget per trial [s] (default 600)")
     es.add_argument("--max-wall-time", type=float, help="the trial's own wall-clock cap [s] (default none)")

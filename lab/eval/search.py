@@ -130,8 +130,8 @@ class SearchSweep:
         if self.obstacles not in OBSTACLES:
             raise ConfigError(f"obstacles must be one of {', '.join(OBSTACLES)}, got {self.obstacles!r}")
         for s in self.sensing:
-            if s not in ("realistic", "ideal", "sensors"):
-                raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal, sensors")
+            if s not in ("realistic", "ideal", "room"):
+                raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal, room")
         for m in self.localization:
             if m not in LOCALIZATIONS:
                 raise ConfigError(f"unknown localization {m!r}; allowed: {', '.join(LOCALIZATIONS)}")

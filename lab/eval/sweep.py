@@ -146,8 +146,8 @@ class IdentifySweep:
             if m not in ("static", "scripted", "random", "evasive"):
                 raise ConfigError(f"unknown mover {m!r}; movers: static, scripted, random, evasive")
         for s in self.sensing:
-            if s not in ("realistic", "ideal", "sensors"):
-                raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal, sensors")
+            if s not in ("realistic", "ideal", "room"):
+                raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal, room")
         parse_error_scales(self.error_scale)
         if self.max_actions < 0:
             raise ConfigError(f"max_actions must be >= 0, got {self.max_actions}")
