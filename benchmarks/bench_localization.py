@@ -2,7 +2,7 @@
 
 Run from the repository root (long: about 15 s of CPU per drive and mode)::
 
-    nice python benchmarks/bench_localization.py [--seeds 100000-100019] [--length 30] \
+    nice python benchmarks/bench_localization.py [--seeds 0-19] [--length 30] \
         [--sensing realistic] [--figure out/localization.png] [--json out/localization.json]
 
 Each seed drives the same seeded loop through the lab room
@@ -10,8 +10,12 @@ Each seed drives the same seeded loop through the lab room
 against the posters. Printed: the median final position and heading error of each (with the 25-75 %
 range), the localizer's NEES (its error against the truth weighted by its own covariance) after every
 accepted update and the fraction inside the chi-square(3) 95 % band [0.216, 9.35], and the number of
-updates and rejected observations. The default seeds are the report split
-(:func:`lab.evaluation.report_seeds`); tune on seeds < 1000.
+updates and rejected observations.
+
+**Which seeds.** By default 20 fresh report seeds (:func:`lab.evaluation.fresh_report_seeds`: above every
+seed in the ledger of spent seeds, ``lab/data/spent_seeds.toml``); tune on seeds < 1000. A report seed
+the ledger lists as spent (the drives' former default, 100000-100019, is) is refused unless
+``--allow-spent-seeds``, and the summary then says "ON SPENT SEEDS".
 """
 
 from __future__ import annotations
@@ -19,12 +23,22 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import sys
 import time
 
 import numpy as np
 from scipy.stats import chi2
 
-from lab.evaluation import parse_seeds, report_seeds, wilson_interval
+from lab.errors import ConfigError
+from lab.evaluation import (
+    ALLOW_SPENT_FLAG,
+    check_report_seeds,
+    fresh_report_seeds,
+    parse_seeds,
+    seed_ranges_text,
+    split_of,
+    wilson_interval,
+)
 from lab.io import write_text_atomic
 from lab.runs.localization import run_localization_drive
 
@@ -33,15 +47,46 @@ def _q(values, q):
     return float(np.percentile(np.asarray(values, float), q))
 
 
-def main() -> None:
+DRIVE_SEEDS = 20  #: the default: this many fresh report seeds
+RUN = "localization drives"  #: the ledger's name of these runs
+
+
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default=None, help="seed list, e.g. 0-19 (default: 20 report seeds)")
+    ap.add_argument(
+        "--seeds",
+        type=parse_seeds,
+        default=fresh_report_seeds(DRIVE_SEEDS),
+        help=f"seed list, e.g. 0-19 (tuning) or report seeds (default: {DRIVE_SEEDS} fresh report seeds, "
+        f"above every seed in the ledger of spent seeds; a spent one is refused without {ALLOW_SPENT_FLAG})",
+    )
     ap.add_argument("--length", type=float, default=30.0, help="drive length [m]")
     ap.add_argument("--sensing", default="realistic")
     ap.add_argument("--figure", default=None, help="write a figure of the first seed's trajectories")
     ap.add_argument("--json", default=None, help="write the per-seed figures as JSON")
-    args = ap.parse_args()
-    seeds = parse_seeds(args.seeds) if args.seeds else report_seeds(20)
+    ap.add_argument(
+        ALLOW_SPENT_FLAG,
+        action="store_true",
+        help="run even on report seeds the ledger lists as spent (refused otherwise); the summary says so",
+    )
+    return ap
+
+
+def main(argv=None) -> int:
+    try:  # a malformed ledger or seed list, or a spent seed: one line
+        args = build_parser().parse_args(argv)
+        spent = check_report_seeds(args.seeds, allow_spent=args.allow_spent_seeds, run=RUN)
+    except ConfigError as e:
+        print(f"bench_localization: error: {e}", file=sys.stderr)
+        return 2
+    on = f"; ON SPENT SEEDS: {seed_ranges_text(spent)}, no fresh evidence" if spent else ""
+    print(f"split: {split_of(args.seeds)} ({seed_ranges_text(args.seeds)}{on})", flush=True)
+    drive(args, args.seeds)
+    return 0
+
+
+def drive(args, seeds) -> None:
+    """The drives and their summary (see the module docstring)."""
     lo, hi = chi2.ppf(0.025, 3), chi2.ppf(0.975, 3)
     rows, nees_all, first = [], [], None
     t0 = time.perf_counter()
@@ -112,4 +157,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

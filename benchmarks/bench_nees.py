@@ -1,6 +1,6 @@
 """EKF consistency on the static-box scenes (issue 19, item 2): NEES inside its 95 % band, per profile.
 
-    nice .venv/bin/python benchmarks/bench_nees.py [--seeds 100000-100007] [--frames 30] [--out nees.json]
+    nice .venv/bin/python benchmarks/bench_nees.py [--seeds 0-7] [--frames 30] [--out nees.json]
 
 A box model stands still in the ``arena`` world (on a carrier that does not move), in front of a
 ``SimRobot`` at one of a few start poses (moved a little by the seed, see :func:`jittered`). Per
@@ -16,8 +16,10 @@ the database's own error added (``--point-std-mm``, the database's figure by def
 papers' filter, which takes the database as exact).
 
 The same seeds, start poses and motions run under every profile (``ideal`` and ``realistic`` side by
-side, in one run), so that the difference is the sensing alone. Seeds come from the report split
-(100000 on by default; the split is printed). The table gives, per profile, the fraction of scored
+side, in one run), so that the difference is the sensing alone. By default 8 fresh report seeds
+(:func:`lab.evaluation.fresh_report_seeds`, above every seed in the ledger of spent seeds; the split is
+printed); a spent one (the former default 100000-100007 is) is refused unless ``--allow-spent-seeds``,
+and the output then says "ON SPENT SEEDS". The table gives, per profile, the fraction of scored
 frames inside the band (a Wilson 95 % interval over frames: frames of one episode are correlated, so
 the interval is optimistic; a second interval resamples whole episodes), the median and p90 NEES, the
 fraction below the band's upper end alone (the over-confidence side), the number of scored frames and
@@ -37,6 +39,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy is imported (
 import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 from dataclasses import asdict, dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -44,6 +47,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 
+from lab.errors import ConfigError  # noqa: E402
 from lab.estimation import (  # noqa: E402
     CalibrationUncertainty,
     EKFConfig,
@@ -52,7 +56,14 @@ from lab.estimation import (  # noqa: E402
     PoseEKF,
     nees,
 )
-from lab.evaluation import parse_seeds  # noqa: E402
+from lab.evaluation import (  # noqa: E402
+    ALLOW_SPENT_FLAG,
+    check_report_seeds,
+    fresh_report_seeds,
+    parse_seeds,
+    seed_ranges_text,
+    split_of,
+)
 from lab.geometry import G_to_pose6, Pose2D, relative_pose2d, se3_inv  # noqa: E402
 from lab.sim import SimRobot, SimWorld, load_box_models  # noqa: E402
 from lab.training import get_database  # noqa: E402
@@ -282,9 +293,18 @@ def print_table(summary: dict[str, dict]) -> None:
         )
 
 
-def main(argv=None) -> dict:
+NEES_SEEDS = 8  #: the default: this many fresh report seeds
+
+
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="100000-100007", help="seeds, e.g. 100000-100007 (the report split)")
+    ap.add_argument(
+        "--seeds",
+        type=parse_seeds,
+        default=fresh_report_seeds(NEES_SEEDS),
+        help=f"seeds, e.g. 0-7 (tuning) or report seeds (default: {NEES_SEEDS} fresh report seeds, above "
+        f"every seed in the ledger of spent seeds; a spent one is refused without {ALLOW_SPENT_FLAG})",
+    )
     ap.add_argument("--frames", type=int, default=30, help="frames per episode (0.1 s apart)")
     ap.add_argument("--warmup", type=int, default=5, help="frames not scored after the start")
     ap.add_argument("--profiles", default="ideal,realistic")
@@ -295,15 +315,31 @@ def main(argv=None) -> dict:
         "lab.vision.database.POINT_STD_M; 0 is the papers' exact database)",
     )
     ap.add_argument("--out", type=Path, help="JSON summary")
-    args = ap.parse_args(argv)
+    ap.add_argument(
+        ALLOW_SPENT_FLAG,
+        action="store_true",
+        help="run even on report seeds the ledger lists as spent (refused otherwise); the output says so",
+    )
+    return ap
+
+
+def main(argv=None) -> int:
+    ap = build_parser()
+    try:  # a malformed ledger or seed list, or a spent seed: one line
+        args = ap.parse_args(argv)
+        spent = check_report_seeds(args.seeds, allow_spent=args.allow_spent_seeds, run="bench_nees")
+    except ConfigError as e:
+        print(f"bench_nees: error: {e}", file=sys.stderr)
+        return 2
     if args.point_std_mm is not None and not (math.isfinite(args.point_std_mm) and args.point_std_mm >= 0):
         ap.error(f"--point-std-mm must be a finite number >= 0, got {args.point_std_mm}")
     point_std_m = None if args.point_std_mm is None else 1e-3 * args.point_std_mm
-    seeds = parse_seeds(args.seeds)
+    seeds = args.seeds
     profiles = [p for p in args.profiles.split(",") if p]
-    split = "report" if min(seeds) >= 100000 else "tuning" if max(seeds) < 1000 else "mixed"
+    split = split_of(seeds)
+    on = f"; ON SPENT SEEDS: {seed_ranges_text(spent)}, no fresh evidence" if spent else ""
     print(
-        f"seeds {seeds[0]}..{seeds[-1]} ({len(seeds)}; {split} split), {len(STARTS)} start poses, "
+        f"seeds {seeds[0]}..{seeds[-1]} ({len(seeds)}; {split} split{on}), {len(STARTS)} start poses, "
         f"{args.frames} frames each ({args.warmup} warm-up), profiles {', '.join(profiles)}"
     )
     models = load_box_models()
@@ -327,6 +363,7 @@ def main(argv=None) -> dict:
     result = {
         "seeds": seeds,
         "split": split,
+        "on_spent_seeds": seed_ranges_text(spent) or None,
         "frames_per_episode": args.frames,
         "warmup": args.warmup,
         "point_std_m": point_std_m if point_std_m is not None else POINT_STD_M,
@@ -339,8 +376,8 @@ def main(argv=None) -> dict:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(result, indent=1))
         print(f"wrote {args.out}")
-    return result
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -230,7 +230,10 @@ def build_parser() -> argparse.ArgumentParser:
         "above every seed in the ledger of spent seeds, lab/data/spent_seeds.toml)",
     )
     ap.add_argument(
-        "--sensing", default="realistic", choices=("realistic", "ideal"), help="the simulator's sensor errors"
+        "--sensing",
+        default="realistic",
+        choices=("realistic", "ideal", "sensors"),
+        help="the simulator's sensor errors",
     )
     ap.add_argument("--planners", default="lut,random", help="comma-separated (default lut,random)")
     ap.add_argument("--mover", default="evasive")

@@ -319,7 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"e.g. 0,1 (tuning) or report seeds (default: {SEARCH_SEEDS} fresh report seeds, above every "
         "seed in the ledger of spent seeds, lab/data/spent_seeds.toml; a spent one is refused)",
     )
-    r.add_argument("--sensing", default="realistic", choices=("realistic", "ideal"))
+    r.add_argument("--sensing", default="realistic", choices=("realistic", "ideal", "sensors"))
     r.add_argument("--obstacles", choices=("no", "yes", "both"), default="both")
     r.add_argument("--surfaces", default=",".join(SURFACES), help="a subset of floor,table,shelf")
     r.add_argument(

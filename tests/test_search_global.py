@@ -170,6 +170,7 @@ def test_a_peak_at_the_left_edge_of_a_view_gets_its_depth():
     scene = SCENE.with_pose("book", place)
     cfg = GlobalSearchConfig()
     with SimWorld(scene, RenderSettings(supersample=2)) as w:
+        # the peak sits at the view's left edge on this image
         robot = SimRobot(w, start=Pose2D(-0.5, 2.6, math.pi), seed=3, sensing="realistic")
         robot.enable()
         res = global_search(robot, search_database("book"), ProbabilityMap.over(-3, -4, 3, 4, 0.2), cfg)

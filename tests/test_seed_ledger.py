@@ -3,6 +3,7 @@ evaluations avoids every seed in it; a spent seed is refused with the override n
 only when asked, marked; a malformed ledger is one clear error; `lab eval spend` appends to it."""
 
 import importlib.util
+import sys
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -30,6 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def _benchmark(name):
     spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
     mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod  # a module's dataclasses look themselves up there
     spec.loader.exec_module(mod)
     return mod
 
@@ -69,6 +71,8 @@ def _eval_defaults():
         "lab eval search": search_sweep(ap.parse_args(["eval", "search", "--out", "o"])).seeds,
         "eval_identify.py": _benchmark("eval_identify").build_parser().parse_args([]).seeds,
         "eval_search.py": _seeds(_benchmark("eval_search").build_parser().parse_args(["run", "--out", "o"])),
+        "bench_localization.py": _benchmark("bench_localization").build_parser().parse_args([]).seeds,
+        "bench_nees.py": _benchmark("bench_nees").build_parser().parse_args([]).seeds,
     }
 
 
@@ -125,6 +129,15 @@ def test_the_benchmarks_refuse_spent_seeds_too(capsys):
     assert "seed 100000 is spent" in err and "--allow-spent-seeds" in err
     assert _benchmark("eval_search").main(["run", "--seeds", "101200,101201", "--out", "unused"]) == 2
     assert "seed 101200 is spent" in capsys.readouterr().err
+    # the localization drives' and the EKF consistency benchmark's former defaults, refused in one line
+    for name, seeds in (("bench_localization", "100000-100019"), ("bench_nees", "100000-100007")):
+        assert _benchmark(name).main(["--seeds", seeds]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert (
+            len(err) == 1
+            and f"{name}: error: seed 100000 is spent" in err[0]
+            and "--allow-spent-seeds" in err[0]
+        )
 
 
 def test_allow_spent_seeds_runs_and_the_report_says_on_spent_seeds(tmp_path, monkeypatch, capsys):

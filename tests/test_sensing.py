@@ -15,6 +15,7 @@ from lab.sim import (
     OdometryErrors,
     OdometryNoise,
     PanTiltErrors,
+    RoomErrors,
     SimRobot,
     SimWorld,
     sensing_profile,
@@ -30,6 +31,7 @@ from lab.sim.sensing import (
 )
 
 WHEEL_BASE = 0.235  # [m] the Create 2's (BaseLimits.wheel_base)
+NO_ROOM = {f.name: 0.0 for f in dataclasses.fields(RoomErrors)}  # a [sensing.room] without the room's errors
 
 
 def _drive_and_look(robot: SimRobot):
@@ -70,7 +72,8 @@ def test_realistic_reports_the_nominal_camera_and_angles():
     with SimWorld("lab_room") as w:
         nominal = SimRobot(w, seed=0).camera
     with SimWorld("lab_room") as w:
-        r = SimRobot(w, seed=0, sensing="realistic")
+        # without the room's errors (no mount error: tests/test_room_errors.py has it)
+        r = SimRobot(w, seed=0, sensing={"profile": "realistic", "room": NO_ROOM})
         f = _drive_and_look(r)
         d = w.truth.sensing.camera
         # the nominal calibration, with its stated accuracy (not the episode's draw)
@@ -163,7 +166,8 @@ def test_odometry_systematic_errors_have_their_stated_spread():
 
 def test_the_robot_integrates_the_odometry_errors():
     # the systematic errors alone (no random wheel error), so that they can be checked exactly
-    sensing = {"profile": "realistic", "odometry": {"wheel_noise": 0.0}}
+    # (and the odometry starting at the true pose: no operator's start error)
+    sensing = {"profile": "realistic", "odometry": {"wheel_noise": 0.0}, "room": NO_ROOM}
     with SimWorld("arena") as w:
         r = SimRobot(w, start=Pose2D(-3.0, 0.0, 0.0), seed=5, sensing=sensing)
         r.enable()

@@ -40,6 +40,7 @@ def scene():
     spec = load_box_models()[1]
     with SimWorld("box_database") as w:
         carrier = w.add_carrier(spec, Pose2D(0.0, 0.0, 0.0), box_yaw=0.4)
+        # the region's feature-for-feature checks ran on this image
         robot = SimRobot(w, start=Pose2D(-1.0, 0.0, 0.0), seed=0, sensing="realistic")
         robot.enable()
         c = carrier.G_WO[:3, 3]

@@ -16,10 +16,10 @@ HELP_VIEW3D = (
 
 def _sensing(value: str) -> str:
     """``--sensing``'s value: a profile name or a ``.toml`` file (read and checked by the command)."""
-    if value in ("realistic", "ideal") or value.endswith(".toml"):
+    if value in ("realistic", "ideal", "room") or value.endswith(".toml"):
         return value
     raise argparse.ArgumentTypeError(
-        f"unknown sensing profile {value!r}; allowed: realistic, ideal, "
+        f"unknown sensing profile {value!r}; allowed: realistic, ideal, room, "
         "or a .toml file with a [sensing] table"
     )
 
@@ -30,12 +30,14 @@ def _sensing_argument(p: argparse.ArgumentParser) -> None:
         "--sensing",
         default="realistic",
         type=_sensing,
-        metavar="{realistic,ideal,FILE.toml}",
+        metavar="{realistic,ideal,room,FILE.toml}",
         help="the simulator's sensor errors (default: realistic: camera noise, calibration error, odometry "
-        "drift, pan-tilt backlash; ideal: exact sensors, for teaching the mathematics; FILE.toml: a "
+        "drift, pan-tilt backlash; room: those in a real room: a surveyed map, the operator's start, mount "
+        "errors, camera latency, slip on a bump, errors 1.5 x what the robot is told; ideal: exact sensors, "
+        "for teaching the mathematics; FILE.toml: a "
         '[sensing] table, profile = "realistic" plus [sensing.camera], [sensing.odometry], '
-        "[sensing.pan_tilt] fields to change); with --robot on a rehearsal config, its rendered camera "
-        "follows the camera section (odometry and pan-tilt are the emulators')",
+        "[sensing.pan_tilt], [sensing.room] fields to change); with --robot on a rehearsal config, its "
+        "rendered camera follows the camera section (odometry and pan-tilt are the emulators')",
     )
 
 
@@ -446,8 +448,9 @@ def build_parser() -> argparse.ArgumentParser:
     ev = sub.add_parser(
         "eval",
         help="run an evaluation sweep (seeded episodes) on a process pool or a Dask cluster",
-        description="Run a grid of seeded episodes (identify: models x seeds x planners x movers x sensing; "
-        "search: objects x placements x seeds x strategies x obstacles x sensing x localization), locally "
+        description="Run a grid of seeded episodes (identify: models x seeds x planners x movers x sensing x "
+        "error scales; search: objects x placements x seeds x strategies x obstacles x sensing x error "
+        "scales x localization), locally "
         "(--workers N processes) or on a Dask cluster (--scheduler tcp://HOST:8786, or 'local' for a local "
         "one); writes OUT/jobs/KEY.json per job as it finishes, OUT/results.csv and OUT/report.md. Report "
         "seeds the ledger lists as spent are refused (--allow-spent-seeds); `lab eval spend` records "
@@ -464,10 +467,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ei.add_argument("--planners", help="comma-separated: lut, mc, random, circle (default lut,random)")
     ei.add_argument("--movers", "--mover", dest="movers", help="comma-separated (default evasive)")
-    ei.add_argument("--sensing", help="comma-separated: realistic, ideal (default realistic)")
+    ei.add_argument("--sensing", help="comma-separated: realistic, ideal, room (default realistic)")
     ei.add_argument("--max-actions", type=int, help="planning actions budget per episode (default 8)")
     ei.add_argument("--max-time", type=float, help="sim-time budget per episode [s] (default 240)")
     ei.add_argument("--keep-direction", type=float, help="the agent's keep_direction (default 0.5)")
+    ei.add_argument(
+        "--error-scale",
+        help="comma-separated scales of every error of the sensing profile, e.g. 1,2,3 (default 1): the "
+        "report's robustness curve, success against scale with Wilson intervals (report.md, robustness.png)",
+    )
     _sweep_run_arguments(ei)
     es = evs.add_parser("search", help="search trials (`lab search`)")
     es.add_argument("--sweep", type=Path, help="a TOML file with the grid (flags given here override it)")
@@ -482,7 +490,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--strategies", help="comma-separated: paper, rate, lawnmower, frontier (default all four)"
     )
     es.add_argument("--obstacles", help="no, yes or both (default both): boxes on the straight path")
-    es.add_argument("--sensing", help="comma-separated: realistic, ideal (default realistic)")
+    es.add_argument("--sensing", help="comma-separated: realistic, ideal, room (default realistic)")
     es.add_argument("--localization", help="comma-separated: landmarks, odometry (default landmarks)")
     es.add_argument("--max-time", type=float, help="sim-time budget per trial [s] (default 600)")
     es.add_argument("--max-wall-time", type=float, help="the trial's own wall-clock cap [s] (default none)")
@@ -496,6 +504,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--object-speed", type=float, help="with --moving: the object's speed [m/s] (default 0.1)"
     )
     es.add_argument("--pause", type=float, help="with --moving: its pause after each leg [s] (default 5)")
+    es.add_argument(
+        "--error-scale",
+        help="comma-separated scales of every error of the sensing profile, e.g. 1,2,3 (default 1): the "
+        "report's robustness curve, success against scale with Wilson intervals (report.md, robustness.png)",
+    )
     _sweep_run_arguments(es)
     sp = evs.add_parser(
         "spend",

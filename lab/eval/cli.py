@@ -40,6 +40,7 @@ def _spec(args, fields) -> dict:
 
 def identify_sweep(args):
     """The grid of ``lab eval identify``, checked."""
+    from lab.eval.robustness import parse_error_scales
     from lab.eval.sweep import SWEEP_FIELDS, IdentifySweep
     from lab.evaluation import fresh_report_seeds
 
@@ -53,6 +54,7 @@ def identify_sweep(args):
         max_actions=int(spec.get("max_actions", 8)),
         max_time=float(spec.get("max_time", 240.0)),
         keep_direction=spec.get("keep_direction"),
+        error_scale=parse_error_scales(spec.get("error_scale", "1")),
     )
     sw.check()
     return sw
@@ -60,6 +62,7 @@ def identify_sweep(args):
 
 def search_sweep(args):
     """The grid of ``lab eval search``, checked."""
+    from lab.eval.robustness import parse_error_scales
     from lab.eval.search import SEARCH_FIELDS, SEARCH_MAX_TIME_S, STRATEGIES, SearchSweep
     from lab.evaluation import fresh_report_seeds
 
@@ -78,6 +81,7 @@ def search_sweep(args):
         moving=spec.get("moving"),
         object_speed=float(spec.get("object_speed", 0.1)),
         pause=float(spec.get("pause", 5.0)),
+        error_scale=parse_error_scales(spec.get("error_scale", "1")),
     )
     sw.check()
     return sw

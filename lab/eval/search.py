@@ -54,6 +54,7 @@ SEARCH_FIELDS = (
     "moving",
     "object_speed",
     "pause",
+    "error_scale",
 )
 
 MOVING_KINDS = ("random", "evasive")
@@ -102,8 +103,10 @@ class SearchSweep:
     moving: str | None = None
     object_speed: float = 0.1
     pause: float = 5.0
+    error_scale: tuple[float, ...] = (1.0,)
 
     def check(self) -> None:
+        from lab.eval.robustness import parse_error_scales
         from lab.runs.placement import SURFACES, searchable_objects
 
         if not self.seeds:
@@ -127,8 +130,8 @@ class SearchSweep:
         if self.obstacles not in OBSTACLES:
             raise ConfigError(f"obstacles must be one of {', '.join(OBSTACLES)}, got {self.obstacles!r}")
         for s in self.sensing:
-            if s not in ("realistic", "ideal"):
-                raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal")
+            if s not in ("realistic", "ideal", "room"):
+                raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal, room")
         for m in self.localization:
             if m not in LOCALIZATIONS:
                 raise ConfigError(f"unknown localization {m!r}; allowed: {', '.join(LOCALIZATIONS)}")
@@ -136,6 +139,7 @@ class SearchSweep:
             raise ConfigError(f"no localization: give --localization like {','.join(LOCALIZATIONS)}")
         if not self.max_time > 0:
             raise ConfigError(f"max_time must be > 0 s, got {self.max_time}")
+        parse_error_scales(self.error_scale)
         if self.max_wall_time is not None and not self.max_wall_time > 0:
             raise ConfigError(f"max_wall_time must be > 0 s, got {self.max_wall_time}")
         if self.moving is not None:
@@ -149,6 +153,7 @@ class SearchSweep:
 
     def jobs(self) -> list[Job]:
         """Every trial; the shelf's last (the slowest), strategies next to each other on a placement."""
+        from lab.eval.robustness import scale_suffix
         from lab.runs.placement import SURFACES, searchable_objects
 
         objects = searchable_objects()
@@ -157,7 +162,7 @@ class SearchSweep:
             for seed in self.seeds:
                 for name in self.objects:
                     for ob in OBSTACLES[self.obstacles]:
-                        for sensing in self.sensing:
+                        for sensing, k in [(s, k) for s in self.sensing for k in self.error_scale]:
                             for loc in self.localization:
                                 for strategy in self.strategies:
                                     kw = dict(
@@ -171,8 +176,10 @@ class SearchSweep:
                                         max_time=self.max_time,
                                         max_wall_time=self.max_wall_time,
                                         placement_key=[seed, objects.index(name), SURFACES.index(surface)],
+                                        error_scale=k,
                                     )
                                     key = search_key(strategy, ob, sensing, name, surface, seed, loc)
+                                    key += scale_suffix(k)
                                     out.extend(self._moving_jobs(key, kw))
         return out
 
@@ -231,9 +238,11 @@ def search_job(
     object_speed: float = 0.1,
     pause: float = 5.0,
     map: str = "static",
+    error_scale: float = 1.0,
 ) -> dict:
     """One search trial in this worker process (its own PyBullet client): the ``lab search --json``
-    result without its map snapshots, with ``shortest_path_m``."""
+    result without its map snapshots, with ``shortest_path_m``; the profile's errors times
+    ``error_scale``."""
     import numpy as np
 
     from lab.runs.moving import MovingOptions
@@ -241,6 +250,7 @@ def search_job(
     from lab.runs.search import navigator_factory, run_search
     from lab.scene import load_scene
     from lab.search.config import SearchAgentConfig
+    from lab.sim.sensing import sensing_profile
 
     scene = load_scene("lab_room")
     place = random_placement(scene, object, np.random.default_rng(placement_key), surface)
@@ -253,7 +263,7 @@ def search_job(
         navigate=navigator_factory,
         obstacles=obstacles,
         max_wall_time=max_wall_time,
-        sensing=sensing,
+        sensing=sensing_profile(sensing).scaled(error_scale),
         localization=localization,
         moving=None
         if moving is None
@@ -299,6 +309,7 @@ SEARCH = SweepKind(
         "localization",
         "seed",
         "max_time",
+        "error_scale",
         "success",
         "found",
         "path_length_m",
@@ -316,7 +327,17 @@ SEARCH = SweepKind(
         "reason",
         "error",
     ),
-    params=("object", "surface", "strategy", "obstacles", "sensing", "localization", "seed", "max_time"),
+    params=(
+        "object",
+        "surface",
+        "strategy",
+        "obstacles",
+        "sensing",
+        "error_scale",
+        "localization",
+        "seed",
+        "max_time",
+    ),
     conditions=("strategy", "obstacles", "sensing", "localization"),
     medians=(
         ("found", lambda rs: str(sum(bool(r["found"]) for r in rs))),

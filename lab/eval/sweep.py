@@ -48,6 +48,7 @@ CSV_FIELDS = (
     "sensing",
     "seed",
     "max_actions",
+    "error_scale",
     "success",
     "identified_model",
     "actions",
@@ -65,7 +66,8 @@ class SweepKind:
     columns (``key``, ``error`` and ``wall_time_s`` among them), the others read from the job's
     parameters (``params``) or its result; ``conditions``: the parameters a report row is grouped
     by; ``medians``: ``(header, function of the rows that ran -> value)`` columns of the report;
-    ``state``: a finished job's progress line."""
+    ``state``: a finished job's progress line. A sweep over several error scales is grouped by
+    ``error_scale`` too (:func:`write_report`)."""
 
     name: str
     schema: str
@@ -91,7 +93,7 @@ IDENTIFY = SweepKind(
     name="identify",
     schema="identify",
     columns=CSV_FIELDS,
-    params=("true_model", "planner", "mover", "sensing", "seed", "max_actions"),
+    params=("true_model", "planner", "mover", "sensing", "error_scale", "seed", "max_actions"),
     conditions=("planner", "mover", "sensing"),
     medians=(
         # an episode that did not identify its model counts its whole budget (a lower bound)
@@ -111,7 +113,8 @@ def job_seed_sequence(seed: int):
 
 @dataclass(frozen=True)
 class IdentifySweep:
-    """The grid of ``lab eval identify``: models x seeds x planners x movers x sensing profiles."""
+    """The grid of ``lab eval identify``: models x seeds x planners x movers x sensing profiles x error
+    scales (every error of the profile times it, :meth:`lab.sim.sensing.SensingProfile.scaled`)."""
 
     models: tuple[int, ...] = (0, 1, 2, 3)
     seeds: tuple[int, ...] = ()
@@ -121,9 +124,11 @@ class IdentifySweep:
     max_actions: int = 8
     max_time: float = 240.0
     keep_direction: float | None = None
+    error_scale: tuple[float, ...] = (1.0,)
     fields: tuple = field(default=(), compare=False, repr=False)
 
     def check(self) -> None:
+        from lab.eval.robustness import parse_error_scales
         from lab.identification.agent import PlannerChoice
 
         if not self.seeds:
@@ -141,31 +146,35 @@ class IdentifySweep:
             if m not in ("static", "scripted", "random", "evasive"):
                 raise ConfigError(f"unknown mover {m!r}; movers: static, scripted, random, evasive")
         for s in self.sensing:
-            if s not in ("realistic", "ideal"):
-                raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal")
+            if s not in ("realistic", "ideal", "room"):
+                raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal, room")
+        parse_error_scales(self.error_scale)
         if self.max_actions < 0:
             raise ConfigError(f"max_actions must be >= 0, got {self.max_actions}")
         if not self.max_time > 0:
             raise ConfigError(f"max_time must be > 0 s, got {self.max_time}")
 
     def jobs(self) -> list[Job]:
+        from lab.eval.robustness import scale_suffix
+
         out = []
-        for planner in self.planners:
-            for mover in self.movers:
-                for sensing in self.sensing:
-                    for seed in self.seeds:
-                        for m in self.models:
-                            kw = dict(
-                                true_model=m,
-                                seed=seed,
-                                mover=mover,
-                                planner=planner,
-                                max_actions=self.max_actions,
-                                max_time_s=self.max_time,
-                                sensing=sensing,
-                                keep_direction=self.keep_direction,
-                            )
-                            out.append(Job(identify_key(planner, mover, sensing, m, seed), identify_job, kw))
+        grid = [(p, mv, s) for p in self.planners for mv in self.movers for s in self.sensing]
+        for (planner, mover, sensing), k in [(g, k) for g in grid for k in self.error_scale]:
+            for seed in self.seeds:
+                for m in self.models:
+                    kw = dict(
+                        true_model=m,
+                        seed=seed,
+                        mover=mover,
+                        planner=planner,
+                        max_actions=self.max_actions,
+                        max_time_s=self.max_time,
+                        sensing=sensing,
+                        keep_direction=self.keep_direction,
+                        error_scale=k,
+                    )
+                    key = identify_key(planner, mover, sensing, m, seed) + scale_suffix(k)
+                    out.append(Job(key, identify_job, kw))
         return out
 
 
@@ -183,6 +192,7 @@ SWEEP_FIELDS = (
     "max_actions",
     "max_time",
     "keep_direction",
+    "error_scale",
 )
 
 
@@ -204,10 +214,13 @@ def load_sweep_file(path: Path, fields: tuple[str, ...] = SWEEP_FIELDS) -> dict:
     return data
 
 
-def identify_job(**kwargs) -> dict:
-    """One identification episode in this worker process (its own PyBullet client), no figures."""
+def identify_job(error_scale: float = 1.0, **kwargs) -> dict:
+    """One identification episode in this worker process (its own PyBullet client), no figures; its
+    profile's errors times ``error_scale``."""
     from lab.runs.identify import run_identify
+    from lab.sim.sensing import sensing_profile
 
+    kwargs["sensing"] = sensing_profile(kwargs.get("sensing", "realistic")).scaled(error_scale)
     return run_identify(figures=False, **kwargs)
 
 
@@ -303,9 +316,11 @@ def run_sweep(
 
 
 def write_report(out: Path, rows: list[dict], kind: SweepKind = IDENTIFY) -> Path:
-    """``report.md``: success per condition (``kind.conditions``, e.g. planner, mover, sensing) with its
-    Wilson 95 % interval and the kind's medians; the split of the seeds, and whether any is spent (in
-    the ledger of :mod:`lab.evaluation`); the failed jobs."""
+    """``report.md``: success per condition (``kind.conditions``, e.g. planner, mover, sensing, and the
+    error scale when there are several) with its Wilson 95 % interval and the kind's medians; the split
+    of the seeds, and whether any is spent (in the ledger of :mod:`lab.evaluation`); the failed jobs; the
+    robustness curve over the error scales (:mod:`lab.eval.robustness`, with ``robustness.png``)."""
+    from lab.eval.robustness import robustness_lines
     from lab.evaluation import spent_among, spent_note, split_of, wilson_interval
     from lab.io import write_text_atomic
 
@@ -317,11 +332,14 @@ def write_report(out: Path, rows: list[dict], kind: SweepKind = IDENTIFY) -> Pat
         note = spent_note(spent_among(seeds, run=kind.name), len(seeds))
         if note:
             lines += [note, ""]
-    heads = [*kind.conditions, "success", "Wilson 95 %", *(h for h, _ in kind.medians), "errors"]
+    conditions = kind.conditions
+    if len({float(r.get("error_scale") or 1.0) for r in rows}) > 1:
+        conditions = (*conditions, "error_scale")
+    heads = [*conditions, "success", "Wilson 95 %", *(h for h, _ in kind.medians), "errors"]
     lines += ["| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
-    conds = sorted({tuple(str(r[c]) for c in kind.conditions) for r in rows})
+    conds = sorted({tuple(str(r[c]) for c in conditions) for r in rows})
     for c in conds:
-        rs = [r for r in rows if tuple(str(r[k]) for k in kind.conditions) == c]
+        rs = [r for r in rows if tuple(str(r[k]) for k in conditions) == c]
         ran = [r for r in rs if not r["error"]]
         k = sum(bool(r["success"]) for r in ran)
         ci = wilson_interval(k, len(ran)) if ran else None
@@ -334,6 +352,7 @@ def write_report(out: Path, rows: list[dict], kind: SweepKind = IDENTIFY) -> Pat
         lines += ["", "Failed jobs (`--resume` runs them again):", ""]
         lines += [f"* {r['key']}: {r['error'].splitlines()[0]}" for r in fails]
     lines.append("")
+    lines += robustness_lines(out, rows, kind.name)
     return write_text_atomic(out / "report.md", "\n".join(lines)) or out / "report.md"
 
 

@@ -13,8 +13,9 @@ Modules: :mod:`~lab.localization.modes` (:class:`LocalizationMode`), :mod:`~lab.
 (the planar motion and measurement models and their Jacobians), :mod:`~lab.localization.filter` (the
 filter: :class:`LocalizerConfig`, :class:`Localizer`, its records; the equations are in its
 docstring), :mod:`~lab.localization.observer` (finding landmarks in frames),
-:mod:`~lab.localization.robot` (:class:`LocalizedRobot`) and :mod:`~lab.localization.landmarks` (the
-landmark map, built by :mod:`lab.training.landmarks`).
+:mod:`~lab.localization.robot` (:class:`LocalizedRobot`), :mod:`~lab.localization.landmarks` (the
+landmark map, built by :mod:`lab.training.landmarks`), :mod:`~lab.localization.posters` (a surveyed map's
+posters in the filter's state) and :mod:`~lab.localization.stamps` (the odometry at an image's stamp).
 """
 
 from lab.localization.filter import Localizer, LocalizerConfig, PlanarPoseEstimate, UpdateRecord
@@ -32,7 +33,9 @@ from lab.localization.models import (
 )
 from lab.localization.modes import LocalizationMode
 from lab.localization.observer import LandmarkObservation, LandmarkObserver, face_share_in_image
+from lab.localization.posters import PosterStates
 from lab.localization.robot import LocalizedRobot
+from lab.localization.stamps import OdometryHistory, PanTiltHistory, interpolate_pose
 
 __all__ = [
     "Landmark",
@@ -43,11 +46,15 @@ __all__ = [
     "LocalizedRobot",
     "Localizer",
     "LocalizerConfig",
+    "OdometryHistory",
+    "PanTiltHistory",
     "PlanarPoseEstimate",
+    "PosterStates",
     "UpdateRecord",
     "calibrated_motion_jacobians",
     "calibrated_motion_model",
     "face_share_in_image",
+    "interpolate_pose",
     "inward_normal",
     "measurement_jacobian",
     "measurement_model",

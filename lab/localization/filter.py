@@ -28,6 +28,9 @@ curvature bias ``c`` [rad/m], with ``theta' = theta + k dtheta + c dx``
 (``H = [dh/dx, 0]``: a landmark sees the pose; a turn correlates the heading with ``k``, and the next
 update corrects both). ``x`` and ``Sigma`` stay the pose's mean and covariance.
 
+**A surveyed map** (:attr:`Landmark.survey_sigma_m` above 0): each such poster's planar pose joins the
+state, seeded by the survey, and the updates refine it (landmark SLAM, :mod:`lab.localization.posters`).
+
 The update is iterated (``LocalizerConfig.update_iterations``) because one EKF step is linearised at the
 prior: after a long drive on realistic odometry the heading can be 15 deg off, and one step then left
 the estimate 15 cm from where a precise poster sighting put the robot, with a covariance claiming 2 cm
@@ -51,13 +54,11 @@ from lab.localization.landmarks import Landmark
 from lab.localization.models import (
     calibrated_motion_jacobians,
     calibrated_motion_model,
-    measurement_jacobian,
-    measurement_model,
     motion_jacobians,
     motion_model,
-    pose_from_observation,
 )
 from lab.localization.modes import LocalizationMode
+from lab.localization.posters import PosterStates, observe, sighting_pose
 
 __all__ = ["Localizer", "LocalizerConfig", "PlanarPoseEstimate", "UpdateRecord"]
 
@@ -150,6 +151,9 @@ class LocalizerConfig:
         The landmark update's iterations (the iterated EKF: relinearise at the new mean until it stops
         moving, at most this many); 1 is the plain EKF. How it was chosen:
         docs/tuning/localizer-update-iterations.md.
+    camera_yaw_sigma_rad : float [rad]
+        Estimate the camera's yaw on the base (the pan zero and the mounts' yaw) in the state, from this
+        prior (:mod:`lab.localization.posters`); 0: assumed exact (not in the state).
     odometry_calibration : bool
         Estimate the odometry's turn scale ``k`` and curvature bias ``c`` in the state
         (:func:`calibrated_motion_model`); False: the pose alone, with the systematic errors left to the
@@ -203,6 +207,7 @@ class LocalizerConfig:
     turn_scale_walk_per_sqrt_rad: float = 0.002
     calibrated_heading_rad_per_sqrt_m: float = 0.02
     calibrated_heading_rad_per_sqrt_rad: float = 0.03
+    camera_yaw_sigma_rad: float = 0.0
     ransac: RansacConfig = field(default_factory=lambda: RansacConfig(min_matches=6, dist_max_m=0.25))
 
     def __post_init__(self):
@@ -225,6 +230,7 @@ class LocalizerConfig:
             "turn_scale_walk_per_sqrt_rad",
             "calibrated_heading_rad_per_sqrt_m",
             "calibrated_heading_rad_per_sqrt_rad",
+            "camera_yaw_sigma_rad",
         ):
             v = getattr(self, k)
             if not (math.isfinite(v) and v >= 0):
@@ -402,7 +408,8 @@ class Localizer:
     through their correlation with the heading (a landmark sees the pose only: ``H = [H_x, 0]``).
 
     ``x`` and ``Sigma`` are the pose's mean and covariance (the first three of ``s`` and ``P``);
-    :attr:`calibration` the odometry's.
+    :attr:`calibration` the odometry's; :meth:`landmark_estimates` a surveyed map's posters, which join
+    ``s`` after these at their first sighting (:mod:`lab.localization.posters`).
 
     Parameters
     ----------
@@ -424,7 +431,8 @@ class Localizer:
     def __init__(self, x0, Sigma0=None, config: LocalizerConfig | None = None, first_sighting: bool = False):
         self.config = c = config or LocalizerConfig()
         self.first_sighting_pending = bool(first_sighting)
-        n = 5 if c.odometry_calibration else 3
+        self._m = n = 5 if c.odometry_calibration else 3  # the robot's part of the state; posters follow
+        self.posters = PosterStates(n)  # the surveyed posters in the state (lab.localization.posters)
         self.s = np.zeros(n)
         self.P = np.zeros((n, n))
         self.x = x0
@@ -434,6 +442,9 @@ class Localizer:
         if n == 5:  # the calibration's prior: nominal odometry, give or take its sigmas
             self.s[3:] = (1.0, 0.0)
             self.P[3, 3], self.P[4, 4] = c.turn_scale_sigma**2, c.curvature_sigma_rad_per_m**2
+        self.camera_yaw = None  # its index in the state, when estimated (camera_yaw_sigma_rad)
+        if c.camera_yaw_sigma_rad > 0:
+            self.s, self.P, self.camera_yaw = self.posters.augment_yaw(self.s, self.P, c.camera_yaw_sigma_rad)
         self.history: list[UpdateRecord] = []
         self.rejected_in_a_row = 0
         self.n_inflations = 0
@@ -454,7 +465,7 @@ class Localizer:
     @property
     def Sigma(self) -> np.ndarray:
         """The pose's covariance (3, 3) (a copy; assigning it sets the pose's block and forgets its
-        correlation with the calibration)."""
+        correlation with the rest of the state: the calibration, the posters)."""
         return self.P[:3, :3].copy()
 
     @Sigma.setter
@@ -467,7 +478,7 @@ class Localizer:
     def calibration(self) -> tuple[float, float, float, float] | None:
         """The odometry's turn scale ``k``, curvature bias ``c`` [rad/m] and their standard deviations,
         or None without ``odometry_calibration``."""
-        if len(self.s) == 3:
+        if self._m == 3:
             return None
         return (float(self.s[3]), float(self.s[4]), math.sqrt(self.P[3, 3]), math.sqrt(self.P[4, 4]))
 
@@ -479,20 +490,23 @@ class Localizer:
         """Prediction from an odometry increment ``u`` (3,).
 
         ``s_bar = f(s, u)``, ``P_bar = F P F^T + V M V^T`` (+ the turn scale's walk when calibrating)."""
-        c = self.config
-        if len(self.s) == 3:
-            F, V = motion_jacobians(self.s, u)
-            s_bar = motion_model(self.s, u)
+        c, m = self.config, self._m
+        if m == 3:
+            F, V = motion_jacobians(self.s[:3], u)
+            s_bar = motion_model(self.s[:3], u)
         else:
-            F, V = calibrated_motion_jacobians(self.s, u)
-            s_bar = calibrated_motion_model(self.s, u)
-        M = c.motion_noise(u)
-        P = F @ self.P @ F.T + V @ M @ V.T  # P_bar = F P F^T + V M V^T
-        if len(self.s) == 5:
+            F, V = calibrated_motion_jacobians(self.s[:5], u)
+            s_bar = calibrated_motion_model(self.s[:5], u)
+        # P_bar = F P F^T + V M V^T with F = blockdiag(F, I): the posters stay where they are
+        P = self.P.copy()
+        P[:m] = F @ P[:m]
+        P[:, :m] = P[:, :m] @ F.T
+        P[:m, :m] += V @ c.motion_noise(u) @ V.T
+        if m == 5:
             P[3, 3] += c.turn_scale_walk_per_sqrt_rad**2 * abs(float(u[2]))
-        self.s, self.P = s_bar, 0.5 * (P + P.T)
+        self.s, self.P = np.concatenate([s_bar, self.s[m:]]), 0.5 * (P + P.T)
         if self._clone is not None:  # the clone stays where it was: Cov(s_bar, x_c) = F Cov(s, x_c)
-            self._clone.cross = F @ self._clone.cross
+            self._clone.cross[:m] = F @ self._clone.cross[:m]
         self._moved += (math.hypot(u[0], u[1]), abs(u[2]))
         if self._moved[0] >= self.config.recount_m or self._moved[1] >= self.config.recount_rad:
             self._rejected_here.clear()  # a new place: every landmark's rejection counts again
@@ -507,18 +521,12 @@ class Localizer:
             return self.first_sighting(z, Q, landmark, t, n_inliers)
         z = np.asarray(z, float)
         Q = np.asarray(Q, float) + self.config.observation_floor(z)
-        l = landmark.planar
+        j = self._poster_block(landmark)  # H = [dh/dx, 0, (dh/dl_j)]: the pose, a surveyed poster
         x_bar, Sigma_bar = self.x, self.Sigma
         s_bar, P_bar = self.s.copy(), self.P.copy()
-        n = len(s_bar)
-
-        def jacobian(s):  # H = [dh/dx, 0]: a landmark sees the pose, not the calibration
-            H = np.zeros((3, n))
-            H[:, :3] = measurement_jacobian(s[:3], l)
-            return H
-
-        H = jacobian(s_bar)
-        nu = z - measurement_model(x_bar, l)  # innovation
+        n, angles = len(s_bar), self.posters.angles()
+        h, H = observe(s_bar, landmark, j, self.camera_yaw)
+        nu = z - h  # innovation
         nu[2] = wrap_angle(nu[2])
         S = H @ P_bar @ H.T + Q  # innovation covariance
         nis = float(nu @ np.linalg.solve(S, nu))
@@ -528,19 +536,20 @@ class Localizer:
             # and S), relinearise at each new mean until it stops moving
             s_i = s_bar.copy()
             for i in range(self.config.update_iterations):
+                h, H_i = observe(s_i, landmark, j, self.camera_yaw)
                 if i > 0:
-                    H = jacobian(s_i)
+                    H = H_i
                     S = H @ P_bar @ H.T + Q
                 K = np.linalg.solve(S, H @ P_bar).T  # K = P_bar H^T S^-1 (S, P_bar symmetric)
-                r = z - measurement_model(s_i[:3], l)
+                r = z - h
                 r[2] = wrap_angle(r[2])
                 ds = s_bar - s_i
-                ds[2] = wrap_angle(ds[2])
+                ds[angles] = wrap_angle(ds[angles])
                 v = r - H @ ds  # the iterated EKF's innovation at s_i
                 s_next = s_bar + K @ v
-                s_next[2] = wrap_angle(s_next[2])
+                s_next[angles] = wrap_angle(s_next[angles])
                 step = s_next - s_i
-                step[2] = wrap_angle(step[2])
+                step[angles] = wrap_angle(step[angles])
                 s_i = s_next
                 if np.max(np.abs(step)) < 1e-9:  # [m], [rad]: converged
                     break
@@ -562,6 +571,21 @@ class Localizer:
                 self.n_inflations += 1
                 self._rejected_here.clear()  # the doubted estimate is tried against them all again
         return self._record(t, landmark, z, Q, x_bar, Sigma_bar, nis, bool(accepted), n_inliers)
+
+    def _poster_block(self, landmark: Landmark) -> int | None:
+        """The index of a surveyed landmark's block in the state, added (seeded by its survey,
+        :meth:`PosterStates.augment`) at its first observation; None for a landmark held fixed."""
+        j = self.posters.index_of(landmark)
+        if j is None and landmark.surveyed:
+            self.s, self.P, j = self.posters.augment(self.s, self.P, landmark)
+            if self._clone is not None:  # the new block is independent of the kept pose
+                self._clone.cross = np.vstack([self._clone.cross, np.zeros((3, 3))])
+        return j
+
+    def landmark_estimates(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """The surveyed posters in the state, as refined so far: ``[x, y, yaw]`` and covariance (3, 3)
+        by name (an exact map's landmarks, held fixed, are not in it)."""
+        return self.posters.estimates(self.s, self.P)
 
     def _record(self, t, landmark, z, Q, x_bar, Sigma_bar, nis, accepted, n_inliers, kind="update"):
         """Keep what an observation did, with the filter's state after it, in :attr:`history`."""
@@ -633,35 +657,44 @@ class Localizer:
           ``first_sighting_max_offset_m`` and ``_rad`` of the start; farther, it is rejected as an outlier
           (a wrong fit) and the next sighting is tried the same way.
 
-        Later observations go through the EKF :meth:`update`.
+        Later observations go through the EKF :meth:`update`. A surveyed landmark (in the state) enters
+        both through :math:`J_l = \partial x_z / \partial l` (:mod:`lab.localization.posters`): the
+        fusion's ``H = [I, 0, -J_l]``; a reset's pose keeps its correlation with the landmark.
         """
         z = np.asarray(z, float)
         Q = np.asarray(Q, float) + self.config.observation_floor(z)
+        j = self._poster_block(landmark)
         x_bar, Sigma_bar = self.x, self.Sigma
         P_bar = self.P.copy()
         n = len(self.s)
-        x_z, J = pose_from_observation(z, landmark.planar)
-        Sigma_z = J @ Q @ J.T  # the sighting's pose covariance
+        x_z, Sigma_z, Jl = sighting_pose(self.s, z, Q, landmark, j, self.camera_yaw)  # Sigma_z = J_z Q J_z^T
         d = x_z - x_bar
         d[2] = wrap_angle(d[2])
-        S = Sigma_bar + Sigma_z
+        Hf = -Jl  # d = x - x_z(l): H = [I, 0, -J_l] (no poster: [I, 0])
+        Hf[:, :3] = np.eye(3)
+        S = Hf @ P_bar @ Hf.T + Sigma_z
         nis = float(d @ np.linalg.solve(S, d))
         cfg = self.config
         kind = "fused"
         accepted = True
         if nis <= chi2_quantile(cfg.gate_prob, 3):
-            K = np.linalg.solve(S, P_bar[:3, :]).T  # K = P_bar H^T S^-1, H = [I, 0] (n, 3)
+            K = np.linalg.solve(S, Hf @ P_bar).T  # K = P_bar H^T S^-1 (n, 3)
             s_new = self.s + K @ d
-            IKH = np.eye(n)
-            IKH[:, :3] -= K
+            IKH = np.eye(n) - K @ Hf
             P = IKH @ P_bar @ IKH.T + K @ Sigma_z @ K.T  # Joseph form
-            s_new[2] = wrap_angle(s_new[2])
+            angles = self.posters.angles()
+            s_new[angles] = wrap_angle(s_new[angles])
             self.s, self.P = s_new, 0.5 * (P + P.T)
         elif math.hypot(d[0], d[1]) <= cfg.first_sighting_max_offset_m and abs(d[2]) <= (
             cfg.first_sighting_max_offset_rad
         ):
             kind = "reset"  # the pose from the sighting; the calibration keeps its prior
-            self.x, self.Sigma = x_z, 0.5 * (Sigma_z + Sigma_z.T)
+            # x = x_z(l): Cov(x, y) = J_l Cov(l, y), Cov(x) = J_z Q J_z^T + J_l Cov(l) J_l^T
+            row = Jl @ P_bar
+            self.s[:3] = x_z
+            self.P[:3, :], self.P[:, :3] = row, row.T
+            self.P[:3, :3] = Sigma_z + Jl @ P_bar @ Jl.T
+            self.P = 0.5 * (self.P + self.P.T)
         else:
             kind, accepted = "outlier", False  # rejected
         if accepted:

@@ -13,10 +13,11 @@ This module is data only: the map is built from a scene file or a hardware landm
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from lab.errors import ConfigError
 from lab.geometry import Rz, se3
 from lab.vision.database import FeatureDatabase
 
@@ -40,6 +41,12 @@ class Landmark:
         Unit vector (x, y) in W in which the printed face looks (into the room).
     database : FeatureDatabase or None
         Its 3D SIFT features in L (None until trained).
+    survey_sigma_m, survey_sigma_rad : float [m], [rad]
+        How well ``centre_W`` (x and y, each) and ``yaw`` are known: the standard deviations of a map
+        measured in a room (a tape and a protractor). 0 (the default): exact, as a scene's own posters
+        are; the localizer holds the landmark fixed. Above 0 the localizer carries the landmark's
+        planar pose in its state, seeded here with these, and refines it from its sightings
+        (:mod:`lab.localization.posters`).
     """
 
     name: str
@@ -48,6 +55,19 @@ class Landmark:
     size: tuple[float, float, float]
     normal_W: tuple[float, float]
     database: FeatureDatabase | None = field(default=None, repr=False, compare=False)
+    survey_sigma_m: float = 0.0
+    survey_sigma_rad: float = 0.0
+
+    def __post_init__(self):
+        for k in ("survey_sigma_m", "survey_sigma_rad"):
+            v = getattr(self, k)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ConfigError(f"Landmark {self.name!r}: {k} must be a finite number >= 0, got {v!r}")
+
+    @property
+    def surveyed(self) -> bool:
+        """Whether the landmark's pose is known only to its survey's accuracy (a sigma above 0)."""
+        return self.survey_sigma_m > 0 or self.survey_sigma_rad > 0
 
     @property
     def G_WL(self) -> np.ndarray:
@@ -56,7 +76,8 @@ class Landmark:
 
     @property
     def planar(self) -> np.ndarray:
-        """``l = [x, y, yaw]`` of L in the floor plane, the localizer's landmark state (known, fixed)."""
+        """``l = [x, y, yaw]`` of L in the floor plane: the localizer's landmark (fixed, or its state's
+        seed when :attr:`surveyed`)."""
         return np.array([self.centre_W[0], self.centre_W[1], self.yaw])
 
     @property
@@ -137,6 +158,14 @@ class LandmarkMap:
     @property
     def trained(self) -> bool:
         return all(lm.database is not None for lm in self.landmarks)
+
+    def surveyed(self, sigma_m: float, sigma_rad: float) -> LandmarkMap:
+        """This map with every landmark's pose stated to be known to ``sigma_m`` [m] (x and y, each) and
+        ``sigma_rad`` [rad] (yaw): a map measured in a room (:attr:`Landmark.survey_sigma_m`); the
+        poses themselves are kept."""
+        sm, sr = float(sigma_m), float(sigma_rad)
+        lms = tuple(replace(lm, survey_sigma_m=sm, survey_sigma_rad=sr) for lm in self)
+        return replace(self, landmarks=lms)
 
     def bearing_in_robot(self, lm: Landmark, x: np.ndarray) -> tuple[float, float]:
         """Range [m] and bearing [rad] of landmark ``lm``'s centre from the planar pose ``x``."""

@@ -24,7 +24,8 @@ from lab.localization.landmarks import LandmarkMap
 from lab.localization.models import odometry_increment
 from lab.localization.modes import LocalizationMode
 from lab.localization.observer import LandmarkObserver
-from lab.robot import Robot, RobotWrapper
+from lab.localization.stamps import OdometryHistory, PanTiltHistory
+from lab.robot import PanTiltState, Robot, RobotWrapper
 
 __all__ = ["LocalizedRobot"]
 
@@ -35,6 +36,13 @@ class LocalizedRobot(RobotWrapper):
     Its frames keep the base's wheel odometry in ``wheel_odom``: the object filters predict with the
     wheels' increment between two frames (:func:`lab.robot.frame_motion`), since a landmark update moves
     the estimate, not the robot.
+
+    A frame is used at its image's stamp: ``frame.t - camera_latency_s``. When the head and odometry
+    were read later than that (``frame.pan_tilt.t``: a camera's latency, stated to the robot, or a base
+    that stamps its frames with the image's exposure but reads later), the odometry is taken back to the
+    image's stamp from the readings the localizer keeps (:attr:`odometry_history`,
+    :meth:`wheels_at_image`), and the frame's ``odom`` and ``wheel_odom`` (what the search places
+    objects from, what the object filters predict with) are the pose at the image's stamp.
 
     Every call is passed on to ``base``. With ``mode=LANDMARKS`` each captured frame in which a landmark
     should be visible updates the filter; ``relocalize()`` points the head at landmarks until the pose
@@ -54,6 +62,10 @@ class LocalizedRobot(RobotWrapper):
     Sigma0 : array_like, shape (3, 3), optional
         The covariance of the start, ``base.odometry()`` when this is made (default: the
         :class:`Localizer`'s, 1 cm and 0.5 deg: the simulator's odometry starts at the true pose).
+    camera_latency_s : float [s]
+        How much older an image is than its frame's stamp ``frame.t`` (a camera's measured mean latency:
+        a USB camera's frame is 30-100 ms old on arrival); 0 for a base whose frames are stamped at the
+        image's exposure (the hardware interpolates its readings to it, ``lab.hardware.frame_time``).
     start_measured_by_hand : bool
         The start is a pose an operator measured (a robot's): the first landmark sighting may correct it
         (:meth:`Localizer.first_sighting`).
@@ -70,11 +82,18 @@ class LocalizedRobot(RobotWrapper):
         *,
         Sigma0=None,
         start_measured_by_hand: bool = False,
+        camera_latency_s: float = 0.0,
     ):
         super().__init__(base)
         self.mode = LocalizationMode.parse(mode)
         self.config = config or LocalizerConfig()
         self._odom = base.odometry()
+        if not (math.isfinite(camera_latency_s) and 0.0 <= camera_latency_s <= 1.0):
+            raise ConfigError(f"camera_latency_s must be within [0, 1] s, got {camera_latency_s!r}")
+        self.camera_latency_s = float(camera_latency_s)
+        self.odometry_history = OdometryHistory()  # the base's stamped readings: wheels_at_image
+        self.pan_tilt_history = PanTiltHistory()  # the head's, with a camera latency: head_at_image
+        self.odometry_history.add(base.now(), self._odom)
         self.localizer = Localizer(
             self._odom.as_array(), Sigma0, config=self.config, first_sighting=start_measured_by_hand
         )
@@ -90,7 +109,11 @@ class LocalizedRobot(RobotWrapper):
 
     # the estimate
     def _sync(self, odom: Pose2D | None = None) -> None:
-        odom = self.base.odometry() if odom is None else odom
+        """Predict the filter to the base's odometry now (kept in the history), or to ``odom`` (a
+        frame's: possibly older than the last, then the increment runs backwards)."""
+        if odom is None:
+            odom = self.base.odometry()
+            self.odometry_history.add(self.base.now(), odom)
         u = odometry_increment(self._odom, odom)
         if np.any(u != 0.0):
             self.localizer.predict(u)
@@ -129,15 +152,64 @@ class LocalizedRobot(RobotWrapper):
             "curvature_sd_rad_per_m": round(sc, 5),
         }
 
+    def refined_landmarks(self) -> dict[str, dict]:
+        """What the filter learned of a surveyed map (:meth:`Localizer.landmark_estimates`), for a run's
+        JSON and the operator, by poster: its refined ``x_m``, ``y_m``, ``yaw_deg``, their standard
+        deviations ``sd_m`` (the larger axis) and ``sd_deg``, and how far it moved from the map
+        (``moved_m``, ``turned_deg``: a survey that far off). Empty for an exact map (held fixed) and
+        with ``mode=odometry``."""
+        if self.mode is LocalizationMode.ODOMETRY:
+            return {}
+        out = {}
+        for name, (l, L) in self.localizer.landmark_estimates().items():
+            mapped = self.observer.map.get(name).planar
+            out[name] = {
+                "x_m": round(float(l[0]), 5),
+                "y_m": round(float(l[1]), 5),
+                "yaw_deg": round(math.degrees(l[2]), 4),
+                "sd_m": round(math.sqrt(max(np.linalg.eigvalsh(L[:2, :2])[-1], 0.0)), 5),
+                "sd_deg": round(math.degrees(math.sqrt(L[2, 2])), 4),
+                "moved_m": round(math.hypot(l[0] - mapped[0], l[1] - mapped[1]), 5),
+                "turned_deg": round(math.degrees(wrap_angle(l[2] - mapped[2])), 4),
+            }
+        return out
+
     def wheel_odometry(self) -> Pose2D:
         """The base's wheel odometry, which the estimate starts from (in the base's frame)."""
         return self.base.odometry()
 
+    def wheels_at_image(self, frame) -> Pose2D:
+        """The base's wheel odometry at the image's stamp ``frame.t - camera_latency_s``.
+
+        The frame's own odometry (``frame.wheels``) was read at ``frame.pan_tilt.t``; when that is later
+        than the image, the history of readings is interpolated back to the image's stamp along the
+        constant-velocity arc (:meth:`OdometryHistory.at`). A base that gives the odometry at the
+        image's stamp (the hardware interpolates it, ``lab.hardware.frame_time``; no latency) has
+        ``pan_tilt.t == t``, and its reading is used as it is."""
+        t_read, t_image = frame.pan_tilt.t, frame.t - self.camera_latency_s
+        self.odometry_history.add(t_read, frame.wheels)
+        return frame.wheels if t_read <= t_image else self.odometry_history.at(t_image)
+
+    def head_at_image(self, frame) -> PanTiltState:
+        """The head's state when the frame's image was exposed, ``frame.t - camera_latency_s``: the
+        frame's reading (``frame.pan_tilt``, at its ``t``) when it is not later, else the head's readings
+        (kept at every :meth:`step` when there is a camera latency) interpolated back to the image's
+        stamp: a head slewing at 60 deg/s is 3 deg past where a 50 ms old image shows it."""
+        t_image = frame.t - self.camera_latency_s
+        if frame.pan_tilt.t <= t_image:
+            return frame.pan_tilt
+        self.pan_tilt_history.add(frame.pan_tilt.t, frame.pan_tilt)
+        return self.pan_tilt_history.at(t_image)
+
     def capture_stereo(self, after=None):
         frame = self.base.capture_stereo(after)
-        self._sync(frame.odom)
-        if self.mode is LocalizationMode.ODOMETRY:
-            return frame
+        wheels = self.wheels_at_image(frame)  # both read at frame.pan_tilt.t, taken to the image's stamp
+        head = self.head_at_image(frame)
+        if head is not frame.pan_tilt:  # G_RC at the image's stamp: for the landmarks and the search
+            frame = replace(frame, pan_tilt=head)
+        self._sync(wheels)
+        if self.mode is LocalizationMode.ODOMETRY:  # the wheels at the image's stamp
+            return frame if wheels is frame.wheels else replace(frame, odom=wheels)
         self.frames_seen += 1
         cands = self.observer.candidates(self.localizer.x, frame)
         for obs in self.observer.observe(frame, cands):
@@ -151,7 +223,7 @@ class LocalizedRobot(RobotWrapper):
                     f"localization: the start pose was {100 * math.hypot(dx, dy):.0f} cm and {abs(dth):.1f} "
                     f"deg off what {obs.landmark.name} says (NIS {rec.nis:.1f}): reset from it"
                 )
-        return replace(frame, odom=self._pose(), wheel_odom=frame.wheels)  # the wheels: frame_motion
+        return replace(frame, odom=self._pose(), wheel_odom=wheels)  # the wheels: frame_motion
 
     def certain(self, sigma_m: float | None = None, sigma_rad: float | None = None, at_W=None) -> bool:
         """Whether the pose is within the thresholds ``sigma_m``, ``sigma_rad`` (position: the larger
@@ -271,7 +343,7 @@ class LocalizedRobot(RobotWrapper):
                     break
                 pan, tilt, _name = view
                 self.base.command_pan_tilt(pan, tilt)
-                self.base.wait_pan_tilt(timeout=15.0)  # a swing across the whole pan range takes > 5 s
+                self._settle(self.base.wait_pan_tilt(timeout=15.0))  # a whole pan swing takes > 5 s
                 n0 = len(self.localizer.history)
                 self.capture_stereo()
                 n_views += 1
@@ -308,7 +380,23 @@ class LocalizedRobot(RobotWrapper):
             at_W=at_W,
         )
 
+    def wait_pan_tilt(self, timeout: float = 10.0, dt: float = 0.05) -> PanTiltState:
+        """Step until the head reaches its targets (:meth:`lab.robot.Robot.wait_pan_tilt`), then, with a
+        camera latency, as long again as an image is old: the next frame's image is exposed with the head
+        where it stopped (at 60 deg/s, an image 50 ms old shows a head that has just arrived 3 deg short
+        of it, and the frame would pair it with the arrived angle)."""
+        return self._settle(super().wait_pan_tilt(timeout, dt))
+
+    def _settle(self, state: PanTiltState) -> PanTiltState:
+        """After the head stopped: wait ``camera_latency_s`` (see :meth:`wait_pan_tilt`)."""
+        if self.camera_latency_s > 0:
+            self.step(self.camera_latency_s)
+            state = self.base.pan_tilt()
+        return state
+
     # the rest of the Robot interface is RobotWrapper's: passed on to the base
     def step(self, dt: float) -> None:
         self.base.step(dt)
         self._sync()
+        if self.camera_latency_s > 0:  # the head's readings, for head_at_image (none without a latency)
+            self.pan_tilt_history.add(self.base.now(), self.base.pan_tilt())

@@ -153,13 +153,13 @@ def run_identify(
     view3d : Path, optional
         Write the recorded 3D view there (:mod:`lab.viz.view3d`, one HTML page); the JSON's ``view3d``.
     """
-    hw, room, start_pose = _checked_setup(true_model, robot_config, localization, start, view3d)
+    hw, room, start_at = _checked_setup(true_model, robot_config, localization, start, view3d, sensing, seed)
     config = _agent_config(max_actions, max_time_s, keep_direction)
     t_wall, t_cpu = time.perf_counter(), time.process_time()  # CPU: the episode's cost whatever the load
     with contextlib.ExitStack() as stack:
         session = _start(stack, hw, true_model, mover, seed, sensing)
         plan = _known_floor_plan(session)
-        robot, note = _localized(session, room, start_pose, seed)
+        robot, note = _localized(session, room, start_at, seed)
         tracked = TrackedRobot(robot, _truth_pose(session))  # the robot's path, for Fig. 6
         agent = build_agent(tracked, planner, seed, config, floor_plan=plan)
         recorder, viewer = _watch(agent, record, progress), _viewer(agent, session, view3d)
@@ -181,7 +181,7 @@ def run_identify(
     return result
 
 
-def _checked_setup(true_model: int, robot_config, localization, start, view3d=None):
+def _checked_setup(true_model: int, robot_config, localization, start, view3d=None, sensing=None, seed=0):
     """The robot config, the room's landmarks and the robot's start in the room, each checked before
     anything starts (a bad model, config or map, or a 3D view without its optional viewer: one clear
     error)."""
@@ -194,7 +194,8 @@ def _checked_setup(true_model: int, robot_config, localization, start, view3d=No
         require_viser()
     hw = load_robot_config(robot_config)
     kind = robot_kind(hw)
-    room = room_landmarks(kind, hw, _scene_of(kind, hw), localization)  # a bad map: one line, first
+    # a bad map is one line, first; in the simulator the surveyed map of the profile's room errors
+    room = room_landmarks(kind, hw, _scene_of(kind, hw), localization, sensing=sensing, seed=seed)
     return hw, room, _start_of(kind, hw, room, start)
 
 

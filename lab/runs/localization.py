@@ -17,6 +17,7 @@ import numpy as np
 
 from lab.geometry import wrap_angle
 from lab.localization import LocalizationMode, LocalizedRobot, LocalizerConfig
+from lab.runs.room import sim_localizer_told, surveyed_map
 from lab.training.landmarks import trained_landmark_map
 
 __all__ = ["DriveResult", "drive_loop_waypoints", "run_localization_drive"]
@@ -129,8 +130,11 @@ def run_localization_drive(
     ):
         base = run.robot
         base.enable()
+        if landmarks is not None and not base.sensing.room.is_none:  # the room's errors: a surveyed map
+            landmarks = surveyed_map(landmarks, base.sensing, seed)
+        told = sim_localizer_told(base)  # the stated start sigma and camera latency
         robot = LocalizedRobot(
-            base, mode, landmarks, config, rng=np.random.default_rng([seed, 21]), log=lambda m: None
+            base, mode, landmarks, config, rng=np.random.default_rng([seed, 21]), log=lambda m: None, **told
         )
         drive = _LoopDrive(w, base, robot, mode)
         drive.record()

@@ -168,7 +168,8 @@ class SimRenderedStereoSource(StereoSource):
         self.image_size = tuple(calibration.image_size)
         #: the rectified camera, as the adapter builds it: its frame C is the robot's camera frame
         self.camera: StereoCamera = calibration.camera_model(c.mount_R, c.camera_offset_P)
-        from lab.sim.sensing import EpisodeSensing, sensing_profile  # a rendered camera needs the simulator
+        from lab.sim.episode import EpisodeSensing  # a rendered camera needs the simulator
+        from lab.sim.sensing import sensing_profile
 
         self.sensing = sensing_profile(sensing)  # SensingProfile
         self._episode = None  # the camera errors' draws and capture noise (None: exact renders)

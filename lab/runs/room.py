@@ -1,7 +1,10 @@
 """The robot in the room: where a run's robot starts, the landmark map it localizes against, and the
 localizer around it (:class:`~lab.localization.LocalizedRobot`), on every kind of robot.
 
-* **the simulator**: the scene's posters; the start is the true one (its odometry starts there);
+* **the simulator**: the scene's posters, as a survey would give them under a profile with the real
+  room's errors (:func:`surveyed_map`: each poster off by the survey's error, drawn per episode, while
+  the renderer draws the true ones); the start is the scene's, the odometry starting where the
+  operator believes the robot stands (:mod:`lab.sim.room_errors`);
 * **a rehearsal**: the robot config's ``[room] landmarks`` file, else the posters of the scene it
   renders; the start is ``--start``, else ``[room] start``, else the rendered scene's start;
 * **the real robot**: ``[room] landmarks`` (``hardware/landmarks.toml``: without one the run falls back
@@ -13,8 +16,9 @@ On a robot the wheel odometry reads (0, 0, 0) where the base was switched on;
 (a tape measure from the room's origin), so the localizer starts with the covariance ``[room]
 start_sigma`` says and lets the first landmark it sees correct it
 (:meth:`~lab.localization.Localizer.first_sighting`): a start 30 cm off its mark is corrected
-at the first poster, not locked out by the gate. The simulator's odometry starts at the true pose: there
-the localizer starts certain, as before.
+at the first poster, not locked out by the gate. In the simulator the localizer is told the profile's
+stated start sigma the same way (:func:`sim_start_sigma`; a profile without the room's errors starts it
+certain, as before).
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -41,6 +45,9 @@ __all__ = [
     "localize",
     "robot_start",
     "room_landmarks",
+    "sim_localizer_told",
+    "sim_start_sigma",
+    "surveyed_map",
 ]
 
 
@@ -56,11 +63,15 @@ class RoomLandmarks:
         Trained (every landmark with its database); None in ``odometry`` mode.
     note : str or None
         Why the run fell back to odometry alone (for its JSON and log).
+    survey_sigma : (float, float) or None [m, rad]
+        The stated accuracy of each landmark's pose in ``landmarks`` (position per coordinate, yaw):
+        the sensing profile's survey in the simulator; None where the map is taken as exact.
     """
 
     mode: LocalizationMode
     landmarks: LandmarkMap | None = field(default=None, repr=False)
     note: str | None = None
+    survey_sigma: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -86,7 +97,13 @@ def _room(config: HardwareConfig | None) -> RoomConfig:
 
 
 def room_landmarks(
-    kind: RobotKind, config: HardwareConfig | None, scene, localization, progress: bool = False
+    kind: RobotKind,
+    config: HardwareConfig | None,
+    scene,
+    localization,
+    progress: bool = False,
+    sensing=None,
+    seed: int = 0,
 ) -> RoomLandmarks:
     """The trained landmark map of a run (see the module's table), or the fallback to odometry alone.
 
@@ -100,6 +117,10 @@ def room_landmarks(
     localization : {"landmarks", "odometry"} or LocalizationMode
     progress : bool
         Say when a landmark database is built.
+    sensing : SensingProfile, str or mapping, optional
+        The simulator's profile: with the room's errors, the map is :func:`surveyed_map`'s copy for
+        episode ``seed``, and ``survey_sigma`` its stated accuracy.
+    seed : int
 
     Raises
     ------
@@ -129,7 +150,60 @@ def room_landmarks(
         return RoomLandmarks(
             LocalizationMode.ODOMETRY, note=f"{landmarks.source} has no landmarks: the pose is odometry alone"
         )
+    if kind is RobotKind.SIM and sensing is not None:
+        from lab.sim.sensing import sensing_profile
+
+        profile = sensing_profile(sensing)
+        if profile.room.survey_m > 0 or profile.room.survey_deg > 0:
+            return RoomLandmarks(
+                mode, surveyed_map(landmarks, profile, seed), None, profile.room.survey_sigma
+            )
     return RoomLandmarks(mode, landmarks)
+
+
+def surveyed_map(landmarks: LandmarkMap, profile, seed: int) -> LandmarkMap:
+    """The map a survey of the room gives in episode ``seed``: each landmark's centre and yaw off by
+    :func:`lab.sim.room_errors.survey_error` (the profile's survey sigma times its mismatch factor), its
+    database unchanged (it is in the landmark's own frame), each stated to be known to the profile's survey
+    sigma, so the localizer holds them in its state and refines them (:mod:`lab.localization.posters`).
+    The renderer keeps drawing the true posters."""
+    from lab.localization import inward_normal
+    from lab.sim.room_errors import survey_error
+
+    out = []
+    for lm in landmarks:
+        dx, dy, dz, dyaw = survey_error(profile.room, profile.mismatch, seed, lm.name)
+        c = (lm.centre_W[0] + dx, lm.centre_W[1] + dy, lm.centre_W[2] + dz)
+        out.append(
+            replace(lm, centre_W=c, yaw=lm.yaw + dyaw, normal_W=inward_normal(c, lm.yaw + dyaw, lm.size))
+        )
+    surveyed = LandmarkMap(tuple(out), landmarks.room_size, f"{landmarks.source} (surveyed)")
+    return surveyed.surveyed(*profile.room.survey_sigma)  # the localizer refines them from that accuracy
+
+
+def sim_localizer_told(robot) -> dict:
+    """What the localizer is told in the simulator, as :class:`~lab.localization.LocalizedRobot`'s keyword
+    arguments: the stated start sigma with the first sighting allowed to correct it
+    (:func:`sim_start_sigma`), and the camera's stated latency (its frames are stamped at arrival); empty
+    for a profile without the room's errors."""
+    Sigma0 = sim_start_sigma(robot)
+    told = {} if Sigma0 is None else {"Sigma0": Sigma0, "start_measured_by_hand": True}
+    room = getattr(getattr(robot, "sensing", None), "room", None)
+    if room is not None and room.latency_s > 0:
+        told["camera_latency_s"] = room.latency_s
+    return told
+
+
+def sim_start_sigma(robot) -> np.ndarray | None:
+    """The start covariance the localizer is told in the simulator: ``diag(s_m^2, s_m^2, s_rad^2)`` from
+    the profile's stated start sigma (:attr:`lab.sim.room_errors.RoomErrors.start_sigma`, a real robot's
+    ``[room] start_sigma``); None for a profile without the room's errors (or a robot without a profile)."""
+    profile = getattr(robot, "sensing", None)
+    room = getattr(profile, "room", None)
+    if room is None or (room.start_m == 0 and room.start_deg == 0):
+        return None
+    s_m, s_rad = room.start_sigma
+    return np.diag([s_m**2, s_m**2, s_rad**2])
 
 
 def robot_start(
@@ -243,12 +317,17 @@ def localize(
 ) -> LocalizedRobot:
     """The run's robot placed at ``start`` in the room (a robot's; None: as it is) behind the localizer.
 
-    In the simulator (or without a start) the localizer starts at the robot's odometry with its default
-    covariance; on a robot at ``start`` with ``start.Sigma0``, the first landmark sighting allowed to
-    correct it (:meth:`~lab.localization.Localizer.first_sighting`).
+    In the simulator the localizer starts at the robot's odometry, with the profile's stated start sigma
+    and the first sighting allowed to correct it when the profile has the room's errors
+    (:func:`sim_start_sigma`), else with its default covariance (so too a robot without a start); on a
+    robot at ``start`` with ``start.Sigma0``, the first landmark sighting allowed to correct it
+    (:meth:`~lab.localization.Localizer.first_sighting`).
     """
     rng = np.random.default_rng([seed, 20])
-    if kind is RobotKind.SIM or start is None:
+    if kind is RobotKind.SIM:
+        told = sim_localizer_told(robot)
+        return LocalizedRobot(robot, room.mode, room.landmarks, rng=rng, log=log, **told)
+    if start is None:
         return LocalizedRobot(robot, room.mode, room.landmarks, rng=rng, log=log)
     p = start.pose
     s_m, s_rad = math.sqrt(start.Sigma0[0, 0]), math.sqrt(start.Sigma0[2, 2])

@@ -297,7 +297,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     hw = load_robot_config(opts.robot_config)  # a bad robot config is one clear line before anything starts
     kind = robot_kind(hw)
     # the landmark map (a bad landmark file is one line too) and where the robot's odometry starts
-    room = room_landmarks(kind, hw, scene, opts.localization, progress=opts.progress)
+    room = room_landmarks(kind, hw, scene, opts.localization, opts.progress, sensing=opts.sensing, seed=seed)
     mode, note = room.mode, room.note
     start_pose = _start_of(kind, hw, scene, room, opts.start)
     rng = np.random.default_rng(seed)

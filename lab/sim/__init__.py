@@ -12,6 +12,7 @@ from lab.sim.sensing import (
     CameraErrors,
     OdometryErrors,
     PanTiltErrors,
+    RoomErrors,
     SensingProfile,
     sensing_profile,
 )
@@ -24,6 +25,7 @@ __all__ = [
     "OdometryNoise",
     "PanTiltErrors",
     "RenderSettings",
+    "RoomErrors",
     "Scene",
     "SensingProfile",
     "SimRobot",

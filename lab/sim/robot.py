@@ -17,13 +17,14 @@ same on both. Simulated time advances only in :meth:`SimRobot.step`, in sub-step
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
 from lab.errors import ConfigError, EStopActive, NotEnabled, SafetyStop
-from lab.geometry import Pose2D, R_to_quat_xyzw, Rz, wrap_angle
+from lab.geometry import Pose2D, R_to_quat_xyzw, Rz, pan_tilt_G_RP, se3, se3_inv, wrap_angle
 from lab.robot import (
     SIM_CAMERA,
     BaseLimits,
@@ -34,7 +35,9 @@ from lab.robot import (
     StereoFrame,
     check_finite,
 )
-from lab.sim.sensing import EpisodeSensing, SensingProfile, backlash, sensing_profile
+from lab.sim.episode import EpisodeSensing
+from lab.sim.room_errors import rotation_rpy
+from lab.sim.sensing import SensingProfile, backlash, sensing_profile
 from lab.sim.world import SimWorld, pybullet
 
 __all__ = ["OdometryNoise", "RobotTruth", "SimRobot"]
@@ -163,7 +166,17 @@ class SimRobot(Robot):
             x, y, h = world.scene.robot_start
             start = Pose2D(x, y, math.radians(h))
         self._true_pose = start
-        self._odom = start
+        room = self._episode.room
+        # the operator stood the robot on its mark; its odometry starts where the operator believes it is
+        self._odom = _compose(start, room.start_offset) if not self._sensing.room.is_none else start
+        self._head_mount = self._camera_mount = None
+        if not self._sensing.room.is_none:
+            m = np.asarray(self._camera.mount_R, float)
+            self._head_mount = se3(None, m) @ se3(rotation_rpy(room.head_mount_rpy)) @ se3(None, -m)
+            self._camera_mount = rotation_rpy(room.camera_mount_rpy)
+        self._latency = room.latency_s
+        n_past = int(math.ceil(self._latency / dt_physics)) + 4
+        self._past: deque = deque(maxlen=n_past)  # (t, true pose, true axes) per sub-step, for a late image
         self._v = self._omega = 0.0
         self._v_cmd = self._omega_cmd = 0.0
         self._last_cmd_t = -math.inf
@@ -179,6 +192,7 @@ class SimRobot(Robot):
         self._in_contact = False
         self._build_body()
         world.robot = self
+        self._remember()
 
     # --- body -----------------------------------------------------------------------------------
     def _build_body(self):
@@ -274,7 +288,7 @@ class SimRobot(Robot):
         self._check_open()
         if after is not None and after >= self.world.t:
             self.step(after - self.world.t + self.dt_physics)
-        G_WC = self._true_G_WC()
+        G_WC = self._G_WC_at(self.world.t - self._latency)
         if self._sensing.camera.is_none:
             left, right = self.world.render_stereo(G_WC, self._camera)
         else:
@@ -286,11 +300,47 @@ class SimRobot(Robot):
 
     def _true_G_WC(self) -> np.ndarray:
         """The left camera's true pose: the true base, the axes' true angles (``world.truth.G_WC``)."""
+        return self._G_WC(self._true_pose, *self._true_axes())
+
+    def _true_axes(self) -> tuple[float, float]:
+        """The pan-tilt axes' true angles: geared (backlash), plus the zero offsets."""
         if self._sensing.pan_tilt.is_none:
-            return self._true_pose.G() @ self._camera.G_RC(self._pan, self._tilt)
+            return self._pan, self._tilt
         d = self._episode.pan_tilt
-        pan, tilt = self._pan_axis + d.pan_offset, self._tilt_axis + d.tilt_offset
-        return self._true_pose.G() @ self._camera.G_RC(pan, tilt)
+        return self._pan_axis + d.pan_offset, self._tilt_axis + d.tilt_offset
+
+    def _G_WC(self, pose: Pose2D, pan: float, tilt: float) -> np.ndarray:
+        """The left camera in W for a base pose and true axis angles, with the mounts' errors: the
+        pan-tilt rotated on the mast about the axes' intersection, the camera on its bracket about its
+        optical centre (what the robot's kinematics, ``camera.G_RC``, do not know)."""
+        G_RC = self._camera.G_RC(pan, tilt)
+        if self._head_mount is not None:
+            G_RP = pan_tilt_G_RP(pan, tilt, self._camera.mount_R)
+            G_PC = se3_inv(G_RP) @ G_RC
+            o = G_PC[:3, 3]
+            G_RC = self._head_mount @ G_RP @ se3(self._camera_mount, o) @ se3(None, -o) @ G_PC
+        return pose.G() @ G_RC
+
+    def _remember(self) -> None:
+        self._past.append((self.world.t, self._true_pose, *self._true_axes()))
+
+    def _G_WC_at(self, t: float) -> np.ndarray:
+        """The true camera pose at time ``t`` (now at most; the sub-steps' record, linearly interpolated,
+        and the oldest one before it): what an image exposed ``latency_s`` before its stamp shows."""
+        if self._latency == 0 or t >= self._past[-1][0]:
+            return self._true_G_WC()
+        past = list(self._past)
+        for (t0, p0, *a0), (t1, p1, *a1) in zip(past[:-1], past[1:], strict=True):
+            if t0 <= t <= t1:
+                w = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
+                pose = Pose2D(
+                    p0.x + w * (p1.x - p0.x),
+                    p0.y + w * (p1.y - p0.y),
+                    wrap_angle(p0.theta + w * wrap_angle(p1.theta - p0.theta)),
+                )
+                return self._G_WC(pose, *(u + w * (v - u) for u, v in zip(a0, a1, strict=True)))
+        _, p, *axes = past[0]
+        return self._G_WC(p, *axes)
 
     def pan_tilt(self) -> PanTiltState:
         moving = abs(self._pan - self._pan_target) > 1e-9 or abs(self._tilt - self._tilt_target) > 1e-9
@@ -376,6 +426,7 @@ class SimRobot(Robot):
                 self._place(self._true_pose)
                 if not self._in_contact:  # one collision per contact, not one per push against it
                     self._collisions += 1
+                    self._slip()
                 self._in_contact = True
                 self._v = self._omega = 0.0
             else:
@@ -392,6 +443,22 @@ class SimRobot(Robot):
         self._pan_axis = backlash(self._pan_axis, self._pan, width)
         self._tilt_axis = backlash(self._tilt_axis, self._tilt, width)
         self.world.step(h)
+        self._remember()
+
+    def _slip(self) -> None:
+        """Wheel slip on a bump: the true pose jumps by the profile's draw, which the odometry does not
+        see (mirrored when the jump would run into something; none when both would)."""
+        room = self._sensing.room
+        if room.bump_slip_m == 0 and room.bump_slip_deg == 0:
+            return
+        d = self._episode.bump_slip()
+        for sign in (1.0, -1.0):
+            new = _compose(self._true_pose, tuple(sign * v for v in d))
+            self._place(new)
+            if not self._collides():
+                self._true_pose = new
+                return
+        self._place(self._true_pose)
 
     def _measure_motion(self, ds: float, dth: float) -> tuple[float, float]:
         """The odometry's distance [m] and heading change [rad] for a true arc ``ds``, ``dth``."""
@@ -414,6 +481,12 @@ def _unicycle_increment(p: Pose2D, ds: float, dth: float) -> Pose2D:
     th_mid = p.theta + 0.5 * dth
     chord = ds * float(np.sinc(0.5 * dth / math.pi))  # np.sinc(x) = sin(pi x) / (pi x)
     return Pose2D(p.x + chord * math.cos(th_mid), p.y + chord * math.sin(th_mid), wrap_angle(p.theta + dth))
+
+
+def _compose(p: Pose2D, d) -> Pose2D:
+    """``p`` moved by ``d = (dx, dy, dtheta)`` given in ``p``'s own frame."""
+    c, s = math.cos(p.theta), math.sin(p.theta)
+    return Pose2D(p.x + c * d[0] - s * d[1], p.y + s * d[0] + c * d[1], wrap_angle(p.theta + d[2]))
 
 
 def _unicycle(p: Pose2D, v: float, omega: float, h: float) -> Pose2D:
