@@ -241,7 +241,8 @@ def _round(v: float | None, digits: int) -> float | None:
 def scored(object: str, out: AgentResult, truth: TrialTruth, odom) -> dict:
     """The result's fields that compare the run with the truth: pose errors in W and in the camera
     frame C (the perception error alone, without the odometry's drift), success, odometry error; None
-    where there is no truth."""
+    where there is no truth. Also what the robot says without a truth: the found pose's stated
+    deviation in W (``pose_std``, :class:`lab.search.world_pose.WorldPoseStd`)."""
     pe = oe = cam = None
     if out.found and truth.G_WO is not None:
         pe, oe = pose_errors(out.G_WO, truth.G_WO)
@@ -262,6 +263,7 @@ def scored(object: str, out: AgentResult, truth: TrialTruth, odom) -> dict:
         else bool(out.found and pe <= SUCCESS_POSITION_M and oe <= SUCCESS_ORIENTATION_DEG),
         "reason": out.reason,
         "camera_frame_error": cam,
+        "pose_std": None if out.pose_std is None else out.pose_std.as_dict(),
         "odometry_error_m": None if rp is None else math.hypot(odom.x - rp.x, odom.y - rp.y),
     }
 

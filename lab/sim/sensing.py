@@ -492,11 +492,15 @@ class SensingProfile:
         """The camera the robot reports: the nominal calibration with its stated accuracy, what a
         calibration report gives (``depth_scale_std`` from the focal length and baseline errors in
         quadrature, ``focal_std`` the focal lengths' share, ``pointing_std_deg`` from the pan-tilt's zero
-        offset); not the episode's draw."""
+        offset and the room's stated mounts of the head and the camera, in quadrature: each a small
+        rotation per axis of the camera on the robot); not the episode's draw."""
+        room = self.room
         return dataclasses.replace(
             camera,
             depth_scale_std=math.hypot(self.camera.intrinsics_error, self.camera.baseline_error),
-            pointing_std_deg=self.pan_tilt.zero_offset_deg,
+            pointing_std_deg=math.hypot(
+                self.pan_tilt.zero_offset_deg, room.camera_mount_deg, room.head_mount_deg
+            ),
             focal_std=self.camera.intrinsics_error,
         )
 
