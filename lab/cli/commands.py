@@ -119,6 +119,7 @@ def _cmd_identify(args) -> int:
     keys += [
         "final_posterior",
         "pose_error",
+        "pose_estimate",
         "sensing",
         "localization",
         "odometry_error_m",

@@ -36,9 +36,10 @@ from lab.robot import Robot
 from lab.runs.robots import PlacedRobot, RobotKind, RobotSession, load_robot_config, make_robot, robot_kind
 from lab.runs.room import RoomLandmarks, localize, robot_start, room_landmarks
 from lab.runs.tracks import TrackedRobot
+from lab.search.world_pose import larger_axes_std
 from lab.training import box_model_names, get_database, get_tables
 
-__all__ = ["build_agent", "floor_plan", "pose_error", "run_identify"]
+__all__ = ["build_agent", "final_pose_estimate", "floor_plan", "pose_error", "run_identify"]
 
 
 def pose_error(G_est: np.ndarray, G_true: np.ndarray) -> dict:
@@ -169,11 +170,12 @@ def run_identify(
         t0 = 0.0 if session.kind is RobotKind.SIM else session.robot.now()
         identified, interrupted, loop = _run_loop(agent, robot, session, tracked)
         error = _final_pose_error(agent, session, truth, true_model)
+        stated = final_pose_estimate(agent, identified)
         elapsed = session.robot.now() - t0
         extra = {**_robot_fields(session), **_localization_fields(robot, session, note)}
     wall, cpu = time.perf_counter() - t_wall, time.process_time() - t_cpu
     result = _episode_json(agent, session, true_model, identified, planner, seed, mover, t0)
-    result.update(sim_time_s=elapsed, wall_time_s=wall, pose_error=error, **extra)
+    result.update(sim_time_s=elapsed, wall_time_s=wall, pose_error=error, pose_estimate=stated, **extra)
     _add_reason_and_speed(result, agent, session, identified, interrupted, (elapsed, wall, cpu, loop))
     _finish_recording(recorder, result, progress, viewer)
     poses = [G for _, G in truth]
@@ -413,6 +415,26 @@ def _record_truth(agent: IdentificationAgent, session: RobotSession) -> list:
 
     agent.step = step_with_truth
     return truth
+
+
+def final_pose_estimate(agent: IdentificationAgent, identified) -> dict | None:
+    """The final pose the robot states without a truth: the identified model's estimate (else the most
+    probable model's) of the object in the last frame's camera C, ``position_m`` and ``euler_zyx_deg``,
+    with its standard deviations, the larger axes of the filter's covariance (``position_std_m``,
+    ``orientation_std_deg``); None when that model has no estimate."""
+    k = int(identified) if identified is not None else int(np.argmax(agent.P))
+    est = agent.bank.estimates[k]
+    if est is None:
+        return None
+    pos, rot = larger_axes_std(est.Sigma_rv)
+    return {
+        "model": k,
+        "frame": "camera",
+        "position_m": [round(float(v), 5) for v in est.mu[:3]],
+        "euler_zyx_deg": [round(math.degrees(float(v)), 3) for v in est.mu[3:]],
+        "position_std_m": round(pos, 5),
+        "orientation_std_deg": round(rot, 3),
+    }
 
 
 def _final_pose_error(agent: IdentificationAgent, session: RobotSession, truth: list, true_model: int):

@@ -35,7 +35,7 @@ import numpy as np
 
 from lab.errors import ConfigError
 
-__all__ = ["WorldPoseStd", "world_pose_covariance", "world_pose_std"]
+__all__ = ["WorldPoseStd", "larger_axes_std", "world_pose_covariance", "world_pose_std"]
 
 
 def _skew(v) -> np.ndarray:
@@ -115,7 +115,9 @@ class WorldPoseStd:
         }
 
 
-def _larger_axes(S: np.ndarray) -> tuple[float, float]:
+def larger_axes_std(S) -> tuple[float, float]:
+    """The larger axes of a pose covariance (6, 6) over ``[t, phi]``: position [m], rotation [deg]."""
+    S = np.asarray(S, float)
     pos = math.sqrt(max(0.0, float(np.linalg.eigvalsh(S[:3, :3])[-1])))
     rot = math.degrees(math.sqrt(max(0.0, float(np.linalg.eigvalsh(S[3:, 3:])[-1]))))
     return pos, rot
@@ -124,6 +126,6 @@ def _larger_axes(S: np.ndarray) -> tuple[float, float]:
 def world_pose_std(G_WR, Sigma_R, G_RC, pointing_std_rad: float, G_CO, Sigma_CO_rv) -> WorldPoseStd:
     """:func:`world_pose_covariance` and its larger axes, with the camera frame's own."""
     S = world_pose_covariance(G_WR, Sigma_R, G_RC, pointing_std_rad, G_CO, Sigma_CO_rv)
-    pos, rot = _larger_axes(S)
-    cpos, crot = _larger_axes(np.asarray(Sigma_CO_rv, float))
+    pos, rot = larger_axes_std(S)
+    cpos, crot = larger_axes_std(np.asarray(Sigma_CO_rv, float))
     return WorldPoseStd(pos, rot, cpos, crot, S)
