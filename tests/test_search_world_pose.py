@@ -30,9 +30,7 @@ def _monte_carlo(G_WR_xyt, Sigma_R, pointing, Sigma_o, n, rng):
     D = np.repeat(np.eye(4)[None], n, axis=0)
     D[:, :3, :3] = Rotation.from_rotvec(ds).as_matrix()
     W = np.stack([planar_G(*x) for x in xs]) @ G_RC @ D @ G
-    return np.hstack(
-        [W[:, :3, 3] - G0[:3, 3], Rotation.from_matrix(W[:, :3, :3] @ G0[:3, :3].T).as_rotvec()]
-    )
+    return np.hstack([W[:, :3, 3] - G0[:3, 3], Rotation.from_matrix(W[:, :3, :3] @ G0[:3, :3].T).as_rotvec()])
 
 
 def test_covariance_matches_a_monte_carlo_of_the_chain():

@@ -170,12 +170,11 @@ def run_identify(
         t0 = 0.0 if session.kind is RobotKind.SIM else session.robot.now()
         identified, interrupted, loop = _run_loop(agent, robot, session, tracked)
         error = _final_pose_error(agent, session, truth, true_model)
-        stated = final_pose_estimate(agent, identified)
         elapsed = session.robot.now() - t0
         extra = {**_robot_fields(session), **_localization_fields(robot, session, note)}
     wall, cpu = time.perf_counter() - t_wall, time.process_time() - t_cpu
     result = _episode_json(agent, session, true_model, identified, planner, seed, mover, t0)
-    result.update(sim_time_s=elapsed, wall_time_s=wall, pose_error=error, pose_estimate=stated, **extra)
+    result.update(sim_time_s=elapsed, wall_time_s=wall, pose_error=error, **extra)
     _add_reason_and_speed(result, agent, session, identified, interrupted, (elapsed, wall, cpu, loop))
     _finish_recording(recorder, result, progress, viewer)
     poses = [G for _, G in truth]
@@ -468,6 +467,7 @@ def _episode_json(agent, session, true_model, identified, planner, seed, mover, 
     return {
         "true_model": true_model if has_truth else None,
         "identified_model": identified,
+        "pose_estimate": final_pose_estimate(agent, identified),  # what the robot states, no truth
         "success": (identified == true_model) if has_truth else None,
         "actions": agent.n_actions,
         "final_posterior": [float(p) for p in (agent.P / agent.P.sum())],

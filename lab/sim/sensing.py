@@ -489,18 +489,14 @@ class SensingProfile:
         return dataclasses.replace(self, name=f"{self.name} x{k:g}", **parts)
 
     def reported_camera(self, camera: StereoCamera) -> StereoCamera:
-        """The camera the robot reports: the nominal calibration with its stated accuracy, what a
-        calibration report gives (``depth_scale_std`` from the focal length and baseline errors in
-        quadrature, ``focal_std`` the focal lengths' share, ``pointing_std_deg`` from the pan-tilt's zero
-        offset and the room's stated mounts of the head and the camera, in quadrature: each a small
-        rotation per axis of the camera on the robot); not the episode's draw."""
-        room = self.room
+        """The camera the robot reports, the nominal calibration with its stated accuracy (not the draw):
+        ``depth_scale_std`` the focal length and baseline errors in quadrature, ``focal_std`` the focal
+        lengths' share, ``pointing_std_deg`` the pan-tilt's zero and the stated mounts in quadrature."""
+        mounts = math.hypot(self.room.camera_mount_deg, self.room.head_mount_deg)
         return dataclasses.replace(
             camera,
             depth_scale_std=math.hypot(self.camera.intrinsics_error, self.camera.baseline_error),
-            pointing_std_deg=math.hypot(
-                self.pan_tilt.zero_offset_deg, room.camera_mount_deg, room.head_mount_deg
-            ),
+            pointing_std_deg=math.hypot(self.pan_tilt.zero_offset_deg, mounts),
             focal_std=self.camera.intrinsics_error,
         )
 
