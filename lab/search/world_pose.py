@@ -23,7 +23,8 @@ With ``G_WO = G_WR(x, y, theta) G_RC Exp(delta) G_CO``, to first order the world
 The three are independent (the robot does not know how its localizer's error and the mount's are
 related), so ``Sigma_WO = J_R Sigma_R J_R^T + J_d Sigma_d J_d^T + J_o Sigma_rv J_o^T``. The stated
 deviations are those of the larger axes, as the local search's "found" uses them
-(:func:`lab.search.tracking.pose_stds`).
+(:func:`lab.search.tracking.pose_stds`). What they say against the errors of tuning runs, and which of
+the room's errors the found pose's error comes from: docs/tuning/search-found-pose.md.
 """
 
 from __future__ import annotations
