@@ -96,3 +96,18 @@ def test_a_reported_find_carries_its_world_deviation_from_the_robot_it_rests_on(
     assert got.position_m > math.sqrt(4e-4)  # at least the robot's own
     bare = AgentResult(True, "found", G_WO=np.eye(4))
     assert stated_pose_std(bare, Sigma_R, SimpleNamespace(pointing_std_deg=0.7)) is bare
+
+
+def test_confidently_wrong_is_an_error_beyond_the_bar_with_a_stated_deviation_under_a_third():
+    """Issue 52's acceptance: more than 5 cm or 10 deg off while stating under a third of the error;
+    a CSV row's strings read as a job's values; not found or nothing stated is not confidently wrong."""
+    from lab.eval.search import confidently_wrong
+
+    row = {"found": True, "position_error_m": 0.06, "orientation_error_deg": 2.0}
+    assert confidently_wrong({**row, "std_position_m": 0.019, "std_orientation_deg": 0.1})
+    assert not confidently_wrong({**row, "std_position_m": 0.021, "std_orientation_deg": 0.1})
+    turned = {"found": "True", "position_error_m": "0.01", "orientation_error_deg": "12.0"}
+    assert confidently_wrong({**turned, "std_position_m": "0.001", "std_orientation_deg": "3.9"})
+    assert not confidently_wrong({**turned, "std_position_m": "0.001", "std_orientation_deg": "4.1"})
+    assert not confidently_wrong({**turned, "std_position_m": "", "std_orientation_deg": ""})
+    assert not confidently_wrong({**row, "found": False, "std_position_m": 0.001, "std_orientation_deg": 0.1})
