@@ -51,6 +51,13 @@ def test_short_identify_episode_keeps_the_contract(tmp_path):
     assert problems("identify", res) == []  # lab/schemas/identify.schema.json
     summary = json.loads(r.stdout)  # the console's summary: the localization in words too
     assert summary["localization_outcome"] == "odometry alone (--localization odometry)"
+    # the final pose the robot states, without a truth: in the camera, with its deviations
+    est = res["pose_estimate"]
+    assert summary["pose_estimate"] == est and est is not None and est["frame"] == "camera"
+    best = max(range(len(res["final_posterior"])), key=res["final_posterior"].__getitem__)
+    assert est["model"] == (best if res["identified_model"] is None else res["identified_model"])
+    assert 0 < est["position_std_m"] < 0.5 and 0 < est["orientation_std_deg"] < 180
+    assert 0.3 < est["position_m"][2] < 5.0  # in front of the camera
 
 
 def test_identify_bad_input_is_one_line():

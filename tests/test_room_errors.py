@@ -174,7 +174,9 @@ def test_the_world_draws_what_the_robot_is_told_at_the_mismatch_factor():
     zero = np.degrees([[e.pan_tilt.pan_offset, e.pan_tilt.tilt_offset] for e in eps])
     assert fx.std() == pytest.approx(1.5 * told.focal_std, rel=TOL)
     assert base.std() == pytest.approx(1.5 * 0.005, rel=TOL)
-    assert zero.std(axis=0) == pytest.approx([1.5 * told.pointing_std_deg] * 2, rel=TOL)
+    assert zero.std(axis=0) == pytest.approx([1.5 * REALISTIC.pan_tilt.zero_offset_deg] * 2, rel=TOL)
+    # the camera's stated pointing: the pan-tilt's zero and both mounts, per axis, in quadrature
+    assert told.pointing_std_deg == pytest.approx(math.sqrt(0.05**2 + 0.5**2 + 0.5**2))
     drawn = REALISTIC.drawn()
     assert [getattr(drawn.room, k) for k in TOLD_SIGMAS] == [
         1.5 * getattr(REALISTIC.room, k) for k in TOLD_SIGMAS

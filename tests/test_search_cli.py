@@ -68,6 +68,11 @@ def test_search_run_finds_the_toy_block_and_keeps_the_contract(tmp_path):
     summary = json.loads(r.stdout)  # the console's summary: found / success and the localization, in words
     assert summary["outcome"].startswith("found and a success")
     assert summary["localization_outcome"].startswith(f"{res['landmark_updates']} landmark update")
+    # the found pose's stated deviation in W, on the console too: at least the camera frame's own
+    std = res["pose_std"]
+    assert summary["pose_std"] == std and std is not None
+    assert std["position_m"] >= std["camera_frame_position_m"] > 0
+    assert std["orientation_deg"] >= std["camera_frame_orientation_deg"] > 0
 
 
 def test_outcome_in_words_says_found_success_and_the_missed_limit():

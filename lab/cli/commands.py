@@ -119,6 +119,7 @@ def _cmd_identify(args) -> int:
     keys += [
         "final_posterior",
         "pose_error",
+        "pose_estimate",
         "sensing",
         "localization",
         "odometry_error_m",
@@ -208,6 +209,7 @@ def _cmd_search(args) -> int:
 
     keys = ("object", "found", "success", "reason", "position_error_m", "orientation_error_deg")
     summary = {k: data.get(k) for k in (*keys, "path_length_m", "sim_time_s")}
+    summary["pose_std"] = data.get("pose_std")  # what the robot says of its pose, without a truth
     summary["outcome"] = outcome_in_words(data)  # found / success / why, in words
     summary["localization_outcome"] = localization_in_words(data)
     print(_json.dumps(summary, indent=2))

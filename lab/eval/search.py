@@ -33,6 +33,7 @@ __all__ = [
     "SEARCH_FIELDS",
     "SEARCH_MOVING",
     "SEARCH_MAX_TIME_S",
+    "confidently_wrong",
     "SearchSweep",
     "search_job",
     "search_key",
@@ -274,6 +275,8 @@ def search_job(
     if moving is not None:
         d["truth_time_s"] = d["moving"]["truth_time_s"]
     d["obstacles_on_path"] = bool(obstacles)  # asked for (``obstacles`` lists the boxes that fit)
+    std = d.get("pose_std") or {}
+    d["std_position_m"], d["std_orientation_deg"] = std.get("position_m"), std.get("orientation_deg")
     lc = SearchAgentConfig().local_search
     sp = shortest_path_m(r.trace.scene, place, lc.max_distance_m, lc.min_distance_m)
     d["shortest_path_m"] = round(sp, 4) if math.isfinite(sp) else None
@@ -289,6 +292,33 @@ def spl(rows) -> float:
         ok = d.get("success") and lo not in (None, "") and math.isfinite(float(lo))
         vals.append(float(lo) / max(float(p), float(lo), 1e-9) if ok else 0.0)
     return sum(vals) / len(vals) if vals else math.nan
+
+
+def confidently_wrong(row, position_m: float = 0.05, orientation_deg: float = 10.0) -> bool:
+    """Whether a found pose is confidently wrong (issue 52's acceptance): more than ``position_m`` [m] or
+    ``orientation_deg`` [deg] off the truth while its stated deviation (``std_position_m``,
+    ``std_orientation_deg``: the JSON's ``pose_std``) is under a third of its error. False when not
+    found, without a truth, or without a stated deviation.
+
+    >>> confidently_wrong({"found": True, "position_error_m": 0.06, "orientation_error_deg": 2.0,
+    ...                    "std_position_m": 0.01, "std_orientation_deg": 1.0})
+    True
+    >>> confidently_wrong({"found": True, "position_error_m": 0.06, "orientation_error_deg": 2.0,
+    ...                    "std_position_m": 0.03, "std_orientation_deg": 1.0})
+    False
+    """
+
+    def num(key):
+        v = row.get(key)
+        return None if v in (None, "") else float(v)
+
+    if str(row.get("found")) not in ("True", "true", "1"):
+        return False
+    pe, oe = num("position_error_m"), num("orientation_error_deg")
+    sp, so = num("std_position_m"), num("std_orientation_deg")
+    off_p = pe is not None and sp is not None and pe > position_m and sp < pe / 3
+    off_o = oe is not None and so is not None and oe > orientation_deg and so < oe / 3
+    return off_p or off_o
 
 
 def _median(xs) -> str:
@@ -316,6 +346,8 @@ SEARCH = SweepKind(
         "shortest_path_m",
         "position_error_m",
         "orientation_error_deg",
+        "std_position_m",
+        "std_orientation_deg",
         "collisions",
         "odometry_error_m",
         "localization_error_m",
@@ -345,6 +377,7 @@ SEARCH = SweepKind(
         ("median path m", lambda rs: _median(r["path_length_m"] for r in rs)),
         ("median sim s", lambda rs: _median(r["sim_time_s"] for r in rs)),
         ("collisions", lambda rs: str(sum(int(r["collisions"] or 0) for r in rs))),
+        ("confidently wrong", lambda rs: str(sum(confidently_wrong(r) for r in rs))),
     ),
     state=lambda res: (
         f"success {res['success']} (found {res['found']}), path {res['path_length_m']:.1f} m, "

@@ -36,9 +36,10 @@ from lab.robot import Robot
 from lab.runs.robots import PlacedRobot, RobotKind, RobotSession, load_robot_config, make_robot, robot_kind
 from lab.runs.room import RoomLandmarks, localize, robot_start, room_landmarks
 from lab.runs.tracks import TrackedRobot
+from lab.search.world_pose import larger_axes_std
 from lab.training import box_model_names, get_database, get_tables
 
-__all__ = ["build_agent", "floor_plan", "pose_error", "run_identify"]
+__all__ = ["build_agent", "final_pose_estimate", "floor_plan", "pose_error", "run_identify"]
 
 
 def pose_error(G_est: np.ndarray, G_true: np.ndarray) -> dict:
@@ -415,6 +416,26 @@ def _record_truth(agent: IdentificationAgent, session: RobotSession) -> list:
     return truth
 
 
+def final_pose_estimate(agent: IdentificationAgent, identified) -> dict | None:
+    """The final pose the robot states without a truth: the identified model's estimate (else the most
+    probable model's) of the object in the last frame's camera C, ``position_m`` and ``euler_zyx_deg``,
+    with its standard deviations, the larger axes of the filter's covariance (``position_std_m``,
+    ``orientation_std_deg``); None when that model has no estimate."""
+    k = int(identified) if identified is not None else int(np.argmax(agent.P))
+    est = agent.bank.estimates[k]
+    if est is None:
+        return None
+    pos, rot = larger_axes_std(est.Sigma_rv)
+    return {
+        "model": k,
+        "frame": "camera",
+        "position_m": [round(float(v), 5) for v in est.mu[:3]],
+        "euler_zyx_deg": [round(math.degrees(float(v)), 3) for v in est.mu[3:]],
+        "position_std_m": round(pos, 5),
+        "orientation_std_deg": round(rot, 3),
+    }
+
+
 def _final_pose_error(agent: IdentificationAgent, session: RobotSession, truth: list, true_model: int):
     """The true model's estimate against the truth behind the last frame (None without a truth)."""
     est = agent.bank.estimates[true_model]
@@ -446,6 +467,7 @@ def _episode_json(agent, session, true_model, identified, planner, seed, mover, 
     return {
         "true_model": true_model if has_truth else None,
         "identified_model": identified,
+        "pose_estimate": final_pose_estimate(agent, identified),  # what the robot states, no truth
         "success": (identified == true_model) if has_truth else None,
         "actions": agent.n_actions,
         "final_posterior": [float(p) for p in (agent.P / agent.P.sum())],

@@ -104,6 +104,9 @@ class SearchResult:
     camera_frame_error : dict or None
         ``{"position_m", "orientation_deg"}``: the estimate's error in the camera frame at detection
         (the local search's own error; ``position_error_m`` adds the odometry's drift to it).
+    pose_std : dict or None
+        The found pose's stated standard deviations in W (what the robot says without a truth:
+        :meth:`lab.search.world_pose.WorldPoseStd.as_dict`); None when not found.
     odometry_error_m : float or None
         Distance between the odometry's and the true robot position at the end of the run (None on the
         real robot).
@@ -162,6 +165,7 @@ class SearchResult:
     surface: str | None
     obstacles: tuple = ()
     camera_frame_error: dict | None = None
+    pose_std: dict | None = None
     odometry_error_m: float | None = 0.0
     localization_error_m: float | None = 0.0
     localization: str = "landmarks"
@@ -209,6 +213,7 @@ class SearchResult:
             "surface": self.surface,
             "obstacles": [[round(float(v), 4) for v in o] for o in self.obstacles],
             "camera_frame_error": self.camera_frame_error,
+            "pose_std": self.pose_std,
             "odometry_error_m": _round(self.odometry_error_m, 4),
             "localization_error_m": _round(self.localization_error_m, 4),
             "localization": self.localization,
@@ -241,7 +246,8 @@ def _round(v: float | None, digits: int) -> float | None:
 def scored(object: str, out: AgentResult, truth: TrialTruth, odom) -> dict:
     """The result's fields that compare the run with the truth: pose errors in W and in the camera
     frame C (the perception error alone, without the odometry's drift), success, odometry error; None
-    where there is no truth."""
+    where there is no truth. Also what the robot says without a truth: the found pose's stated
+    deviation in W (``pose_std``, :class:`lab.search.world_pose.WorldPoseStd`)."""
     pe = oe = cam = None
     if out.found and truth.G_WO is not None:
         pe, oe = pose_errors(out.G_WO, truth.G_WO)
@@ -262,6 +268,7 @@ def scored(object: str, out: AgentResult, truth: TrialTruth, odom) -> dict:
         else bool(out.found and pe <= SUCCESS_POSITION_M and oe <= SUCCESS_ORIENTATION_DEG),
         "reason": out.reason,
         "camera_frame_error": cam,
+        "pose_std": None if out.pose_std is None else out.pose_std.as_dict(),
         "odometry_error_m": None if rp is None else math.hypot(odom.x - rp.x, odom.y - rp.y),
     }
 

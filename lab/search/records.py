@@ -19,6 +19,7 @@ from lab.geometry import Pose2D
 if TYPE_CHECKING:
     from lab.search.global_search import GlobalSearchResult
     from lab.search.local_search import LocalSearchResult
+    from lab.search.world_pose import WorldPoseStd
 
 __all__ = ["AgentResult", "MapSnapshot", "NavigationResult", "Navigate", "SearchEvent"]
 
@@ -102,6 +103,10 @@ class AgentResult:
     nav_paths : tuple of (target_xy, path_xy or None)
     P_final : ndarray
     t_start, t_end : float [s] (robot clock)
+    pose_std : WorldPoseStd or None
+        How well the robot says it knows ``G_WO`` in the world (:mod:`lab.search.world_pose`): the
+        object in the camera, the camera on the robot and the robot's pose; set when the find is
+        reported (:meth:`lab.search.report_policy.ReportPolicy.report`).
     """
 
     found: bool
@@ -117,3 +122,4 @@ class AgentResult:
     P_final: np.ndarray | None = field(default=None, repr=False)
     t_start: float = 0.0
     t_end: float = 0.0
+    pose_std: WorldPoseStd | None = field(default=None, repr=False)

@@ -33,8 +33,9 @@ from lab.geometry import Pose2D, se3_inv
 from lab.localization import LocalizationMode, PlanarPoseEstimate
 from lab.search.budget import SearchBudgetExceeded
 from lab.search.records import AgentResult, NavigationResult
+from lab.search.world_pose import world_pose_std
 
-__all__ = ["RelocalizingNavigate", "ReportPolicy", "unlimited"]
+__all__ = ["RelocalizingNavigate", "ReportPolicy", "stated_pose_std", "unlimited"]
 
 
 def unlimited() -> None:
@@ -128,21 +129,26 @@ class ReportPolicy:
         Returns the result to report and what was done, for the JSON's ``report_relocalization`` (None
         when nothing was reported: not found, or not localized against landmarks): the landmark updates
         it made, the object point's position standard deviation before and after, how far the reported
-        object moved, and the detour (None: none was needed or possible)."""
+        object moved, and the detour (None: none was needed or possible).
+
+        The result carries the reported pose's stated deviation in the world (:func:`stated_pose_std`)
+        with the robot's covariance as reported (on odometry alone: dead reckoning's)."""
         robot = self.robot
-        if not out.found or out.G_WO is None or robot.mode is not LocalizationMode.LANDMARKS:
+        if not out.found or out.G_WO is None:
             return out, None
+        if robot.mode is not LocalizationMode.LANDMARKS:
+            return stated_pose_std(out, robot.pose_estimate().Sigma, robot.camera), None
         p_W = out.G_WO[:2, 3].copy()
         est0 = robot.pose_estimate()
         robot.relocalize_to_report(at_W=p_W)
         est1 = robot.pose_estimate()
-        G_WR, sigma, detour = est1.pose.G(), est1.point_sigma_m(p_W), None
+        G_WR, sigma, detour, Sigma_R = est1.pose.G(), est1.point_sigma_m(p_W), None, est1.Sigma
         cfg = robot.config
         wanted = sigma > max(cfg.report_sigma_m, cfg.report_detour_above_m)
         if wanted and self.navigate is not None and cfg.report_detour_m > 0:
             kept, detour = self.detour()
             if kept is not None:
-                G_WR, sigma = kept.pose.G(), kept.point_sigma_m(p_W)
+                G_WR, sigma, Sigma_R = kept.pose.G(), kept.point_sigma_m(p_W), kept.Sigma
         G_WO = G_WR @ se3_inv(est0.pose.G()) @ out.G_WO
         info = {
             "updates": int(robot.pose_estimate().n_updates - est0.n_updates),
@@ -152,7 +158,7 @@ class ReportPolicy:
             "shift_m": round(float(np.linalg.norm(G_WO[:3, 3] - out.G_WO[:3, 3])), 4),
             "detour": detour,
         }
-        return replace(out, G_WO=G_WO), info
+        return stated_pose_std(replace(out, G_WO=G_WO), Sigma_R, robot.camera), info
 
     def detour(self) -> tuple[PlanarPoseEstimate | None, dict | None]:
         """Keep the robot's pose in the filter (:meth:`Localizer.start_clone`), drive to the nearest place
@@ -205,3 +211,17 @@ class ReportPolicy:
             Pose2D(*(float(v) for v in x_c)), S_c, robot.now(), LocalizationMode.LANDMARKS
         )
         return kept, info
+
+
+def stated_pose_std(out: AgentResult, Sigma_R, camera) -> AgentResult:
+    """``out`` with its ``pose_std``: how well the robot knows the found ``G_WO`` in the world
+    (:func:`lab.search.world_pose.world_pose_std`) from the local search's estimate in the camera, the
+    camera's stated pointing accuracy on the robot (``camera.pointing_std_deg``: the pan-tilt's zero and
+    the mounts) and the robot's pose covariance ``Sigma_R`` (3, 3); unchanged without a found track."""
+    loc = out.local
+    if out.G_WO is None or loc is None or loc.estimate is None or loc.frame is None:
+        return out
+    G_RC, G_CO = loc.frame.G_RC, loc.estimate.G_CO
+    G_WR = out.G_WO @ se3_inv(G_RC @ G_CO)  # the robot pose the reported G_WO rests on
+    pointing = math.radians(camera.pointing_std_deg)
+    return replace(out, pose_std=world_pose_std(G_WR, Sigma_R, G_RC, pointing, G_CO, loc.estimate.Sigma_rv))

@@ -9,8 +9,8 @@ A :class:`SensingProfile` says how far the simulated sensors fall short of the t
   what a real robot would know of its sensors;
 * ``room``: realistic's sensors in a real room (:mod:`lab.sim.room_errors`): a surveyed map, an
   operator's start, camera and head mounts, the camera's latency, slip on a bump, and the world's errors
-  drawn at 1.5 times what the robot is told. Not yet the default: nothing estimates the mounts yet,
-  which put a found object's pose centimetres off (docs/tuning/room-errors.md).
+  drawn at 1.5 times what the robot is told. Not yet the default: a found object's pose is still
+  1-4 cm off under it, the survey's error dominating (docs/tuning/room-errors.md).
 
 The robot keeps *reporting* the nominal camera, the commanded pan-tilt angles and its wheel odometry,
 as a real one would; only the simulator knows the perturbed camera it rendered with, the axes' true
@@ -491,14 +491,14 @@ class SensingProfile:
         return dataclasses.replace(self, name=f"{self.name} x{k:g}", **parts)
 
     def reported_camera(self, camera: StereoCamera) -> StereoCamera:
-        """The camera the robot reports: the nominal calibration with its stated accuracy, what a
-        calibration report gives (``depth_scale_std`` from the focal length and baseline errors in
-        quadrature, ``focal_std`` the focal lengths' share, ``pointing_std_deg`` from the pan-tilt's zero
-        offset); not the episode's draw."""
+        """The camera the robot reports, the nominal calibration with its stated accuracy (not the draw):
+        ``depth_scale_std`` the focal length and baseline errors in quadrature, ``focal_std`` the focal
+        lengths' share, ``pointing_std_deg`` the pan-tilt's zero and the stated mounts in quadrature."""
+        mounts = math.hypot(self.room.camera_mount_deg, self.room.head_mount_deg)
         return dataclasses.replace(
             camera,
             depth_scale_std=math.hypot(self.camera.intrinsics_error, self.camera.baseline_error),
-            pointing_std_deg=self.pan_tilt.zero_offset_deg,
+            pointing_std_deg=math.hypot(self.pan_tilt.zero_offset_deg, mounts),
             focal_std=self.camera.intrinsics_error,
         )
 
