@@ -17,7 +17,7 @@ SWEEP = ["--objects", "toy_block,book", "--surfaces", "floor", "--seeds", "3", "
          "--obstacles", "no", "--sensing", "ideal", "--max-time", "0.5"]  # fmt: skip
 VOLATILE = ("wall_time_s", "cpu_time_s")
 # what a sweep's job adds to the `lab search` JSON
-ADDED = ("n_snapshots", "shortest_path_m", "obstacles_on_path")
+ADDED = ("n_snapshots", "shortest_path_m", "obstacles_on_path", "std_position_m", "std_orientation_deg")
 
 
 def _strip(d: dict) -> dict:

@@ -94,7 +94,7 @@ def imports_lab(x):
     return 2 * np.asarray(x)
 
 def garbles_channel(x):
-    for fd in range(3, 20):
+    for fd in range(3, 1024):  # the answer pipe keeps the grader's number for it, which may be high
         try:
             os.write(fd, b"\\x00\\x00\\x00\\x10{not json at all}")
         except OSError:
