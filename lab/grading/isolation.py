@@ -409,6 +409,25 @@ def private_workdir(uid: int | None, prefix: str) -> Path:
 
 
 # ---------------------------------------------------------------------------------- detection
+def run_confined(sb: Sandbox, cmd: list[str], cwd: Path, env: dict) -> subprocess.CompletedProcess:
+    """Run a sandbox command (``sb.command``) under the seccomp filter every graded child runs under
+    (:func:`lab.grading.seccomp.attach`), its output captured as text, within 60 s."""
+    fd = seccomp.attach(cmd, env, sb.bubblewrap)
+    try:
+        return subprocess.run(
+            cmd,
+            capture_output=True,
+            text=True,
+            timeout=60,
+            stdin=subprocess.DEVNULL,
+            cwd=cwd,
+            env=env,
+            pass_fds=(fd,),
+        )
+    finally:
+        os.close(fd)
+
+
 def _probe(sb: Sandbox) -> str | None:
     """Run one trivial child in ``sb``; None if it works, else why not."""
     entry = Path(__file__).with_name("sandbox.py")
@@ -431,20 +450,7 @@ def _probe(sb: Sandbox) -> str | None:
         what = sb.bwrap if sb.bubblewrap else "the uid mode"
         cmd, env = sb.command(["-I", "-c", code, str(entry)], d, entry, uid), dict(os.environ)
         try:
-            fd = seccomp.attach(cmd, env, sb.bubblewrap)  # the filter every child runs under
-            try:
-                r = subprocess.run(
-                    cmd,
-                    capture_output=True,
-                    text=True,
-                    timeout=60,
-                    stdin=subprocess.DEVNULL,
-                    cwd=d,
-                    env=env,
-                    pass_fds=(fd,),
-                )
-            finally:
-                os.close(fd)
+            r = run_confined(sb, cmd, d, env)
         except (OSError, subprocess.TimeoutExpired) as e:
             return f"{what} could not run: {e}"
         if r.returncode != 0:

@@ -15,7 +15,6 @@ import json
 import os
 import secrets
 import shutil
-import subprocess
 from pathlib import Path
 
 from lab.grading import seccomp
@@ -29,6 +28,7 @@ from lab.grading.isolation import (
     make_grader_private,
     make_undumpable,
     private_workdir,
+    run_confined,
     secret_folders,
 )
 
@@ -157,21 +157,7 @@ def _run_checks(sb: Sandbox, results: Path) -> tuple[dict, bool]:
     try:
         args = ["-I", "-c", _CHECKS, str(-1 if uid is None else uid), json.dumps(targets := _targets())]
         args += [str(os.getpid()), str(results), token, str(entry), json.dumps(numbers)]
-        cmd = sb.command(args, d, entry, uid)
-        fd = seccomp.attach(cmd, env, sb.bubblewrap)
-        try:
-            r = subprocess.run(
-                cmd,
-                capture_output=True,
-                text=True,
-                timeout=60,
-                stdin=subprocess.DEVNULL,
-                cwd=d,
-                env=env,
-                pass_fds=(fd,),
-            )
-        finally:
-            os.close(fd)
+        r = run_confined(sb, sb.command(args, d, entry, uid), d, env)
         if uid is not None and sb.kind == "uid":
             end_all(None, uid)
         try:
