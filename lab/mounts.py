@@ -175,7 +175,7 @@ class CalibratedRobot(RobotWrapper):
 
 def _body(m: HeadMounts) -> str:
     def num(x) -> str:
-        return repr(round(math.degrees(float(x)), 6))
+        return repr(round(math.degrees(float(x)), 9))
 
     def vec(v) -> str:
         return "[" + ", ".join(num(x) for x in v) + "]"
@@ -206,7 +206,7 @@ def _checksum(body: str) -> str:
 
 
 def save_mounts(path: str | Path, mounts: HeadMounts) -> Path:
-    """Write ``mounts`` to ``path`` (the module's format, angles in degrees to 1e-6), atomically: a
+    """Write ``mounts`` to ``path`` (the module's format, angles in degrees to 1e-9), atomically: a
     temporary file renamed over the old one, so a crash leaves the old calibration or the new one."""
     body = "# The camera's mounts, estimated by `lab hardware calibrate` (lab/mounts.py). Do not edit:\n"
     body += "# the checksum covers every line above it.\n" + _body(mounts)

@@ -43,12 +43,14 @@ __all__ = ["PATTERN_DEG", "CalibrationRun", "calibrate", "collect_sightings", "p
 PATTERN_DEG = {"pan": tuple(range(-150, 151, 20)), "tilt": (-8.0, 6.0, 18.0, 30.0)}
 
 
-def pattern(limits) -> list[tuple[float, float]]:
-    """The (pan, tilt) [rad] of :data:`PATTERN_DEG` inside the head's ``limits``, in a boustrophedon order
-    (each tilt's row walked the other way than the last: the head never swings back round)."""
+def pattern(limits, pattern_deg=None) -> list[tuple[float, float]]:
+    """The (pan, tilt) [rad] of ``pattern_deg`` (default :data:`PATTERN_DEG`) inside the head's
+    ``limits``, in a boustrophedon order (each tilt's row walked the other way than the last: the head
+    never swings back round)."""
+    pd = pattern_deg or PATTERN_DEG
     out = []
-    for i, t in enumerate(PATTERN_DEG["tilt"]):
-        pans = PATTERN_DEG["pan"] if i % 2 == 0 else tuple(reversed(PATTERN_DEG["pan"]))
+    for i, t in enumerate(pd["tilt"]):
+        pans = pd["pan"] if i % 2 == 0 else tuple(reversed(pd["pan"]))
         for p in pans:
             pan, tilt = math.radians(p), math.radians(t)
             if limits.pan_min <= pan <= limits.pan_max and limits.tilt_min <= tilt <= limits.tilt_max:
@@ -67,13 +69,15 @@ class CalibrationRun:
     truth: dict = field(default_factory=dict)  # the simulator's drawn angles [rad] (tests, tuning)
 
 
-def collect_sightings(robot: Robot, observer: LandmarkObserver, start: Pose2D, settle_s: float = 0.3):
-    """Turn the head over :func:`pattern` and fit the posters the nominal kinematics say are in view,
-    from the believed ``start``; returns ``(sightings, n_frames)``."""
+def collect_sightings(
+    robot: Robot, observer: LandmarkObserver, start: Pose2D, settle_s: float = 0.3, pattern_deg=None
+):
+    """Turn the head over :func:`pattern` (``pattern_deg``) and fit the posters the nominal kinematics
+    say are in view from the believed ``start``; returns ``(sightings, n_frames)``."""
     robot.enable()
     sightings: list[MountSighting] = []
     n = 0
-    for pan, tilt in pattern(robot.pan_tilt_limits):
+    for pan, tilt in pattern(robot.pan_tilt_limits, pattern_deg):
         robot.command_pan_tilt(pan, tilt)
         robot.wait_pan_tilt()
         robot.step(settle_s)
@@ -108,6 +112,7 @@ def calibrate(
     seed: int = 0,
     world: str = "lab_room",
     start=None,
+    pattern_deg: dict | None = None,
     log: Callable[[str], None] = print,
 ) -> CalibrationRun:
     """Run the routine (module docstring) and write the file ``out`` (None: do not write).
@@ -127,6 +132,8 @@ def calibrate(
         placed there; on the real robot it is where the operator stood it (default: the config's
         ``[room] start``, else the scene's start). A spot that sees many posters within a few metres
         calibrates best.
+    pattern_deg : dict, optional
+        ``{"pan": [...], "tilt": [...]}`` [deg] instead of :data:`PATTERN_DEG` (a shorter one for a test).
 
     Raises
     ------
@@ -145,6 +152,25 @@ def calibrate(
         raise ConfigError(f"lab hardware calibrate needs a landmark map: {room.note}")
     observer = LandmarkObserver(room.landmarks, LocalizerConfig(), np.random.default_rng([seed, 52, 7]))
     t0 = time.perf_counter()
+    got = _sightings(kind, hw, scene, room, observer, sensing, seed, start, pattern_deg)
+    sightings, n, truth, camera, name, start, sigma = got
+    log(
+        f"lab hardware calibrate: {len(sightings)} poster sightings in {n} frames "
+        f"({time.perf_counter() - t0:.0f} s)"
+    )
+    result = solve_mounts(sightings, camera, start, sigma)
+    stamp = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    mounts = replace(result.mounts, robot=name, created=stamp)
+    path = None if out is None else save_mounts(out, mounts)
+    run_out = CalibrationRun(result, path, n, name, truth)
+    for line in report_lines(run_out):
+        log(line)
+    return run_out
+
+
+def _sightings(kind, hw, scene, room, observer, sensing, seed: int, start, pattern_deg):
+    """Stand the robot (the simulator's, or a robot config's with the nominal kinematics) and collect the
+    pattern's sightings: ``(sightings, n_frames, truth, camera, robot name, believed start, its sigma)``."""
     if kind is RobotKind.SIM:
         from lab.sim import RenderSettings, SimWorld
 
@@ -153,33 +179,18 @@ def calibrate(
             SimWorld(scene, RenderSettings(supersample=2)) as w,
             make_robot(world=w, seed=seed, sensing=sensing, start=at) as run,
         ):
-            start = run.robot.odometry()
+            believed = run.robot.odometry()
             Sigma0 = sim_start_sigma(run.robot)
             sigma = (
                 (0.01, math.radians(0.5)) if Sigma0 is None else (Sigma0[0, 0] ** 0.5, Sigma0[2, 2] ** 0.5)
             )
-            sightings, n = collect_sightings(run.robot, observer, start)
-            truth, camera, name = _sim_truth(run.robot), run.robot.camera, "sim"
-    else:
-        st = robot_start(hw, scene.robot_start, start, room.landmarks.room_size)
-        start, sigma = st.pose, (st.Sigma0[0, 0] ** 0.5, st.Sigma0[2, 2] ** 0.5)
-        with make_robot(hw, seed=seed, scene=scene, sensing=sensing, config_mounts=False) as run:
-            robot = PlacedRobot(run.robot, start)
-            sightings, n = collect_sightings(robot, observer, start)
-            truth, camera, name = _rehearsal_truth(hw), run.robot.camera, run.name
-    log(
-        f"lab hardware calibrate: {len(sightings)} poster sightings in {n} frames "
-        f"({time.perf_counter() - t0:.0f} s)"
-    )
-    result = solve_mounts(sightings, camera, start, sigma)
-    m = result.mounts
-    stamp = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
-    mounts = type(m)(m.head_rpy, m.camera_rpy, m.pan_zero, m.tilt_zero, m.std, m.estimated, name, stamp)
-    path = None if out is None else save_mounts(out, mounts)
-    run_out = CalibrationRun(result, path, n, name, truth)
-    for line in report_lines(run_out):
-        log(line)
-    return run_out
+            got = collect_sightings(run.robot, observer, believed, pattern_deg=pattern_deg)
+            return (*got, _sim_truth(run.robot), run.robot.camera, "sim", believed, sigma)
+    st = robot_start(hw, scene.robot_start, start, room.landmarks.room_size)
+    sigma = (st.Sigma0[0, 0] ** 0.5, st.Sigma0[2, 2] ** 0.5)
+    with make_robot(hw, seed=seed, scene=scene, sensing=sensing, config_mounts=False) as run:
+        got = collect_sightings(PlacedRobot(run.robot, st.pose), observer, st.pose, pattern_deg=pattern_deg)
+        return (*got, _rehearsal_truth(hw), run.robot.camera, run.name, st.pose, sigma)
 
 
 def _rehearsal_truth(hw) -> dict:
