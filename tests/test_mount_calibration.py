@@ -297,3 +297,42 @@ def test_bad_survey_sigmas_are_refused_naming_the_field(tmp_path, top, own, mess
     with pytest.raises(ConfigError, match=message) as e:
         load_landmark_map(p)
     assert str(p) in str(e.value)
+
+
+def _rehearsal_config(tmp_path, extra_sim: str = "", mounts: str = "") -> Path:
+    text = (REPO / "hardware" / "rehearsal.toml").read_text()
+    text = text.replace('calibration = "calibration/', f'calibration = "{REPO}/hardware/calibration/')
+    text = text.replace("supersample = 1\n", f"supersample = 1\n{extra_sim}\n")
+    text = text.replace("mount_R = [0.0, 0.0, 0.7]\n", f"mount_R = [0.0, 0.0, 0.7]\n{mounts}\n")
+    p = tmp_path / "rehearsal.toml"
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        ("head_mount_deg = [0.4, 0.1]", r"\[sim\] head_mount_deg must be \[roll, pitch, yaw\]"),
+        (
+            "camera_mount_deg = [0.0, 0.0, 15.0]",
+            r"camera_mount_deg .* within \[-10, 10\], got \[0.0, 0.0, 15.0\]",
+        ),
+    ],
+)
+def test_bad_rendered_mounts_are_refused(tmp_path, extra, message):
+    from lab.hardware.config import load_config
+
+    with pytest.raises(ConfigError, match=message):
+        load_config(_rehearsal_config(tmp_path, extra))
+
+
+def test_a_corrupt_mounts_file_of_a_config_stops_the_run_before_it_starts(tmp_path):
+    from lab.runs.robots import make_robot
+
+    cfg = _rehearsal_config(tmp_path, mounts='mounts = "cal/mounts.toml"')
+    p = save_mounts(tmp_path / "cal" / "mounts.toml", _mounts())
+    p.write_text(p.read_text().replace("version = 1", "version = 1\nrobot_extra = 1"))
+    with pytest.raises(ConfigError, match="checksum does not match") as e:
+        with make_robot(cfg, scene="lab_room"):
+            pass
+    assert str(p) in str(e.value)
