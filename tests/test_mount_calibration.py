@@ -336,3 +336,13 @@ def test_a_corrupt_mounts_file_of_a_config_stops_the_run_before_it_starts(tmp_pa
         with make_robot(cfg, scene="lab_room"):
             pass
     assert str(p) in str(e.value)
+
+
+def test_lab_search_refuses_a_corrupt_mounts_file_in_one_line(tmp_path, capsys):
+    from lab.cli import main
+
+    p = save_mounts(tmp_path / "mounts.toml", _mounts())
+    p.write_text(p.read_text().replace("version = 1", "version = 3"))
+    code = main(["search", "--object", "book", "--seed", "0", "--mounts", str(p), "--max-time", "1"])
+    err = capsys.readouterr().err
+    assert code != 0 and "version 3 is not supported" in err and str(p) in err
