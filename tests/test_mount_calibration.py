@@ -346,3 +346,26 @@ def test_lab_search_refuses_a_corrupt_mounts_file_in_one_line(tmp_path, capsys):
     code = main(["search", "--object", "book", "--seed", "0", "--mounts", str(p), "--max-time", "1"])
     err = capsys.readouterr().err
     assert code != 0 and "version 3 is not supported" in err and str(p) in err
+
+
+def test_check_reads_the_mounts_file_a_config_names(tmp_path):
+    """`lab hardware check`'s line: not made yet passes (nominal kinematics), a good file shows its
+    angles, a corrupt one fails with the fix (the rest of the check is not run here)."""
+    from lab.hardware.cli import check_mounts
+    from lab.hardware.config import load_config
+
+    cfg = load_config(_rehearsal_config(tmp_path, mounts='mounts = "cal/mounts.toml"'))
+    lines = []
+
+    def line(ok, what, detail, fix=""):
+        lines.append((ok, what, detail, fix))
+
+    check_mounts(cfg, line)
+    save_mounts(tmp_path / "cal" / "mounts.toml", _mounts())
+    check_mounts(cfg, line)
+    (tmp_path / "cal" / "mounts.toml").write_text("format = 1")
+    check_mounts(cfg, line)
+    (ok0, _, d0, _), (ok1, _, d1, _), (ok2, _, d2, fix) = lines
+    assert ok0 and "not made yet" in d0
+    assert ok1 and "[0.057, -0.115, 0.286, 0.172, -0.229] deg" in d1
+    assert not ok2 and "not a mount calibration" in d2 and fix.startswith("lab hardware calibrate --config")
