@@ -369,3 +369,14 @@ def test_check_reads_the_mounts_file_a_config_names(tmp_path):
     assert ok0 and "not made yet" in d0
     assert ok1 and "[0.057, -0.115, 0.286, 0.172, -0.229] deg" in d1
     assert not ok2 and "not a mount calibration" in d2 and fix.startswith("lab hardware calibrate --config")
+
+
+def test_lab_hardware_calibrate_without_a_landmark_map_is_one_line(capsys):
+    """The emulated robot (random-dot camera, no [room] landmarks): nothing to calibrate against, said in
+    one line before any device is touched."""
+    from lab.cli import main
+
+    code = main(["hardware", "calibrate", "--config", str(REPO / "hardware" / "emulated.toml")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert err[-1].startswith("lab hardware: error: lab hardware calibrate needs a landmark map")
