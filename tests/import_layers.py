@@ -77,7 +77,16 @@ RULES = (
     ),
     Rule(
         "the ground floor imports nothing above it",
-        ("lab.robot", "lab.geometry", "lab.errors", "lab.io", "lab.paths", "lab.scene", "lab.evaluation"),
+        (
+            "lab.robot",
+            "lab.geometry",
+            "lab.errors",
+            "lab.io",
+            "lab.paths",
+            "lab.scene",
+            "lab.evaluation",
+            "lab.mounts",
+        ),
         ("lab.sim", "lab.hardware", "lab.viz", "lab.training", "lab.runs", "lab.cli", *ALGORITHMS),
     ),
 )

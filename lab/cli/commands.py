@@ -186,6 +186,7 @@ def _cmd_search(args) -> int:
         truth=args.truth,
         start=args.start,
         moving=_moving(args),
+        mounts=args.mounts,
     )
     data = res.to_json()
     if args.view3d is not None:
@@ -227,6 +228,10 @@ def _cmd_hardware(args) -> int:
 
     if args.hw_command == "emulate":
         return hw.emulate(args.dir)
+    if args.hw_command == "calibrate":
+        from lab.runs.calibrate import main_calibrate
+
+        return main_calibrate(args)
     return hw.check(args.config, emulate=args.emulate, room_check=check_room)
 
 

@@ -326,6 +326,13 @@ def build_parser() -> argparse.ArgumentParser:
         "state, the object placed by --place or the seed); --max-time is then wall time",
     )
     se.add_argument(
+        "--mounts",
+        type=Path,
+        metavar="FILE.toml",
+        help="a mount calibration (lab hardware calibrate): the robot's camera frame includes it (a robot "
+        "config's [camera] mounts is used without it)",
+    )
+    se.add_argument(
         "--truth",
         type=lambda s: _floats(s, 4, "--truth"),
         metavar="X,Y,Z,YAW_DEG",
@@ -360,6 +367,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
     hc.add_argument("--config", required=True, type=Path, help="hardware TOML file, e.g. hardware/robot.toml")
     hc.add_argument("--emulate", action="store_true", help="start the emulators on the config's ports first")
+    hk = hws.add_parser(
+        "calibrate",
+        help="estimate the camera's mounts and the tilt's zero from posters seen by the standing robot",
+        description="Turn the head over a pan/tilt pattern, fit the landmark map's posters, solve for the "
+        "head's roll and pitch, the tilt's zero and the camera's roll and yaw (least squares), print them "
+        "with their deviations and write the calibration file (lab/runs/calibrate.py). Never drives.",
+    )
+    hk.add_argument("--config", type=Path, help="the robot's hardware TOML (default: the simulator)")
+    hk.add_argument("--out", type=Path, help="the calibration file (default: the config's [camera] mounts)")
+    hk.add_argument("--seed", type=int, default=0, help="the simulator's episode (its drawn mounts)")
+    hk.add_argument(
+        "--start",
+        type=lambda s: _floats(s, 3, "--start"),
+        metavar="X,Y,YAW_DEG",
+        help="where the robot stands (the simulator places it there; default: [room] start, else the "
+        "scene's start); a spot that sees many posters within a few metres calibrates best",
+    )
+    _sensing_argument(hk)
 
     nb = sub.add_parser(
         "notebooks",

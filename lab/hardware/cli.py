@@ -2,9 +2,9 @@
 ``lab hardware check --config PATH``); ``python -m lab.hardware.cli`` runs them until that hook exists.
 
 * :func:`emulate` starts a PTU-D46 and a Create 2 emulator, prints their ports, and blocks until Ctrl-C.
-* :func:`check` walks through the bring-up: config, calibration, ports, PTU version and limits, the
-  Create's stream and odometry at rest, one stereo frame. Each line is ``PASS`` or ``FAIL`` with the fix.
-  It never moves the robot.
+* :func:`check` walks through the bring-up: config, calibration, the head's mounts, ports, PTU version
+  and limits, the Create's stream and odometry at rest, one stereo frame. Each line is ``PASS`` or
+  ``FAIL`` with the fix. It never moves the robot.
 """
 
 from __future__ import annotations
@@ -28,8 +28,9 @@ from lab.hardware.create2 import Create2
 from lab.hardware.emulators import start_emulators
 from lab.hardware.ptu import PTUD46
 from lab.hardware.serial_port import available_ports
+from lab.mounts import load_mounts
 
-__all__ = ["DEFAULT_LINK_DIR", "check", "emulate", "main"]
+__all__ = ["DEFAULT_LINK_DIR", "check", "check_mounts", "emulate", "main"]
 
 DEFAULT_LINK_DIR = "/tmp/lab-emulators"  # hardware/emulated.toml points here
 
@@ -139,6 +140,26 @@ def check(
     return 0 if ok else 1
 
 
+def check_mounts(cfg, line) -> None:
+    """The head's mount calibration (``[camera] mounts``), when the config names one: read strictly (a
+    corrupt file fails); not made yet is no failure (the robot then uses the nominal kinematics)."""
+    path = cfg.camera.mounts
+    if not path:
+        return
+    if not Path(path).exists():
+        line(True, "mounts", f"{path} not made yet: the nominal kinematics (lab hardware calibrate makes it)")
+        return
+    try:
+        m = load_mounts(path)
+    except LabError as e:
+        line(False, "mounts", str(e), f"lab hardware calibrate --config {cfg.path or 'CONFIG'}")
+        return
+    deg = [
+        round(math.degrees(v), 3) for v in (*m.head_rpy[:2], m.tilt_zero, m.camera_rpy[0], m.camera_rpy[2])
+    ]
+    line(True, "mounts", f"{path} ({m.created}): head roll, pitch, tilt zero, camera roll, yaw {deg} deg")
+
+
 def _check_ptu(cfg, line) -> None:
     ptu = PTUD46.from_config(cfg)
     try:
@@ -215,6 +236,7 @@ def _check_base(cfg, line, in_process: bool = False) -> None:
 
 
 def _check_camera(cfg, calib, line) -> None:
+    check_mounts(cfg, line)
     if cfg.camera.source == "sim":  # rendered from the emulators' state: only a rehearsal can make it
         line(
             True,

@@ -101,6 +101,7 @@ class CameraConfig:
     folder: str = ""
     mount_R: tuple = (0.0, 0.0, 0.8)
     camera_offset_P: tuple = (0.05, 0.06, 0.0)
+    mounts: str = ""  # the head's mount calibration (lab/mounts.py), written by lab hardware calibrate
 
 
 @dataclass(frozen=True)
@@ -109,12 +110,17 @@ class SimSceneConfig:
 
     Poses are ``[x, y, heading_deg]`` in the world frame W: ``robot_start`` is where the base stands when
     the Create emulator's true pose is (0, 0, 0); ``carrier_start`` is where the box's carrier stands.
+    ``head_mount_deg`` and ``camera_mount_deg`` (roll, pitch, yaw [deg]) rotate the rendered camera as a
+    real head's mounts would (:func:`lab.mounts.mounted_G_RC`): what ``lab hardware calibrate`` recovers
+    in a rehearsal; the robot's kinematics do not know them.
     """
 
     world: str = "arena"
     robot_start: tuple = (-1.2, 0.0, 0.0)
     carrier_start: tuple = (0.0, 0.0, 0.0)
     supersample: int = 1
+    head_mount_deg: tuple = (0.0, 0.0, 0.0)
+    camera_mount_deg: tuple = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -358,6 +364,13 @@ def _check_sim(sim: SimSceneConfig, cam: CameraConfig, need) -> None:
             f"[sim] {k} must be [x_m, y_m, heading_deg], got {list(v)}",
         )
     need(sim.supersample in (1, 2, 3, 4), f"[sim] supersample must be 1, 2, 3 or 4, got {sim.supersample}")
+    for k in ("head_mount_deg", "camera_mount_deg"):
+        v = getattr(sim, k)
+        ok = len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+        need(
+            ok and all(math.isfinite(x) and abs(x) <= 10 for x in v),
+            f"[sim] {k} must be [roll, pitch, yaw] in degrees, each within [-10, 10], got {list(v)}",
+        )
     if cam.source == "sim":
         from lab.scene import list_worlds
 
@@ -383,7 +396,7 @@ def _check_room(room: RoomConfig, need) -> None:
 def _resolve_paths(c: HardwareConfig, root: Path) -> HardwareConfig:
     cam = c.camera
     changes = {}
-    for k in ("calibration", "folder"):
+    for k in ("calibration", "folder", "mounts"):
         v = getattr(cam, k)
         if v and not Path(v).is_absolute():
             changes[k] = str((root / v).resolve())

@@ -43,13 +43,15 @@ def face_share_in_image(landmark: Landmark, G_CL: np.ndarray, camera, n: int = 1
 
 @dataclass(frozen=True)
 class LandmarkObservation:
-    """A landmark found in a frame: its fitted ``G_CL``, the measurement ``z`` and covariance ``Q``."""
+    """A landmark found in a frame: its fitted ``G_CL``, the measurement ``z`` and covariance ``Q``;
+    ``Sigma_rv`` is the fit's own covariance over ``[t_CL, phi]`` (:func:`observation_of`)."""
 
     landmark: Landmark
     G_CL: np.ndarray = field(repr=False)
     z: np.ndarray = field(repr=False)
     Q: np.ndarray = field(repr=False)
     n_inliers: int = 0
+    Sigma_rv: np.ndarray | None = field(default=None, repr=False)
 
 
 class LandmarkObserver:
@@ -120,5 +122,5 @@ class LandmarkObserver:
                 self.n_partial += 1
                 continue
             z, Q = observation_of(frame.G_RC, G_CL, res.Sigma_rv)
-            out.append(LandmarkObservation(lm, G_CL, z, Q, res.n_inliers))
+            out.append(LandmarkObservation(lm, G_CL, z, Q, res.n_inliers, res.Sigma_rv))
         return out

@@ -67,6 +67,7 @@ from lab.geometry import Pose2D, se3, se3_inv
 from lab.hardware.camera import RawStereo, StereoSource, load_camera_calibration, wait_until_after
 from lab.hardware.config import HardwareConfig, load_config
 from lab.hardware.emulators import Create2Emulator, EmulatorSet, PTUEmulator, start_emulators
+from lab.mounts import mounted_G_RC
 from lab.robot import StereoCamera
 from lab.vision.rectify import StereoCalibration
 
@@ -213,6 +214,14 @@ class SimRenderedStereoSource(StereoSource):
             math.atan2(math.sin(s.theta + th), math.cos(s.theta + th)),
         )
 
+    def _G_RC_true(self, pan: float, tilt: float) -> np.ndarray:
+        """The camera in R as rendered: the kinematics with ``[sim]``'s mount errors, when it has any."""
+        head, cam = self.config.sim.head_mount_deg, self.config.sim.camera_mount_deg
+        if not any(head) and not any(cam):
+            return self.camera.G_RC(pan, tilt)
+        c = self.camera
+        return mounted_G_RC(pan, tilt, c.mount_R, c.camera_offset_P, np.radians(head), np.radians(cam))
+
     def pan_tilt_true(self) -> tuple[float, float]:
         """The head's true (pan, tilt) [rad] from the PTU emulator's axis positions."""
         pos, res = self.ptu.axis_positions()
@@ -237,7 +246,7 @@ class SimRenderedStereoSource(StereoSource):
         base_W = self.base_pose_W()
         pan, tilt = self.pan_tilt_true()
         self.advance_world(t)
-        G_WC = base_W.G() @ self.camera.G_RC(pan, tilt)
+        G_WC = base_W.G() @ self._G_RC_true(pan, tilt)
         G_WL = G_WC @ self._G_CL
         light = None if self._episode is None else self._episode.camera.light_direction
         left, _, _ = self.world.render(G_WL, self._raw[0], light_direction=light)

@@ -29,6 +29,7 @@ from pathlib import Path
 from lab.errors import ConfigError
 from lab.geometry import Pose2D, wrap_angle
 from lab.hardware.config import HardwareConfig, load_config
+from lab.mounts import CalibratedRobot, HeadMounts, load_mounts
 from lab.robot import Robot, RobotWrapper, StereoFrame
 
 __all__ = ["PlacedRobot", "RobotKind", "RobotSession", "load_robot_config", "make_robot", "robot_kind"]
@@ -126,6 +127,8 @@ def make_robot(
     sensing="ideal",
     scene=None,
     emulator_setup: Callable | None = None,
+    mounts=None,
+    config_mounts: bool = True,
 ) -> Iterator[RobotSession]:
     """The robot a run drives, closed (devices stopped, emulators ended) on exit.
 
@@ -149,6 +152,11 @@ def make_robot(
         A rehearsal's scene instead of its config's ``[sim]`` world and carrier (the search's room), and
         a hook that injects faults into its emulators before the robot connects
         (:func:`lab.runs.rehearsal.rehearsal`).
+    mounts : HeadMounts, optional
+        A calibration of the camera's mounts (:mod:`lab.mounts`): the robot is a
+        :class:`~lab.mounts.CalibratedRobot` whose camera frame includes it. Without it, a robot config's
+        ``[camera] mounts`` file is used when it exists (``config_mounts``; False: the nominal
+        kinematics, as ``lab hardware calibrate`` needs them).
 
     Raises
     ------
@@ -161,20 +169,28 @@ def make_robot(
         from lab.sim import SimRobot
 
         robot = SimRobot(world, start=start, seed=seed, sensing=sensing)
-        yield RobotSession(RobotKind.SIM, robot, world)
+        yield RobotSession(RobotKind.SIM, _calibrated(robot, mounts), world)
         return
     cfg = _load(config)
+    if mounts is None and config_mounts and cfg.camera.mounts and Path(cfg.camera.mounts).exists():
+        mounts = load_mounts(cfg.camera.mounts)  # a corrupt file stops here, naming it
     if cfg.camera.source == "sim":
         from lab.runs.rehearsal import rehearsal
 
         kw = {"scene": scene, "emulator_setup": emulator_setup, "sensing": sensing}
         with rehearsal(cfg, true_model=true_model, mover=mover, seed=seed, **kw) as r:
-            yield RobotSession(RobotKind.REHEARSAL, r.robot, r.world, r.carrier, r.config, r)
+            robot = _calibrated(r.robot, mounts)
+            yield RobotSession(RobotKind.REHEARSAL, robot, r.world, r.carrier, r.config, r)
         return
     from lab.hardware.robot import HardwareRobot
 
     with HardwareRobot(cfg) as robot:
-        yield RobotSession(RobotKind.HARDWARE, robot, config=cfg)
+        yield RobotSession(RobotKind.HARDWARE, _calibrated(robot, mounts), config=cfg)
+
+
+def _calibrated(robot: Robot, mounts: HeadMounts | None) -> Robot:
+    """``robot`` seeing through the calibrated camera frame (None: as it is)."""
+    return robot if mounts is None else CalibratedRobot(robot, mounts)
 
 
 class PlacedRobot(RobotWrapper):

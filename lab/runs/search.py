@@ -46,6 +46,7 @@ import numpy as np
 from lab.errors import ConfigError
 from lab.geometry import Rz, se3
 from lab.localization import LocalizationMode
+from lab.mounts import HeadMounts, load_mounts
 from lab.navigation.grid import GridSpec
 from lab.robot import Robot
 from lab.runs.moving import MovingOptions, agent_config, found_time, passable_of, start_mover
@@ -201,6 +202,9 @@ class TrialOptions:
         static-map baseline (:mod:`lab.runs.moving`). None: the paper's stationary object.
     view3d : path, optional
         Write the recorded 3D view there (:mod:`lab.viz.view3d`: one HTML page, one step per event).
+    mounts : path or HeadMounts, optional
+        A mount calibration file (``lab hardware calibrate``, :mod:`lab.mounts`): the robot's camera frame
+        includes it. Default: none in the simulator; a robot config's ``[camera] mounts`` if it exists.
     """
 
     place: tuple | None = None
@@ -223,6 +227,7 @@ class TrialOptions:
     start: tuple | None = None
     moving: MovingOptions | None = None
     view3d: object = None
+    mounts: object = None
 
 
 def run_search(
@@ -249,6 +254,7 @@ def run_search(
     start=None,
     moving: MovingOptions | None = None,
     view3d=None,
+    mounts=None,
 ) -> SearchResult:
     """Run one search trial (in the simulator, a rehearsal or on the robot) and score it.
 
@@ -278,6 +284,7 @@ def run_search(
         start=start,
         moving=moving,
         view3d=view3d,
+        mounts=mounts,
     )
     return run_trial(object, seed, options)
 
@@ -295,6 +302,8 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
 
         viewer = View3D(opts.view3d)
     hw = load_robot_config(opts.robot_config)  # a bad robot config is one clear line before anything starts
+    if opts.mounts is not None and not isinstance(opts.mounts, HeadMounts):  # so is a bad calibration file
+        opts = replace(opts, mounts=load_mounts(opts.mounts))
     kind = robot_kind(hw)
     # the landmark map (a bad landmark file is one line too) and where the robot's odometry starts
     room = room_landmarks(kind, hw, scene, opts.localization, opts.progress, sensing=opts.sensing, seed=seed)
@@ -394,15 +403,18 @@ class _TruthOf:
 def _session(stack, kind, robot_config, scene, object, seed, opts: TrialOptions, G_WO):
     """The trial's robot session (entered on ``stack``) and where its truth comes from."""
     sensing, supersample, emulator_setup = opts.sensing, opts.supersample, opts.emulator_setup
+    mounts = opts.mounts  # read by run_trial
     if kind is RobotKind.SIM:
         from lab.sim import RenderSettings, SimWorld
 
         w = stack.enter_context(SimWorld(scene, RenderSettings(supersample=supersample)))
-        run = stack.enter_context(make_robot(world=w, seed=seed, sensing=sensing))
+        run = stack.enter_context(make_robot(world=w, seed=seed, sensing=sensing, mounts=mounts))
         t = w.truth
         at = None if opts.moving is None else start_mover(w, object, opts.moving, seed).G_WO_at
         return run, _TruthOf(lambda: t.G_W(object), t.G_WC, t.robot_pose, lambda: int(t.collisions), at)
-    robot = make_robot(robot_config, seed=seed, scene=scene, emulator_setup=emulator_setup, sensing=sensing)
+    robot = make_robot(
+        robot_config, seed=seed, scene=scene, emulator_setup=emulator_setup, sensing=sensing, mounts=mounts
+    )
     run = stack.enter_context(robot)
     bumps = lambda: int(run.robot.bumps)  # noqa: E731 - the bumpers' count: a robot's own collisions
     if kind is RobotKind.REHEARSAL:

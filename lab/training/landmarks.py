@@ -13,6 +13,13 @@ file. On the real robot the same map comes from a file beside the robot config
     size = [1.4, 0.02, 1.0]           # extent along the landmark's x, y, z [m]; one horizontal is thin
     centre = [0.0, 3.94, 1.5]         # the poster's centre in the room [m]
     yaw_deg = 0.0                     # rotation about z [deg]
+    survey_sigma_m = 0.015            # optional, per landmark or once at the top for all: how well
+    survey_sigma_deg = 0.7            # the centre (x, y each) and the yaw were measured (1 sigma)
+
+With a survey sigma above 0 (:attr:`Landmark.survey_sigma_m`, ``survey_sigma_rad``) the localizer
+carries the poster's pose in its state and refines it from its sightings, as it does the simulator's
+surveyed map (:mod:`lab.localization.posters`); without one the map is taken as exact. A landmark's own
+value overrides the file's.
 
 A bad file (unknown key, missing or unreadable texture, duplicate name, a landmark outside the room)
 raises :class:`~lab.errors.ConfigError` with one line naming the file and the field.
@@ -55,8 +62,9 @@ __all__ = [
     "trained_landmark_map",
 ]
 
-_FILE_KEYS = {"room_size", "wall_height", "landmark"}
-_LANDMARK_KEYS = {"name", "texture", "size", "centre", "yaw_deg"}
+_SURVEY_KEYS = {"survey_sigma_m": 0.5, "survey_sigma_deg": 30.0}  # each key's largest allowed value
+_FILE_KEYS = {"room_size", "wall_height", "landmark", *_SURVEY_KEYS}
+_LANDMARK_KEYS = {"name", "texture", "size", "centre", "yaw_deg", *_SURVEY_KEYS}
 
 
 @dataclass(frozen=True)
@@ -128,6 +136,19 @@ def _numbers(v, n: int, where: str) -> tuple[float, ...]:
     return out
 
 
+def _survey_value(table: dict, key: str, where: str, default: float) -> float:
+    """A survey sigma of ``table`` (``default`` when absent): a finite number in [0, its largest]."""
+    v = table.get(key, default)
+    hi = _SURVEY_KEYS[key]
+    unit = "m" if key.endswith("_m") else "deg"
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 <= v <= hi):
+        raise ConfigError(
+            f"{where}: the survey's standard deviation must be a number within [0, {hi:g}] {unit} "
+            f"(0: exact), got {v!r}"
+        )
+    return float(v)
+
+
 def _read_landmark_file(path: Path) -> tuple[list[_Poster], tuple[float, float]]:
     path = Path(path)
     if not path.is_file():
@@ -145,6 +166,7 @@ def _read_landmark_file(path: Path) -> tuple[list[_Poster], tuple[float, float]]
     if min(room) <= 0:
         raise ConfigError(f"{path} room_size: both extents must be > 0 m, got {list(room)}")
     wall_height = float(d.get("wall_height", 2.5))
+    survey = {k: _survey_value(d, k, f"{path} {k}", 0.0) for k in _SURVEY_KEYS}
     entries = d.get("landmark", [])
     if not isinstance(entries, list) or not entries:
         raise ConfigError(f"{path}: needs at least one [[landmark]] table")
@@ -189,7 +211,8 @@ def _read_landmark_file(path: Path) -> tuple[list[_Poster], tuple[float, float]]
                 f"y within +-{hy:g} m, z within [0, {wall_height:g}] m)"
             )
         yaw = math.radians(float(yaw_deg))
-        lm = Landmark(name, centre, yaw, size, inward_normal(centre, yaw, size))
+        sm, sd = (_survey_value(e, k, f"{where} {k}", survey[k]) for k in _SURVEY_KEYS)
+        lm = Landmark(name, centre, yaw, size, inward_normal(centre, yaw, size), None, sm, math.radians(sd))
         out.append(_Poster(lm, tex_path))
     return out, room
 
