@@ -21,7 +21,14 @@ from lab.errors import ConfigError
 from lab.search.config import SearchAgentConfig
 from lab.search.motion import MotionModel, passable_from_costmap
 
-__all__ = ["MOVING_POSITION_STD_M", "MovingOptions", "agent_config", "found_time", "passable_of", "start_mover"]
+__all__ = [
+    "MOVING_POSITION_STD_M",
+    "MovingOptions",
+    "agent_config",
+    "found_time",
+    "passable_of",
+    "start_mover",
+]
 
 MOVING_KINDS = ("random", "evasive")
 
