@@ -92,3 +92,29 @@ def test_bad_options_are_one_clear_error():
         MovingObjectConfig(speed_mps=0.0)
     with pytest.raises(ConfigError, match="pause"):
         MovingObjectConfig(pause_s=-1.0)
+
+
+def test_it_never_drives_towards_a_robot_that_came_within_its_keep_away_distance():
+    """A leg chosen before the robot arrived would run into it: the object stops where a step would
+    bring it nearer than ``keep_away_m`` to the robot's base (it drove right up to a searching robot
+    that stood still, which then drove into what its camera could not see so close), and a leg that
+    leads away from the robot is still driven."""
+    scene, name = room_with_object(1)
+    ox, oy = scene.body(name).centre[:2]
+    with SimWorld(scene) as w:
+        cfg = MovingObjectConfig(MovingKind.RANDOM, speed_mps=0.2, pause_s=1000.0)
+        m = make_moving_object(w, name, cfg, np.random.default_rng(0))
+        robot_at = (ox + 1.5, oy)  # the robot, 1.5 m away on +x: the leg below runs through it
+        SimRobot(w, start=Pose2D(*robot_at, math.pi))
+        m.goal = np.array([ox + 3.0, oy])
+        for _ in range(100):  # 10 s: 2 m at 0.2 m/s, if nothing stopped it
+            w.robot.step(0.1)
+        d = math.hypot(m.xy[0] - robot_at[0], m.xy[1] - robot_at[1])
+        assert m.goal is None  # the leg ended
+        assert cfg.keep_away_m - 0.2 * 0.1 < d  # it stopped at the distance, within a step
+        assert d < cfg.keep_away_m + 0.2 * 0.1 + 1e-9
+        m.goal = np.array([ox - 0.5, oy])  # away from the robot: allowed
+        x0 = m.xy.copy()
+        for _ in range(10):
+            w.robot.step(0.1)
+        assert m.xy[0] < x0[0] - 0.15

@@ -52,7 +52,11 @@ class MovingObjectConfig:
     clearance_m : float [m]
         Distance its centre keeps from every obstacle's footprint.
     keep_away_m : float [m]
-        Distance its legs keep from the robot's base (it never drives into the robot).
+        Distance its legs keep from the robot's base (it never drives into the robot): a leg is chosen
+        clear of where the robot stands, and a step that would bring it nearer than this to where the
+        robot stands now ends the leg there (the robot moved since; a carrier robot's proximity stop).
+        It never approaches a robot that stands still, so whatever it stands next to, the robot saw
+        come (a robot's camera does not see the floor within about half a metre of its base).
     sight_range_m : float [m]
         How far the evasive object notices the camera.
     """
@@ -142,12 +146,24 @@ class MovingObject:
         step = self.goal - self.xy
         d = float(np.hypot(*step))
         move = cfg.speed_mps * dt
+        nxt = self.goal.copy() if d <= move else self.xy + step * (move / d)
+        if self._nearing_robot(nxt):
+            self.goal = None  # the proximity stop: the leg ends here, and the pause begins
+            return
+        self.xy = nxt
         if d <= move:
-            self.xy, self.goal = self.goal.copy(), None
-        else:
-            self.xy = self.xy + step * (move / d)
+            self.goal = None
         self.world.set_body_pose(self.name, self.G_WO)
         self.track.append((self.world.t + dt, self.G_WO))
+
+    def _nearing_robot(self, nxt: np.ndarray) -> bool:
+        """Whether the step to ``nxt`` [m] comes nearer to the robot's base than ``keep_away_m`` and
+        nearer than it stands now (a step away from a robot that came close is allowed)."""
+        if self.world.robot is None:
+            return False
+        r = self.world.truth.robot_pose()
+        d_next = math.hypot(nxt[0] - r.x, nxt[1] - r.y)
+        return d_next < self.config.keep_away_m and d_next < math.hypot(self.xy[0] - r.x, self.xy[1] - r.y)
 
     def seen(self, xy=None) -> bool:
         """Whether a point (default: the object) is in the robot camera's view cone within range."""
