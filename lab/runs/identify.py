@@ -419,10 +419,11 @@ def _record_truth(agent: IdentificationAgent, session: RobotSession) -> list:
 def final_pose_estimate(agent: IdentificationAgent, identified) -> dict | None:
     """The final pose the robot states without a truth: the identified model's estimate (else the most
     probable model's) of the object in the last frame's camera C, ``position_m`` and ``euler_zyx_deg``,
-    with its standard deviations, the larger axes of the filter's covariance (``position_std_m``,
-    ``orientation_std_deg``); None when that model has no estimate."""
+    with its standard deviations, the larger axes of the estimate's covariance (``position_std_m``,
+    ``orientation_std_deg``); None when that model has no estimate. The estimate is the model's filter
+    fed only the consistent part of each frame (:mod:`lab.identification.final_pose`)."""
     k = int(identified) if identified is not None else int(np.argmax(agent.P))
-    est = agent.bank.estimates[k]
+    est = agent.final_pose.estimate(k)
     if est is None:
         return None
     pos, rot = larger_axes_std(est.Sigma_rv)
@@ -437,8 +438,9 @@ def final_pose_estimate(agent: IdentificationAgent, identified) -> dict | None:
 
 
 def _final_pose_error(agent: IdentificationAgent, session: RobotSession, truth: list, true_model: int):
-    """The true model's estimate against the truth behind the last frame (None without a truth)."""
-    est = agent.bank.estimates[true_model]
+    """The true model's stated estimate (:func:`final_pose_estimate`'s) against the truth behind the last
+    frame (None without a truth)."""
+    est = agent.final_pose.estimate(true_model)
     if session.kind is RobotKind.SIM:
         last = truth[-1] if truth else None
     else:
