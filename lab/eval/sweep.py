@@ -76,8 +76,8 @@ class SweepKind:
     parameters (``params``) or its result; ``conditions``: the parameters a report row is grouped
     by; ``medians``: ``(header, function of the rows that ran -> value)`` columns of the report;
     ``state``: a finished job's progress line; ``derive``: the columns computed from a job's result
-    (a function of it returning a dict, read before the result's own fields). A sweep over several error scales is grouped by
-    ``error_scale`` too (:func:`write_report`)."""
+    (a function of it returning a dict, read before the result's own fields). A sweep over several
+    error scales is grouped by ``error_scale`` too (:func:`write_report`)."""
 
     name: str
     schema: str
