@@ -402,14 +402,17 @@ def _watch(agent: IdentificationAgent, record: Path | None, progress):
 
 
 def _record_truth(agent: IdentificationAgent, session: RobotSession) -> list:
-    """In the simulator, (G_WC, G_WO) true at each frame's capture (scoring and figures only)."""
+    """In the simulator, (G_WC, G_WO) true at each frame's capture (scoring and figures only): the camera
+    when the frame's image was exposed (a camera latency before the frame's stamp; the robot takes its
+    odometry and head back to that instant, so its estimates are relative to that camera), the box as
+    the image shows it."""
     truth: list = []
     if session.kind is not RobotKind.SIM:
         return truth
     world, carrier, agent_step = session.world, session.carrier, agent.step
 
     def step_with_truth():
-        truth.append((world.truth.G_WC(), carrier.G_WO.copy()))
+        truth.append((world.truth.G_WC_exposed(), carrier.G_WO.copy()))
         return agent_step()
 
     agent.step = step_with_truth
