@@ -152,8 +152,10 @@ def test_an_image_shows_the_robot_where_it_was_latency_before_its_stamp():
         for _ in range(40):  # up to speed (0.5 m/s^2), then steady
             r.drive(speed, 0.0)
             r.step(0.05)
+        exposed = w.truth.G_WC_exposed()  # the truth of the camera the next image is rendered from
         f = r.capture_stereo()
         now = w.truth.G_WC()
+        np.testing.assert_array_equal(exposed, rendered[-1])
         assert r.truth.pose().x - (-2.0) > 0.3
         lag = now[:3, 3] - rendered[-1][:3, 3]
         assert lag == pytest.approx([speed * latency, 0.0, 0.0], abs=1e-9)  # 1.5 cm behind
@@ -162,6 +164,7 @@ def test_an_image_shows_the_robot_where_it_was_latency_before_its_stamp():
         r.step(0.2)
         r.capture_stereo()
         assert rendered[-1] == pytest.approx(w.truth.G_WC(), abs=1e-12)  # standing still: no lag
+        assert w.truth.G_WC_exposed() == pytest.approx(w.truth.G_WC(), abs=1e-12)
 
 
 # --- the mismatch -----------------------------------------------------------------------------------

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 
 from lab.errors import ConfigError
 from lab.eval.executor import Job
-from lab.eval.sweep import SweepKind
+from lab.eval.sweep import SweepKind, confidently_wrong_pose
 
 __all__ = [
     "SEARCH",
@@ -308,17 +308,9 @@ def confidently_wrong(row, position_m: float = 0.05, orientation_deg: float = 10
     False
     """
 
-    def num(key):
-        v = row.get(key)
-        return None if v in (None, "") else float(v)
-
     if str(row.get("found")) not in ("True", "true", "1"):
         return False
-    pe, oe = num("position_error_m"), num("orientation_error_deg")
-    sp, so = num("std_position_m"), num("std_orientation_deg")
-    off_p = pe is not None and sp is not None and pe > position_m and sp < pe / 3
-    off_o = oe is not None and so is not None and oe > orientation_deg and so < oe / 3
-    return off_p or off_o
+    return confidently_wrong_pose(row, position_m, orientation_deg)
 
 
 def _median(xs) -> str:

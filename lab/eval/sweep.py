@@ -25,6 +25,8 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from lab.errors import ConfigError
 from lab.eval.executor import Job, Outcome
 
@@ -32,6 +34,9 @@ __all__ = [
     "IDENTIFY",
     "IdentifySweep",
     "SweepKind",
+    "confidently_wrong_pose",
+    "final_pose_quantile",
+    "with_pose_columns",
     "identify_job",
     "identify_key",
     "job_seed_sequence",
@@ -54,6 +59,10 @@ CSV_FIELDS = (
     "actions",
     "sim_time_s",
     "wall_time_s",
+    "position_error_m",
+    "orientation_error_deg",
+    "std_position_m",
+    "std_orientation_deg",
     "error",
 )
 
@@ -66,8 +75,9 @@ class SweepKind:
     columns (``key``, ``error`` and ``wall_time_s`` among them), the others read from the job's
     parameters (``params``) or its result; ``conditions``: the parameters a report row is grouped
     by; ``medians``: ``(header, function of the rows that ran -> value)`` columns of the report;
-    ``state``: a finished job's progress line. A sweep over several error scales is grouped by
-    ``error_scale`` too (:func:`write_report`)."""
+    ``state``: a finished job's progress line; ``derive``: the columns computed from a job's result
+    (a function of it returning a dict, read before the result's own fields). A sweep over several
+    error scales is grouped by ``error_scale`` too (:func:`write_report`)."""
 
     name: str
     schema: str
@@ -76,6 +86,7 @@ class SweepKind:
     conditions: tuple[str, ...]
     medians: tuple = ()
     state: object = None
+    derive: object = None
 
 
 def _med(xs, fmt="{:.1f}"):
@@ -89,6 +100,53 @@ def _median_actions(rows) -> str:
     return _med([r["actions"] if r["success"] else r["max_actions"] for r in rows], "{:g}")
 
 
+def _num(row, key) -> float | None:
+    v = row.get(key)
+    return None if v in (None, "") else float(v)
+
+
+def confidently_wrong_pose(row, position_m: float = 0.05, orientation_deg: float = 10.0) -> bool:
+    """Whether a stated pose is confidently wrong (issue 52's bar): more than ``position_m`` [m] or
+    ``orientation_deg`` [deg] off the truth (``position_error_m``, ``orientation_error_deg``) while its
+    stated deviation (``std_position_m``, ``std_orientation_deg``) is under a third of that error. False
+    without an error or a stated deviation (no truth, no pose).
+
+    >>> confidently_wrong_pose({"position_error_m": 0.06, "std_position_m": 0.01})
+    True
+    >>> confidently_wrong_pose({"position_error_m": 0.06, "std_position_m": 0.03})
+    False
+    """
+    pe, oe = _num(row, "position_error_m"), _num(row, "orientation_error_deg")
+    sp, so = _num(row, "std_position_m"), _num(row, "std_orientation_deg")
+    off_p = pe is not None and sp is not None and pe > position_m and sp < pe / 3
+    off_o = oe is not None and so is not None and oe > orientation_deg and so < oe / 3
+    return off_p or off_o
+
+
+def _identified(row) -> bool:
+    return str(row.get("success")) in ("True", "true", "1")
+
+
+def final_pose_quantile(rows, q: float) -> tuple[float, float] | None:
+    """The ``q``-quantile (0..1, linear interpolation) of the final pose's position [cm] and orientation
+    [deg] error over the episodes that identified their model (an unidentified one has no pose of the
+    right model to score; it counts as a failure in the success column); None without one."""
+    ok = [r for r in rows if _identified(r) and _num(r, "position_error_m") is not None]
+    if not ok:
+        return None
+    p = np.quantile([100.0 * _num(r, "position_error_m") for r in ok], q)
+    o = np.quantile([_num(r, "orientation_error_deg") for r in ok], q)
+    return float(p), float(o)
+
+
+def _pose_cell(q: float):
+    def cell(rows) -> str:
+        v = final_pose_quantile(rows, q)
+        return "-" if v is None else f"{v[0]:.2f} cm / {v[1]:.1f}°"
+
+    return cell
+
+
 IDENTIFY = SweepKind(
     name="identify",
     schema="identify",
@@ -99,8 +157,14 @@ IDENTIFY = SweepKind(
         # an episode that did not identify its model counts its whole budget (a lower bound)
         ("median actions", _median_actions),
         ("median sim s", lambda rs: _med([r["sim_time_s"] for r in rs])),
+        # the final pose of the identified episodes: the issue's bar is 1 cm / 2 deg and 3 cm / 5 deg
+        ("final pose median", _pose_cell(0.5)),
+        ("final pose p90", _pose_cell(0.9)),
+        ("final pose worst", _pose_cell(1.0)),
+        ("confidently wrong", lambda rs: str(sum(_identified(r) and confidently_wrong_pose(r) for r in rs))),
     ),
     state=lambda r: f"success {r['success']} after {r['actions']} actions, {r['sim_time_s']:.1f} s sim",
+    derive=lambda res: with_pose_columns(res),
 )
 
 
@@ -224,10 +288,26 @@ def identify_job(error_scale: float = 1.0, **kwargs) -> dict:
     return run_identify(figures=False, **kwargs)
 
 
+def with_pose_columns(result: dict) -> dict:
+    """The table's columns of a ``lab identify`` JSON's final pose: ``position_error_m``,
+    ``orientation_error_deg`` (its ``pose_error``, the true model's estimate against the truth) and
+    ``std_position_m``, ``std_orientation_deg`` (its ``pose_estimate``'s stated deviations); None where
+    missing."""
+    err = result.get("pose_error") or {}
+    est = result.get("pose_estimate") or {}
+    return {
+        "position_error_m": err.get("translation_m"),
+        "orientation_error_deg": err.get("rotation_deg"),
+        "std_position_m": est.get("position_std_m"),
+        "std_orientation_deg": est.get("orientation_std_deg"),
+    }
+
+
 def _row(kind: SweepKind, key: str, job_kw: dict, res: dict | None, error: str | None, wall) -> dict:
     row = {k: job_kw.get(k) for k in kind.params}
     row["key"] = key
     if res is not None:
+        res = res if kind.derive is None else {**res, **kind.derive(res)}
         row.update({k: res.get(k) for k in kind.columns if k not in kind.params and k != "key"})
         row["wall_time_s"] = res.get("wall_time_s", wall)
     else:

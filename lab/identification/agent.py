@@ -68,6 +68,7 @@ from lab.estimation import (
 from lab.geometry import G_to_pose6, Pose2D, wrap_angle
 from lab.identification.actions import ActionConfig, RingBlocked
 from lab.identification.bayes import uniform
+from lab.identification.final_pose import ConsistentShadows
 from lab.identification.head import HeadController, HeadMode
 from lab.identification.hypotheses import (
     ModelHypotheses,
@@ -203,6 +204,7 @@ class IdentificationAgent:
             ),
             rng=np.random.default_rng(seed),
         )
+        self.final_pose = ConsistentShadows(self.bank)  # the pose the run states (final_pose.py)
 
     def _start_loop_state(self, observer, floor_plan) -> None:
         """The loop's state before the first step: a uniform belief, no records, no goal, no track."""
@@ -264,12 +266,9 @@ class IdentificationAgent:
     def _perceive(self, frame):
         """Predict every model's filter to this frame, then update filters and probabilities with it."""
         if self._prev is not None:
-            self.bank.predict(
-                self._prev.G_RC,
-                frame.G_RC,
-                frame_motion(self._prev, frame),
-                frame.t - self._prev.t,
-            )
+            motion = (self._prev.G_RC, frame.G_RC, frame_motion(self._prev, frame), frame.t - self._prev.t)
+            self.final_pose.predict(*motion)  # first: it compares the filters with their last update
+            self.bank.predict(*motion)
         self._prev = frame
         predicted = self.bank.estimates
         self.last_roi = roi = self.region_of_interest(predicted, frame.camera)
@@ -279,6 +278,7 @@ class IdentificationAgent:
         )
         self.P = obs.belief.P
         self.last_features, self.last_observation = f, obs
+        self.final_pose.update(obs.updates, obs.matches)
         if any(u.outcome is not UpdateOutcome.SKIPPED for u in obs.updates):
             self._last_seen_t = frame.t
         self._follow_reinitialised_filters(predicted, obs.updates)

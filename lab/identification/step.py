@@ -30,10 +30,13 @@ class FrameObservation:
         Model probabilities and entropy after the frame.
     updates : tuple of UpdateResult
         Each model's EKF update.
+    matches : tuple of (d_C, b_O, Sigma_d)
+        Each model's matched pairs that its update was given (empty: not recorded).
     """
 
     belief: Belief
     updates: tuple[UpdateResult, ...] = field(repr=False)
+    matches: tuple = field(default=(), repr=False)
 
 
 def _shared(matcher: Matcher, scorer: ModelScorer, features: Features3D):
@@ -81,14 +84,11 @@ def observe_frame(
             f"need one prediction, matcher and scorer per model: {len(predicted)}, {len(matchers)}, "
             f"{len(scorers)} for {L} filters"
         )
-    updates = bank.update_all(  # every model's matches, the filters' linear algebra batched
-        [
-            matchers[i]
-            .match(features, _shared(matchers[i], scorers[i], features))
-            .pairs(features, scorers[i].db)
-            for i in range(L)
-        ]
+    matches = tuple(
+        matchers[i].match(features, _shared(matchers[i], scorers[i], features)).pairs(features, scorers[i].db)
+        for i in range(L)
     )
+    updates = bank.update_all(list(matches))  # every model's matches, the filters' linear algebra batched
     states = [state_for_scoring(p, u) for p, u in zip(predicted, updates, strict=True)]
     belief = calc_current_entropy(P, features, scorers, states, config, symmetries)
-    return FrameObservation(belief, updates)
+    return FrameObservation(belief, updates, matches)

@@ -402,14 +402,17 @@ def _watch(agent: IdentificationAgent, record: Path | None, progress):
 
 
 def _record_truth(agent: IdentificationAgent, session: RobotSession) -> list:
-    """In the simulator, (G_WC, G_WO) true at each frame's capture (scoring and figures only)."""
+    """In the simulator, (G_WC, G_WO) true at each frame's capture (scoring and figures only): the camera
+    when the frame's image was exposed (a camera latency before the frame's stamp; the robot takes its
+    odometry and head back to that instant, so its estimates are relative to that camera), the box as
+    the image shows it."""
     truth: list = []
     if session.kind is not RobotKind.SIM:
         return truth
     world, carrier, agent_step = session.world, session.carrier, agent.step
 
     def step_with_truth():
-        truth.append((world.truth.G_WC(), carrier.G_WO.copy()))
+        truth.append((world.truth.G_WC_exposed(), carrier.G_WO.copy()))
         return agent_step()
 
     agent.step = step_with_truth
@@ -419,10 +422,11 @@ def _record_truth(agent: IdentificationAgent, session: RobotSession) -> list:
 def final_pose_estimate(agent: IdentificationAgent, identified) -> dict | None:
     """The final pose the robot states without a truth: the identified model's estimate (else the most
     probable model's) of the object in the last frame's camera C, ``position_m`` and ``euler_zyx_deg``,
-    with its standard deviations, the larger axes of the filter's covariance (``position_std_m``,
-    ``orientation_std_deg``); None when that model has no estimate."""
+    with its standard deviations, the larger axes of the estimate's covariance (``position_std_m``,
+    ``orientation_std_deg``); None when that model has no estimate. The estimate is the model's filter
+    fed only the consistent part of each frame (:mod:`lab.identification.final_pose`)."""
     k = int(identified) if identified is not None else int(np.argmax(agent.P))
-    est = agent.bank.estimates[k]
+    est = agent.final_pose.estimate(k)
     if est is None:
         return None
     pos, rot = larger_axes_std(est.Sigma_rv)
@@ -437,8 +441,9 @@ def final_pose_estimate(agent: IdentificationAgent, identified) -> dict | None:
 
 
 def _final_pose_error(agent: IdentificationAgent, session: RobotSession, truth: list, true_model: int):
-    """The true model's estimate against the truth behind the last frame (None without a truth)."""
-    est = agent.bank.estimates[true_model]
+    """The true model's stated estimate (:func:`final_pose_estimate`'s) against the truth behind the last
+    frame (None without a truth)."""
+    est = agent.final_pose.estimate(true_model)
     if session.kind is RobotKind.SIM:
         last = truth[-1] if truth else None
     else:

@@ -85,6 +85,13 @@ class RobotTruth:
         """The left camera's true pose in the world: the true base, the pan-tilt axes' true angles."""
         return self._robot._true_G_WC()
 
+    def G_WC_exposed(self) -> np.ndarray:
+        """The left camera's true pose when an image captured now was exposed: ``latency_s`` before now
+        (what :meth:`SimRobot.capture_stereo` renders, the camera a frame's estimates are relative to);
+        :meth:`G_WC` without a latency."""
+        r = self._robot
+        return r._G_WC_at(r.world.t - r._latency)
+
     @property
     def sensing(self) -> EpisodeSensing:
         """The sensing draws of this episode (the renders' cameras, light, odometry errors, zeros)."""

@@ -59,6 +59,14 @@ class Truth:
             raise ConfigError("this world has no robot")
         return r.truth.G_WC()
 
+    def G_WC_exposed(self) -> np.ndarray:
+        """True pose of the left camera when an image captured now was exposed (the camera latency
+        before now; :meth:`G_WC` without one): the camera the frame's image shows the world from."""
+        r = self._w.robot
+        if r is None:
+            raise ConfigError("this world has no robot")
+        return r.truth.G_WC_exposed()
+
     @property
     def sensing(self):
         """The robot's sensing draws of this episode (:class:`lab.sim.sensing.EpisodeSensing`): the
