@@ -1,23 +1,36 @@
-"""Search trials with the localizer's inputs recorded, then replayed with other localizer settings.
+"""Search trials on tuning seeds with the localizer's inputs, the pose checks and the navigator's
+clearings recorded, then re-analysed offline (docs/tuning/revalidation.md, issue 52).
 
     nice .venv/bin/python benchmarks/replay_localizer.py record --seeds 1-2 --out out/reval-search
     nice .venv/bin/python benchmarks/replay_localizer.py replay --out out/reval-search
+    nice .venv/bin/python benchmarks/replay_localizer.py pose-checks --out out/reval-search
+    nice .venv/bin/python benchmarks/replay_localizer.py search-figures --out out/reval-search
 
 ``record`` runs the ``lab eval search`` trials of the paper strategy (every object, surface and obstacle
-setting of ``--seeds``, realistic sensing, landmarks) one after the other in this process, writes each
-trial's JSON to ``OUT/jobs/KEY.json`` as ``lab eval search --out OUT`` does (so ``lab eval search ...
---resume --out OUT`` then writes the report without running them again), and beside it
-``OUT/replay/KEY.pkl``: the :class:`lab.localization.Localizer`'s construction and every call that
-changed it (``predict``, ``update``, ``start_clone``, ``end_clone``) in order, with the simulator's true
-robot pose at each update (scoring only; the robot never read it). A trial already in ``OUT/jobs``
-is skipped.
+setting of ``--seeds``, realistic sensing, landmarks, 600 s) one after the other in this process, a
+seed's every surface before the next seed, writes each trial's JSON to ``OUT/jobs/KEY.json`` as ``lab
+eval search --out OUT`` does (so ``lab eval search ... --resume --out OUT`` then writes the report
+without running them again), and beside it in ``OUT/replay/``: ``KEY.pkl``, the
+:class:`lab.localization.Localizer`'s construction and every call that changed it (``predict``,
+``update``, ``start_clone``, ``end_clone``) in order, with the simulator's true robot pose at each
+update; ``KEY.checks.pkl``, every pose check before "found" (its counts, the checked pose, the true
+camera pose, the frame) and every clearing of marks under the robot (``Navigator.clear_under_robot``);
+``KEY.dbs.pkl``, the feature databases those checks used. The truth is for scoring only; the robot
+never read it. A trial already in ``OUT/jobs`` is skipped. Tuning seeds only.
 
 ``replay`` feeds each recorded call sequence to a fresh localizer built with one setting changed at a
-time (the recount rule, the heading's observation floor) and scores its estimate after every landmark
-update against the true pose: the position and heading errors, the pose's NEES (3 degrees of freedom;
-inside the chi-square 95 % band 95 % of the time when honest) and the gate lock-out's inflations. The
-replay is open-loop: the robot drove as the recorded run's own localizer told it, so it says what a
-setting does to the estimate from the same observations, not where the robot would then have gone.
+time (the recount rule, the heading's observation floor, the position terms of the floor) and scores
+its estimate after every landmark update against the true pose: the position and heading errors, the
+pose's NEES (3 degrees of freedom; inside the chi-square 95 % band 95 % of the time when honest), the
+heading's squared z-score and the gate lock-out's inflations. The replay is open-loop: the robot drove
+as the recorded run's own localizer told it, so it says what a setting does to the estimate from the
+same observations, not where the robot would then have gone.
+
+``pose-checks`` scores each logged pose check against the truth (right: within the success criterion's
+5 cm and 10 degrees) and checks its frame again at the pose turned about the vertical (wrong poses),
+for several thresholds; it also lists the navigator's clearings. ``search-figures`` prints the find
+times against budgets and the revisits from another side (of a cell searched itself, or only of a
+neighbour).
 """
 
 from __future__ import annotations
