@@ -77,8 +77,8 @@ class PoseCheckConfig:
         Fewest explained features as a fraction of the predicted visible ones.
 
     ``min_explained`` and ``min_fraction`` are low enough to pass the true poses of a box seen on a
-    shelf, which explain only a few of their predicted features. They were chosen on the report split,
-    not the tuning one: docs/tuning/search-pose-check-thresholds.md.
+    shelf, which explain only a few of their predicted features. They were chosen on the report split
+    and re-validated on the tuning one: docs/tuning/search-pose-check-thresholds.md.
     """
 
     visibility_deg: float = 30.0
