@@ -208,7 +208,7 @@ class ReportPolicy:
             x_c, S_c = loc.end_clone()
         info["updates"] = int(robot.pose_estimate().n_updates - n0)
         kept = PlanarPoseEstimate(
-            Pose2D(*(float(v) for v in x_c)), S_c, robot.now(), LocalizationMode.LANDMARKS
+            Pose2D(*(float(v) for v in x_c)), loc.stated_Sigma(S_c), robot.now(), LocalizationMode.LANDMARKS
         )
         return kept, info
 
