@@ -31,9 +31,11 @@ update corrects both). ``x`` and ``Sigma`` stay the pose's mean and covariance.
 **A surveyed map** (:attr:`Landmark.survey_sigma_m` above 0): each such poster's planar pose joins the
 state, seeded by the survey, and the updates refine it (landmark SLAM, :mod:`lab.localization.posters`).
 How far they moved from their surveys estimates how good the survey was (:meth:`Localizer.survey_scale`):
-when worse than stated, the covariance the robot states (:meth:`Localizer.stated_Sigma`) and the gate
-follow it, so a survey stated to 1.5 cm but off by more neither makes the robot overconfident nor makes
-the gate refuse the other posters that would average its error out.
+when worse than stated, the deviation a report states (:meth:`Localizer.stated_Sigma`) follows it, so a
+survey stated to 1.5 cm but off by more does not make a found pose's statement overconfident. The
+filter's own covariance, its gate and its re-localization thresholds keep the told figures (letting the
+thresholds follow the scale made the report look again and again at a far poster whose shared range
+error each sighting then counted afresh: docs/tuning/room-found-pose-anchoring.md).
 
 The update is iterated (``LocalizerConfig.update_iterations``) because one EKF step is linearised at the
 prior: after a long drive on realistic odometry the heading can be 15 deg off, and one step then left
@@ -534,10 +536,7 @@ class Localizer:
         nu[2] = wrap_angle(nu[2])
         S = H @ P_bar @ H.T + Q  # innovation covariance
         nis = float(nu @ np.linalg.solve(S, nu))
-        # the gate at the covariance the robot states (stated_Sigma): a map the sightings show worse than
-        # its survey said widens it by the survey's variance scale (an exact map: the filter's own)
-        lam = self.survey_scale()[0] if len(self.posters) else 1.0
-        accepted = nis <= chi2_quantile(self.config.gate_prob, 3) * max(lam, 1.0)
+        accepted = nis <= chi2_quantile(self.config.gate_prob, 3)
         if accepted:
             # the iterated EKF: from s_0 = s_bar (whose step is the plain EKF's, K nu, with the gate's H
             # and S), relinearise at each new mean until it stops moving
@@ -595,11 +594,11 @@ class Localizer:
         return self.posters.survey_scale(self.s, self.P)
 
     def stated_Sigma(self, Sigma=None) -> np.ndarray:
-        """The pose's covariance as the robot states it (``Sigma``: a kept pose's; default the pose's):
+        """The pose's covariance as a report states it (``Sigma``: a kept pose's; default the pose's):
         times the survey's variance scale when the sightings show the map worse than its survey said
         (:meth:`survey_scale` above 1), never below the filter's own. The filter's gain is unchanged by
         a common scale of its prior and noises, so the estimate stays; the statement follows the map's
-        actual accuracy, which the report's thresholds and the found pose's deviation rest on."""
+        actual accuracy (a found pose's deviation, :class:`lab.search.report_policy.ReportPolicy`)."""
         S = self.Sigma if Sigma is None else np.asarray(Sigma, float)
         lam, _ = self.survey_scale()
         return S * lam if lam > 1.0 else S

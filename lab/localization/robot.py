@@ -125,10 +125,10 @@ class LocalizedRobot(RobotWrapper):
         return Pose2D(*(float(v) for v in self.localizer.x))
 
     def pose_estimate(self) -> PlanarPoseEstimate:
-        """The robot's pose estimate and covariance now (as stated: :meth:`Localizer.stated_Sigma`)."""
+        """The robot's pose estimate and covariance now."""
         self._sync()
         return PlanarPoseEstimate(
-            self._pose(), self.localizer.stated_Sigma(), self.base.now(), self.mode, self.localizer.n_updates
+            self._pose(), self.localizer.Sigma.copy(), self.base.now(), self.mode, self.localizer.n_updates
         )
 
     def odometry(self) -> Pose2D:
