@@ -30,12 +30,6 @@ update corrects both). ``x`` and ``Sigma`` stay the pose's mean and covariance.
 
 **A surveyed map** (:attr:`Landmark.survey_sigma_m` above 0): each such poster's planar pose joins the
 state, seeded by the survey, and the updates refine it (landmark SLAM, :mod:`lab.localization.posters`).
-How far they moved from their surveys estimates how good the survey was (:meth:`Localizer.survey_scale`):
-when worse than stated, the deviation a report states (:meth:`Localizer.stated_Sigma`) follows it, so a
-survey stated to 1.5 cm but off by more does not make a found pose's statement overconfident. The
-filter's own covariance, its gate and its re-localization thresholds keep the told figures (letting the
-thresholds follow the scale made the report look again and again at a far poster whose shared range
-error each sighting then counted afresh: docs/tuning/room-found-pose-anchoring.md).
 
 The update is iterated (``LocalizerConfig.update_iterations``) because one EKF step is linearised at the
 prior: after a long drive on realistic odometry the heading can be 15 deg off, and one step then left
@@ -587,21 +581,6 @@ class Localizer:
             if self._clone is not None:  # the new block is independent of the kept pose
                 self._clone.cross = np.vstack([self._clone.cross, np.zeros((3, 3))])
         return j
-
-    def survey_scale(self) -> tuple[float, int]:
-        """The surveyed map's variance scale as the sightings show it, and its degrees of freedom
-        (:meth:`PosterStates.survey_scale`; ``(1.0, 0)`` with an exact map)."""
-        return self.posters.survey_scale(self.s, self.P)
-
-    def stated_Sigma(self, Sigma=None) -> np.ndarray:
-        """The pose's covariance as a report states it (``Sigma``: a kept pose's; default the pose's):
-        times the survey's variance scale when the sightings show the map worse than its survey said
-        (:meth:`survey_scale` above 1), never below the filter's own. The filter's gain is unchanged by
-        a common scale of its prior and noises, so the estimate stays; the statement follows the map's
-        actual accuracy (a found pose's deviation, :class:`lab.search.report_policy.ReportPolicy`)."""
-        S = self.Sigma if Sigma is None else np.asarray(Sigma, float)
-        lam, _ = self.survey_scale()
-        return S * lam if lam > 1.0 else S
 
     def landmark_estimates(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """The surveyed posters in the state, as refined so far: ``[x, y, yaw]`` and covariance (3, 3)

@@ -159,7 +159,6 @@ class PosterStates:
     def __init__(self, first: int):
         self.first = int(first)
         self.index: dict[str, int] = {}
-        self.prior: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # each poster's survey (survey_prior)
 
     def __len__(self) -> int:
         return len(self.index)
@@ -179,7 +178,6 @@ class PosterStates:
         P_new[:n, :n] = P
         P_new[n:, n:] = L
         self.index[landmark.name] = n
-        self.prior[landmark.name] = (l.copy(), L)
         return np.concatenate([s, l]), P_new, n
 
     def augment_yaw(
@@ -198,34 +196,6 @@ class PosterStates:
     def angles(self) -> list[int]:
         """The state's indices that are angles (wrapped after each step): the heading and each yaw."""
         return [2] + [j + 2 for j in self.index.values()]
-
-    def survey_scale(self, s: np.ndarray, P: np.ndarray) -> tuple[float, int]:
-        r"""How far the posters moved from their survey, against how far the survey's stated accuracy lets
-        them move: the survey's variance scale :math:`\hat\lambda` and its degrees of freedom.
-
-        The shift of the posters' estimates from their surveys, :math:`\delta = \hat l - l^{s}` (all
-        posters in the state, yaws wrapped), is the update's correction of the prior; for a Gaussian
-        prior :math:`N(l^s, L)` and posterior covariance :math:`P_{ll}` its covariance is
-        :math:`C = L - P_{ll}`. When the survey is off by :math:`\lambda` times the stated variance
-        (a tape survey stated to 1-2 cm is not known better than that), the shift grows with it and
-        :math:`q = \delta^T C^{+} \delta` is about :math:`\lambda \chi^2_k`, ``k`` the rank of ``C``
-        (what the sightings resolved: eigenvalues above 1e-3 of the largest). Returns
-        :math:`(q / k, k)`; ``(1.0, 0)`` with no poster in the state."""
-        if not self.index:
-            return 1.0, 0
-        idx = [np.arange(j, j + 3) for j in self.index.values()]
-        d = np.concatenate([s[j] - self.prior[n][0] for n, j in zip(self.index, idx, strict=True)])
-        d[2::3] = [wrap_angle(v) for v in d[2::3]]
-        J = np.concatenate(idx)
-        C = np.zeros((len(J), len(J)))
-        for i, n in enumerate(self.index):
-            C[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = self.prior[n][1]
-        w, V = np.linalg.eigh(C - P[np.ix_(J, J)])
-        keep = w > 1e-3 * max(float(w[-1]), 0.0)
-        k = int(keep.sum())
-        if k == 0:
-            return 1.0, 0
-        return float(np.sum((V[:, keep].T @ d) ** 2 / w[keep])) / k, k
 
     def estimates(self, s: np.ndarray, P: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Each poster in the state: its planar pose ``[x, y, yaw]`` and covariance (3, 3), by name."""

@@ -315,7 +315,6 @@ class LocalizedRobot(RobotWrapper):
         sigma_rad: float | None = None,
         passes: int = 1,
         at_W=None,
-        every_view: bool = False,
     ) -> bool:
         """Active re-localization: when the position is uncertain, stop and pan the head to the landmarks
         the estimate says are in view, best first (:meth:`landmark_views`), until it is certain again.
@@ -324,17 +323,15 @@ class LocalizedRobot(RobotWrapper):
         at (default the re-localization's, at the robot; a report uses ``report_sigma_m`` at the object,
         :meth:`relocalize_to_report`); ``passes``: how many times round the landmarks in view, at most
         ``max_views`` views in all; a pass after the first looks only where the one before it saw a
-        landmark the filter accepted; ``every_view``: look at every landmark in view once (one pass, at
-        most ``max_views``) even when the thresholds are met (:meth:`relocalize_to_report`).
+        landmark the filter accepted.
 
         Returns True when the pose is (or became) within the thresholds; the head is put back where
         it was.
         """
         if self.mode is LocalizationMode.ODOMETRY:
             return False
-        if self.certain(sigma_m, sigma_rad, at_W) and not every_view:
+        if self.certain(sigma_m, sigma_rad, at_W):
             return True
-        passes = 1 if every_view else passes
         self.base.stop()
         start = self.base.pan_tilt()
         views = self.landmark_views(tilt_max)
@@ -352,7 +349,7 @@ class LocalizedRobot(RobotWrapper):
                 n_views += 1
                 if any(r.accepted for r in self.localizer.history[n0:]):
                     productive.append(view)
-                if self.certain(sigma_m, sigma_rad, at_W) and not every_view:
+                if self.certain(sigma_m, sigma_rad, at_W):
                     done = True
                     break
             # the next pass looks again only where this one saw a landmark it accepted: the robot stands
@@ -363,29 +360,18 @@ class LocalizedRobot(RobotWrapper):
                 break
         self.base.command_pan_tilt(start.pan, start.tilt)
         self.base.wait_pan_tilt(timeout=15.0)
-        return done or (every_view and self.certain(sigma_m, sigma_rad, at_W))
+        return done
 
     def relocalize_to_report(self, at_W=None) -> bool:
         """The re-localization before a pose is reported in the room (a found object's, at ``at_W`` =
         (x, y) [m] in W): the ordinary one first (:meth:`relocalize`), then on until the point's
         position standard deviation is within ``report_sigma_m`` (the robot's own without ``at_W``) and
         the heading's within ``report_sigma_rad``, with up to ``report_max_views`` views,
-        ``report_passes`` times round the landmarks in view.
-
-        With a surveyed map (posters in the localizer's state, :mod:`lab.localization.posters`) it first
-        looks at every landmark in view once, whatever the thresholds say. The reported point is then
-        placed in the frame of all the posters seen from here, not of the one the robot happened to see
-        last: one poster's survey error (1.5 cm, 0.7 deg) is the found object's error whole (0.7 deg at
-        3 m is 3.7 cm), while N posters tied together by one view each from the same place average
-        their surveys' errors, about 1/sqrt(N) (docs/tuning/room-errors.md). The thresholds alone do
-        not ask for it: the point's deviation with one well-seen poster is already within
-        ``report_sigma_m``, since the filter cannot tell one poster's survey error from its own."""
+        ``report_passes`` times round the landmarks in view."""
         if self.mode is LocalizationMode.ODOMETRY:
             return False
         self.relocalize()
         c = self.config
-        if len(self.localizer.posters):
-            self.relocalize(c.report_max_views, at_W=at_W, every_view=True)
         return self.relocalize(
             c.report_max_views,
             sigma_m=c.report_sigma_m,

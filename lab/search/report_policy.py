@@ -132,8 +132,7 @@ class ReportPolicy:
         object moved, and the detour (None: none was needed or possible).
 
         The result carries the reported pose's stated deviation in the world (:func:`stated_pose_std`)
-        with the robot's covariance as reported (on odometry alone: dead reckoning's; against a
-        surveyed map, times the survey's variance scale when above 1, :meth:`Localizer.stated_Sigma`)."""
+        with the robot's covariance as reported (on odometry alone: dead reckoning's)."""
         robot = self.robot
         if not out.found or out.G_WO is None:
             return out, None
@@ -159,7 +158,6 @@ class ReportPolicy:
             "shift_m": round(float(np.linalg.norm(G_WO[:3, 3] - out.G_WO[:3, 3])), 4),
             "detour": detour,
         }
-        Sigma_R = robot.localizer.stated_Sigma(Sigma_R)  # the survey's accuracy as the sightings show it
         return stated_pose_std(replace(out, G_WO=G_WO), Sigma_R, robot.camera), info
 
     def detour(self) -> tuple[PlanarPoseEstimate | None, dict | None]:
