@@ -149,9 +149,7 @@ def test_the_report_tables_success_against_scale_and_draws_the_figure(tmp_path):
         ("realistic", 1.0, 9),
         ("realistic", 2.0, 7),
     ]
-    assert ("room", 1.0, 3, 3) in [
-        (p.sensing, p.scale, p.successes, p.runs) for p in robustness_points(rows)
-    ]
+    assert ("room", 1.0, 3, 3) in [(p.sensing, p.scale, p.successes, p.runs) for p in robustness_points(rows)]
     write_report(tmp_path, rows, IDENTIFY)
     assert "| room | 1 | 3/3 | 100.0 % |" in (tmp_path / "report.md").read_text()
 
