@@ -66,7 +66,8 @@ def test_the_quantiles_are_numpys_over_the_identified_episodes():
 def test_the_report_shows_them(tmp_path):
     rows, pos, rot = _rows()
     for i, r in enumerate(rows):
-        r.update(key=f"k{i}", planner="lut", mover="evasive", sensing="room", seed=i, error="")
+        r.update(key=f"k{i}", planner="lut", mover="evasive", sensing="room", localization="odometry")
+        r.update(seed=i, error="")
         r.update(actions=3, max_actions=8, sim_time_s=20.0)
     n_wrong = sum(
         ((p > 0.05) and 0.005 < p / 3) or (o > 10 and 1.0 < o / 3) for p, o in zip(pos, rot, strict=True)
@@ -76,6 +77,6 @@ def test_the_report_shows_them(tmp_path):
     assert "final pose median" in text and "confidently wrong" in text
     p50, o50 = final_pose_quantile(rows, 0.5)
     p90, o90 = final_pose_quantile(rows, 0.9)
-    line = next(ln for ln in text.splitlines() if ln.startswith("| lut | evasive | room |"))
+    line = next(ln for ln in text.splitlines() if ln.startswith("| lut | evasive | room | odometry |"))
     assert f"{p50:.2f} cm / {o50:.1f}°" in line and f"{p90:.2f} cm / {o90:.1f}°" in line
     assert line.split("|")[-3].strip() == str(n_wrong) and n_wrong > 0

@@ -95,6 +95,26 @@ def test_each_scale_is_a_job_with_its_own_key():
         SearchSweep(seeds=(0,), error_scale=(0,)).check()
 
 
+def test_identify_sweeps_localization_keeping_the_default_jobs_names(monkeypatch):
+    import lab.runs.identify
+
+    ap = build_parser()
+    argv = ["eval", "identify", "--seeds", "0", "--models", "1", "--planners", "lut", "--out", "o"]
+    sw = identify_sweep(ap.parse_args(argv))
+    assert sw.localization == ("odometry",)  # `lab identify`'s own default
+    assert [j.key for j in sw.jobs()] == ["lut_evasive_realistic_m1_s0"]  # the names --resume knows
+    sw = identify_sweep(ap.parse_args([*argv, "--localization", "odometry,landmarks"]))
+    jobs = sw.jobs()
+    assert [j.key for j in jobs] == ["lut_evasive_realistic_m1_s0", "lut_evasive_realistic_landmarks_m1_s0"]
+    seen = []
+    monkeypatch.setattr(lab.runs.identify, "run_identify", lambda **kw: seen.append(kw["localization"]) or {})
+    for j in jobs:
+        j.fn(**j.kwargs)
+    assert seen == ["odometry", "landmarks"]  # what reaches the episode
+    with pytest.raises(ConfigError, match="unknown localization 'gps'; allowed: odometry, landmarks"):
+        identify_sweep(ap.parse_args([*argv, "--localization", "gps"]))
+
+
 def test_a_job_runs_with_the_profiles_errors_times_its_scale(monkeypatch):
     import lab.runs.identify
 
@@ -124,7 +144,8 @@ def _rows(scale, k, n, **extra):
 
 
 def test_the_report_tables_success_against_scale_and_draws_the_figure(tmp_path):
-    cond = {"planner": "lut", "mover": "evasive", "sensing": "realistic", "actions": 3, "max_actions": 8}
+    cond = {"planner": "lut", "mover": "evasive", "sensing": "realistic", "localization": "odometry"}
+    cond.update(actions=3, max_actions=8)
     cond["sim_time_s"] = 20.0
     rows = _rows(1.0, 9, 10, **cond) + _rows(2.0, 7, 10, **cond) + _rows(3.0, 2, 8, **cond)
     rows.append({**_rows(3.0, 0, 1, **cond)[0], "key": "broken", "error": "RuntimeError: x"})  # not counted
@@ -141,7 +162,7 @@ def test_the_report_tables_success_against_scale_and_draws_the_figure(tmp_path):
     assert "## Robustness: success against error scale" in text
     lo, hi = _wilson(7, 10)
     assert f"| realistic | 2 | 7/10 | 70.0 % | [{100 * lo:.1f}, {100 * hi:.1f}] % |" in text
-    assert "| lut | evasive | realistic | 3.0 | 2/8 |" in text  # the conditions split by scale too
+    assert "| lut | evasive | realistic | odometry | 3.0 | 2/8 |" in text  # the conditions split by scale too
     assert (tmp_path / "robustness.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # one curve per profile: another profile's rows are counted apart
     rows += [dict(r, sensing="room", key="s" + r["key"]) for r in _rows(1.0, 3, 3, **cond)]

@@ -493,6 +493,10 @@ def build_parser() -> argparse.ArgumentParser:
     ei.add_argument("--planners", help="comma-separated: lut, mc, random, circle (default lut,random)")
     ei.add_argument("--movers", "--mover", dest="movers", help="comma-separated (default evasive)")
     ei.add_argument("--sensing", help="comma-separated: realistic, ideal, room (default realistic)")
+    ei.add_argument(
+        "--localization",
+        help="comma-separated: odometry, landmarks (default odometry, as `lab identify`)",
+    )
     ei.add_argument("--max-actions", type=int, help="planning actions budget per episode (default 8)")
     ei.add_argument("--max-time", type=float, help="sim-time budget per episode [s] (default 240)")
     ei.add_argument("--keep-direction", type=float, help="the agent's keep_direction (default 0.5)")

@@ -51,6 +51,7 @@ def identify_sweep(args):
         planners=_names(spec.get("planners", "lut,random")),
         movers=_names(spec.get("movers", "evasive")),
         sensing=_names(spec.get("sensing", "realistic")),
+        localization=_names(spec.get("localization", "odometry")),
         max_actions=int(spec.get("max_actions", 8)),
         max_time=float(spec.get("max_time", 240.0)),
         keep_direction=spec.get("keep_direction"),

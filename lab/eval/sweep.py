@@ -54,6 +54,7 @@ CSV_FIELDS = (
     "seed",
     "max_actions",
     "error_scale",
+    "localization",
     "success",
     "identified_model",
     "actions",
@@ -151,8 +152,17 @@ IDENTIFY = SweepKind(
     name="identify",
     schema="identify",
     columns=CSV_FIELDS,
-    params=("true_model", "planner", "mover", "sensing", "error_scale", "seed", "max_actions"),
-    conditions=("planner", "mover", "sensing"),
+    params=(
+        "true_model",
+        "planner",
+        "mover",
+        "sensing",
+        "localization",
+        "error_scale",
+        "seed",
+        "max_actions",
+    ),
+    conditions=("planner", "mover", "sensing", "localization"),
     medians=(
         # an episode that did not identify its model counts its whole budget (a lower bound)
         ("median actions", _median_actions),
@@ -177,14 +187,17 @@ def job_seed_sequence(seed: int):
 
 @dataclass(frozen=True)
 class IdentifySweep:
-    """The grid of ``lab eval identify``: models x seeds x planners x movers x sensing profiles x error
-    scales (every error of the profile times it, :meth:`lab.sim.sensing.SensingProfile.scaled`)."""
+    """The grid of ``lab eval identify``: models x seeds x planners x movers x sensing profiles x
+    localization modes x error scales (every error of the profile times it,
+    :meth:`lab.sim.sensing.SensingProfile.scaled`). Localization defaults to ``lab identify``'s own
+    (odometry), so the default grid's jobs keep their names."""
 
     models: tuple[int, ...] = (0, 1, 2, 3)
     seeds: tuple[int, ...] = ()
     planners: tuple[str, ...] = ("lut", "random")
     movers: tuple[str, ...] = ("evasive",)
     sensing: tuple[str, ...] = ("realistic",)
+    localization: tuple[str, ...] = ("odometry",)
     max_actions: int = 8
     max_time: float = 240.0
     keep_direction: float | None = None
@@ -212,6 +225,11 @@ class IdentifySweep:
         for s in self.sensing:
             if s not in ("realistic", "ideal", "room"):
                 raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal, room")
+        if not self.localization:
+            raise ConfigError("no localization: give --localization like odometry,landmarks")
+        for loc in self.localization:
+            if loc not in ("odometry", "landmarks"):
+                raise ConfigError(f"unknown localization {loc!r}; allowed: odometry, landmarks")
         parse_error_scales(self.error_scale)
         if self.max_actions < 0:
             raise ConfigError(f"max_actions must be >= 0, got {self.max_actions}")
@@ -222,8 +240,14 @@ class IdentifySweep:
         from lab.eval.robustness import scale_suffix
 
         out = []
-        grid = [(p, mv, s) for p in self.planners for mv in self.movers for s in self.sensing]
-        for (planner, mover, sensing), k in [(g, k) for g in grid for k in self.error_scale]:
+        grid = [
+            (p, mv, s, loc)
+            for p in self.planners
+            for mv in self.movers
+            for s in self.sensing
+            for loc in self.localization
+        ]
+        for (planner, mover, sensing, loc), k in [(g, k) for g in grid for k in self.error_scale]:
             for seed in self.seeds:
                 for m in self.models:
                     kw = dict(
@@ -234,17 +258,22 @@ class IdentifySweep:
                         max_actions=self.max_actions,
                         max_time_s=self.max_time,
                         sensing=sensing,
+                        localization=loc,
                         keep_direction=self.keep_direction,
                         error_scale=k,
                     )
-                    key = identify_key(planner, mover, sensing, m, seed) + scale_suffix(k)
+                    key = identify_key(planner, mover, sensing, m, seed, loc) + scale_suffix(k)
                     out.append(Job(key, identify_job, kw))
         return out
 
 
-def identify_key(planner: str, mover: str, sensing: str, model: int, seed: int) -> str:
-    """An identification job's name: ``OUT/jobs/KEY.json``."""
-    return f"{planner}_{mover}_{sensing}_m{model}_s{seed}"
+def identify_key(
+    planner: str, mover: str, sensing: str, model: int, seed: int, localization: str = "odometry"
+) -> str:
+    """An identification job's name: ``OUT/jobs/KEY.json`` (``_landmarks`` added for that localization,
+    so the default's names stay those of earlier sweeps and ``--resume`` finds them)."""
+    loc = "" if localization == "odometry" else f"_{localization}"
+    return f"{planner}_{mover}_{sensing}{loc}_m{model}_s{seed}"
 
 
 SWEEP_FIELDS = (
@@ -253,6 +282,7 @@ SWEEP_FIELDS = (
     "planners",
     "movers",
     "sensing",
+    "localization",
     "max_actions",
     "max_time",
     "keep_direction",
