@@ -66,6 +66,7 @@ def refine_track(
     same image again, which would add no information while the filter counted it as new (on the robot,
     sensor noise makes successive frames differ).
     """
+    upsample = max(upsample, cfg.refine_upsample)
     prev = frame
     confirmed, last_used = 0, 0
     dither = math.radians(cfg.dither_deg)
