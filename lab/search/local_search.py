@@ -193,7 +193,7 @@ class LocalSearchConfig:
         The refinement's region of interest is enlarged at least this many times before SIFT
         (:func:`lab.vision.stereo.upsampled_pair`; a second look's own ``upsample`` when larger). 1: as
         captured, the paper's. An object that drives away while the robot looks leaves the
-        local-search range: at 1.4-2 m a box spans 50-70 px at 320 x 240 and its refinement frames
+        local-search range: at 1.4-2 m a box spans 25-50 px at 320 x 240 and its refinement frames
         matched too few features for an update, where the enlarged region matched three times as many
         (:func:`lab.runs.moving.agent_config` sets 2; docs/tuning/search-moving-object.md).
     max_rest_tilt_deg : float or None [deg]

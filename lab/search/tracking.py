@@ -59,7 +59,8 @@ def refine_track(
     robot, db, matcher, detector, ekf: PoseEKF, frame: StereoFrame, cfg: LocalSearchConfig, upsample: int = 1
 ):
     """Centre the object and track it over ``cfg.refine_frames`` frames with ROI-restricted SIFT (on
-    the region enlarged ``upsample`` times for a second look).
+    the region enlarged ``upsample`` times for a second look, and at least ``cfg.refine_upsample``
+    times).
 
     The head aims at the estimated object centre before each frame, offset by a small dither
     (``cfg.dither_deg``, alternating directions): a simulated camera that has not moved renders the very
