@@ -23,6 +23,7 @@ from lab.search.motion import MotionModel, passable_from_costmap
 
 __all__ = [
     "MOVING_POSITION_STD_M",
+    "MOVING_REFINE_UPSAMPLE",
     "MovingOptions",
     "agent_config",
     "found_time",
@@ -40,6 +41,13 @@ MOVING_KINDS = ("random", "evasive")
 #: moving object. 2 cm is still well inside the 5 cm a find is scored against; how it was chosen:
 #: docs/tuning/search-moving-object.md.
 MOVING_POSITION_STD_M = 0.02
+
+#: The local search's refinement regions are enlarged this many times for a moving object
+#: (``LocalSearchConfig.refine_upsample``): the object drives on while the head turns to it, out of the
+#: 0.6-0.9 m local-search range the robot stood at, and at 1.4-2 m the refinement frames of the
+#: captured image matched too few features for an update (degenerate or gated out) where the enlarged
+#: region matched about three times as many; how it was measured: docs/tuning/search-moving-object.md.
+MOVING_REFINE_UPSAMPLE = 2
 
 
 @dataclass(frozen=True)
@@ -88,14 +96,16 @@ def _number(v) -> bool:
 
 def agent_config(cfg: SearchAgentConfig, moving: MovingOptions) -> SearchAgentConfig:
     """The agent's config for a moving object: the map's motion model, the pose EKF's object motion
-    at the speed bound, and the found pose's position deviation bound that this motion allows
-    (:data:`MOVING_POSITION_STD_M`); the baseline keeps the static config."""
+    at the speed bound, the found pose's position deviation bound that this motion allows
+    (:data:`MOVING_POSITION_STD_M`) and the refinement on enlarged regions
+    (:data:`MOVING_REFINE_UPSAMPLE`); the baseline keeps the static config."""
     if not moving.predict:
         return cfg
     ls = cfg.local_search
     process = replace(ls.process, sigma_v=float(moving.speed_mps))  # constant position, velocity noise
     std = max(ls.max_position_std_m, MOVING_POSITION_STD_M)
-    local = replace(ls, process=process, max_position_std_m=std)
+    up = max(ls.refine_upsample, MOVING_REFINE_UPSAMPLE)
+    local = replace(ls, process=process, max_position_std_m=std, refine_upsample=up)
     return replace(cfg, motion=MotionModel(speed_mps=float(moving.speed_mps)), local_search=local)
 
 

@@ -189,6 +189,13 @@ class LocalSearchConfig:
     second_look : SecondLookConfig or None
         Before the cell is declared empty, look again at the colour peaks near it, on enlarged
         regions (module docstring; ours). None: the paper's local search, the 9 views alone.
+    refine_upsample : int
+        The refinement's region of interest is enlarged at least this many times before SIFT
+        (:func:`lab.vision.stereo.upsampled_pair`; a second look's own ``upsample`` when larger). 1: as
+        captured, the paper's. An object that drives away while the robot looks leaves the
+        local-search range: at 1.4-2 m a box spans 25-50 px at 320 x 240 and its refinement frames
+        matched too few features for an update, where the enlarged region matched three times as many
+        (:func:`lab.runs.moving.agent_config` sets 2; docs/tuning/search-moving-object.md).
     max_rest_tilt_deg : float or None [deg]
         "Found" needs the pose in the world to rest on one of the object's faces within this angle
         (:func:`lab.search.pose_check.rest_tilt_deg`): the success criterion's 10 degrees, which no
@@ -216,6 +223,7 @@ class LocalSearchConfig:
     )
     pose_check: PoseCheckConfig | None = field(default_factory=PoseCheckConfig)
     second_look: SecondLookConfig | None = field(default_factory=SecondLookConfig)
+    refine_upsample: int = 1
     max_rest_tilt_deg: float | None = 10.0
 
     def __post_init__(self):
@@ -234,6 +242,8 @@ class LocalSearchConfig:
             raise ConfigError("min_matches and min_inliers must be >= 4 (a RANSAC start needs 4)")
         if self.refine_frames < 1:
             raise ConfigError(f"refine_frames must be >= 1, got {self.refine_frames}")
+        if not (isinstance(self.refine_upsample, int) and self.refine_upsample >= 1):
+            raise ConfigError(f"refine_upsample must be an integer >= 1, got {self.refine_upsample!r}")
 
 
 @dataclass(frozen=True)

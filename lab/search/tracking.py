@@ -59,13 +59,15 @@ def refine_track(
     robot, db, matcher, detector, ekf: PoseEKF, frame: StereoFrame, cfg: LocalSearchConfig, upsample: int = 1
 ):
     """Centre the object and track it over ``cfg.refine_frames`` frames with ROI-restricted SIFT (on
-    the region enlarged ``upsample`` times for a second look).
+    the region enlarged ``upsample`` times for a second look, and at least ``cfg.refine_upsample``
+    times).
 
     The head aims at the estimated object centre before each frame, offset by a small dither
     (``cfg.dither_deg``, alternating directions): a simulated camera that has not moved renders the very
     same image again, which would add no information while the filter counted it as new (on the robot,
     sensor noise makes successive frames differ).
     """
+    upsample = max(upsample, cfg.refine_upsample)
     prev = frame
     confirmed, last_used = 0, 0
     dither = math.radians(cfg.dither_deg)
