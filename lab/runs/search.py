@@ -50,16 +50,7 @@ from lab.mounts import HeadMounts, load_mounts
 from lab.navigation.grid import GridSpec
 from lab.robot import Robot
 from lab.runs.moving import MovingOptions, agent_config, found_time, passable_of, start_mover
-from lab.runs.placement import (
-    check_placement,
-    circle_polygon,
-    footprint,
-    polygon_inside,
-    polygons_overlap,
-    random_placement,
-    searchable_objects,
-    supports,
-)
+from lab.runs.placement import check_placement, path_obstacles, random_placement, searchable_objects, supports
 from lab.runs.robots import RobotKind, load_robot_config, make_robot, robot_kind
 from lab.runs.room import localize, robot_start, room_landmarks
 from lab.runs.search_result import (
@@ -73,7 +64,7 @@ from lab.runs.search_result import (
     scored,
 )
 from lab.runs.tracks import TrackedRobot
-from lab.scene import BodySpec, Scene, load_scene
+from lab.scene import Scene, load_scene
 from lab.search.agent import INTERRUPTED, SearchAgent, SearchEvent, Strategy
 from lab.search.budget import BudgetedRobot
 from lab.search.config import SearchAgentConfig
@@ -108,45 +99,6 @@ def map_spec(scene: Scene, resolution: float = 0.2) -> GridSpec:
         raise ConfigError(f"scene {scene.name!r} has no room to search")
     sx, sy = scene.room.size
     return GridSpec.from_bounds(-sx / 2, -sy / 2, sx / 2, sy / 2, resolution)
-
-
-def path_obstacles(
-    scene: Scene, name: str, place, rng: np.random.Generator, n: int = 2, size=(0.3, 0.3, 0.5)
-) -> tuple[Scene, list[tuple[float, float, float, float]]]:
-    """Put ``n`` boxes on the straight line from the robot's start to the object (the "obstacles placed
-    in the planned path" of the paper's second set of trials).
-
-    Each box goes at a random point along the middle of the line (jittered sideways by up to 15 cm),
-    clear of other bodies by 0.35 m, at least 0.8 m from the start and 1.0 m from the object, so the
-    robot can still get past and stand near the object. Boxes that find no such spot are left out.
-    """
-    rx, ry, _ = scene.robot_start
-    ox, oy = float(place[0]), float(place[1])
-    length = math.hypot(ox - rx, oy - ry)
-    room = supports(scene)[0].polygon
-    out_bodies, poses = list(scene.bodies), []
-    ux, uy = ((ox - rx) / length, (oy - ry) / length) if length > 1e-9 else (1.0, 0.0)
-    for k in range(n):
-        for _ in range(200):
-            s = rng.uniform(0.8, max(0.8, length - 1.0))
-            lat = rng.uniform(-0.15, 0.15)
-            x, y = rx + s * ux - lat * uy, ry + s * uy + lat * ux
-            yaw = float(rng.uniform(0, 90))
-            body = BodySpec(
-                f"obstacle_{k + 1}", "box", tuple(size), (x, y, 0.0, yaw), "obstacle", (0.45, 0.4, 0.35)
-            )
-            fp = footprint(body)
-            if not polygon_inside(footprint(body, 0.35), room):
-                continue
-            if any(polygons_overlap(fp, footprint(b, 0.35)) for b in out_bodies if b.role != "decor"):
-                continue
-            near_start = polygons_overlap(fp, circle_polygon(rx, ry, 0.6))
-            if near_start or polygons_overlap(fp, circle_polygon(ox, oy, 1.0)):
-                continue
-            out_bodies.append(body)
-            poses.append((x, y, 0.0, yaw))
-            break
-    return replace(scene, bodies=tuple(out_bodies)), poses
 
 
 @dataclass(frozen=True)
