@@ -263,7 +263,7 @@ class MovingObject:
         """The gap [m] between the object's footprint circle at each point ``pts`` (n, 2) [m] and the
         nearest of the table top's edges and the other bodies standing on it (negative: over an edge,
         or into a body). A body's footprint lies within its occupied cells, each within half a cell's
-        diagonal of its centre, so the gap to a body is never more than stated."""
+        diagonal of its centre, so the gap stated to a body is never more than the true one."""
         x, y, _, yaw_deg = self.top.pose
         c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
         d = pts - (x, y)
