@@ -11,7 +11,7 @@ import pytest
 
 from lab.errors import ConfigError
 from lab.geometry import Pose2D
-from lab.runs.placement import random_placement
+from lab.runs.placement import check_placement, random_placement
 from lab.scene import load_scene
 from lab.sim import SimRobot, SimWorld
 from lab.sim.moving_object import MovingKind, MovingObjectConfig, make_moving_object
@@ -118,3 +118,49 @@ def test_it_never_drives_towards_a_robot_that_came_within_its_keep_away_distance
         for _ in range(10):
             w.robot.step(0.1)
         assert m.xy[0] < x0[0] - 0.15
+
+
+TOPS = [
+    ("book", "table_a", (2.2, 2.6, 0.75, 20.0), "cereal_box"),  # the cereal box stands on table_a
+    ("toy_block", "table_b", (-2.3, -1.3, 0.75, 10.0), "glossy_cup"),  # the glossy cup on table_b
+]
+
+
+@pytest.mark.parametrize("name,table,place,other", TOPS)
+def test_on_a_tables_top_it_stays_on_the_top_over_a_long_random_walk(name, table, place, other):
+    """The truth of a long walk on a table's top, checked by the placement checker (the peer that
+    places objects and refuses one in mid-air or in another body): at every step the object stands
+    wholly on that table's top, overlapping nothing, at the top's height; it drives the length of
+    the top, at its speed."""
+    scene = load_scene("lab_room")
+    scene = scene.with_pose(name, place)
+    assert check_placement(scene, name, place).name == table  # a valid start
+    with SimWorld(scene) as w:
+        robot = SimRobot(w)
+        cfg = MovingObjectConfig(MovingKind.RANDOM, speed_mps=0.2, pause_s=0.5)
+        m = make_moving_object(w, name, cfg, np.random.default_rng(7))
+        assert m.surface == table
+        z0 = w.truth.G_W(name)[2, 3]
+        xs = []
+        for _ in range(6000):  # 600 s
+            robot.step(0.1)
+            xs.append(m.xy.copy())
+        assert w.truth.G_W(name)[2, 3] == z0
+    xs = np.array(xs)
+    steps = np.hypot(*np.diff(xs, axis=0).T)
+    assert steps.max() <= 0.2 * 0.1 + 1e-9
+    assert m.legs >= 100 and m.path_length_m() > 30.0
+    for x, y in xs[::5]:
+        got = check_placement(scene, name, (x, y, place[2], place[3]), clearance_m=0.0)
+        assert got.name == table
+    body = scene.body(table)
+    long_axis = int(np.argmax(body.size[:2]))
+    assert np.ptp(xs[:, long_axis]) > 0.5 * body.size[long_axis]  # it drove the length of the top
+    near = np.hypot(*(xs - scene.body(other).centre[:2]).T).min()
+    assert near < 0.25  # and close by the other object on the top (and not into it: above)
+
+
+def test_a_shelf_is_no_place_for_a_carrier():
+    scene = load_scene("lab_room")  # the book stands on the shelf
+    with SimWorld(scene) as w, pytest.raises(ConfigError, match="on the floor or on a table's top"):
+        make_moving_object(w, "book", MovingObjectConfig(), np.random.default_rng(0))

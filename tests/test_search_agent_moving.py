@@ -100,3 +100,40 @@ def test_the_passable_mask_is_read_from_the_agent(monkeypatch):
     assert calls
     assert not np.array_equal(walled.P_final, open_room.P_final)
     assert walled.P_final.sum() == pytest.approx(1.0, abs=1e-12)
+
+
+def test_a_map_log_replays_the_run_and_the_same_run_without_prediction(monkeypatch):
+    """MapLog records a predicting run's map changes: replayed with the run's motion model it gives
+    the run's own maps bit for bit (its snapshots after each update, and the final map); replayed
+    without a model, or at speed 0, it is the same observations on a static map, which the Bayes
+    updates alone give (no prediction between them)."""
+    import lab.search.agent as agent_mod
+    from lab.search.agent import SearchAgent
+    from lab.search.map_log import MapLog
+
+    log = MapLog()
+    orig = SearchAgent.__init__
+
+    def init(self, *a, **k):
+        orig(self, *a, **k)
+        log.attach(self)
+
+    monkeypatch.setattr(agent_mod.SearchAgent, "__init__", init)
+    model = MotionModel(speed_mps=0.05)
+    out, _, _ = scripted_run(monkeypatch, OBJECT, PEAKS, config=SearchAgentConfig(motion=model))
+    assert any(s.detection is None and s.dt_s > 0 for s in log.steps)  # it predicted
+    run = log.replay(model)
+    np.testing.assert_array_equal(run[-1][1], out.P_final)
+    maps = {t: P for t, P in run}  # the last map of each moment: after all its updates
+    matched = [s for s in out.snapshots if s.t in maps]
+    assert len(matched) >= 2  # the global search's and the failed local search's
+    for snap in matched:
+        np.testing.assert_array_equal(maps[snap.t], snap.P)
+    static = log.replay(None)
+    P = ProbabilityMap(SPEC)
+    for s in log.steps:
+        if s.detection is not None:
+            P.observe(s.detection)
+    np.testing.assert_array_equal(static[-1][1], P.P)
+    assert not np.array_equal(static[-1][1], run[-1][1])
+    assert all(np.array_equal(a[1], b[1]) for a, b in zip(static, log.replay(MotionModel(0.0)), strict=True))

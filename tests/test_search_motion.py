@@ -1,5 +1,6 @@
 """The probability map's prediction step (lab/search/motion.py) on hand-made maps, against peers:
-scipy.ndimage for the open-grid convolution, the random walk's variance, and the speed bound."""
+scipy.ndimage for the open-grid convolution, the random walk's variance, and the speed bound; with
+surface labels (Eq. (P2)), mass stays on its surface (a table's top) and spreads over it."""
 
 from __future__ import annotations
 
@@ -14,7 +15,16 @@ from scipy import ndimage
 from lab.errors import ConfigError
 from lab.navigation.costmap import CellState
 from lab.navigation.grid import GridSpec
-from lab.search.motion import MotionModel, diffuse_step, diffusion_coefficient, passable_from_costmap, predict
+from lab.search.motion import (
+    FLOOR,
+    RAISED,
+    MotionModel,
+    diffuse_step,
+    diffusion_coefficient,
+    passable_from_costmap,
+    predict,
+    surfaces_from_costmap,
+)
 from lab.search.probability_map import DetectionModel, LocalSearchDetection, ProbabilityMap
 
 R = 0.2  # cell side [m]
@@ -170,3 +180,78 @@ def test_the_map_method_is_the_function():
     np.testing.assert_array_equal(
         pmap.P, predict(point_mass((15, 15), (7, 7)), passable, 8.0, MotionModel(0.1), R)
     )
+
+
+def table_room():
+    """A 20 x 20 floor with a 6 x 3 table (the raised cells the costmap saw) and a wall cell of 0."""
+    s = np.full((20, 20), FLOOR, dtype=np.int8)
+    s[5:11, 8:11] = RAISED
+    s[15, 15] = 0
+    return s
+
+
+def test_a_mask_is_the_surfaces_1_and_0_bit_for_bit():
+    P = np.random.default_rng(5).random((20, 20))
+    P /= P.sum()
+    mask = wall_map()
+    a = predict(P, mask, 17.0, MotionModel(0.2), R)
+    b = predict(P, mask.astype(np.int8), 17.0, MotionModel(0.2), R)
+    np.testing.assert_array_equal(a, b)
+
+
+@given(seed=st.integers(0, 2**31 - 1), dt=st.floats(0.5, 60.0))
+@settings(max_examples=30, deadline=None)
+def test_each_surface_keeps_its_mass_and_a_label_0_cell_its_own(seed, dt):
+    rng = np.random.default_rng(seed)
+    labels = rng.integers(0, 3, (12, 12))  # any layout of surfaces and blocked cells
+    P = rng.random((12, 12))
+    P /= P.sum()
+    out = predict(P, labels, dt, MotionModel(speed_mps=0.3), R)
+    assert np.all(out >= 0)
+    for k in (1, 2):
+        assert out[labels == k].sum() == pytest.approx(P[labels == k].sum(), abs=1e-12)
+    np.testing.assert_array_equal(out[labels == 0], P[labels == 0])
+
+
+def test_a_table_tops_mass_spreads_over_the_top_and_stays_on_it():
+    """A point mass on the table's top (raised cells): it never reaches the floor, and over a long time
+    it spreads to the uniform distribution over the top (the random walk's stationary one on a
+    connected region it cannot leave); with the passable mask of (P1) it stayed frozen in its cell."""
+    surfaces = table_room()
+    table = surfaces == RAISED
+    P = point_mass((20, 20), (6, 9))
+    model = MotionModel(speed_mps=0.1)
+    soon = predict(P, surfaces, 4.0, model, R)
+    assert soon[~table].sum() == 0.0 and soon.sum() == pytest.approx(1.0, abs=1e-12)
+    assert soon[6, 9] < 1.0 and soon[7, 9] > 0  # it moved over the top
+    late = predict(P, surfaces, 2000.0, model, R)
+    np.testing.assert_allclose(late[table], 1.0 / table.sum(), rtol=1e-6)
+    frozen = predict(P, surfaces == FLOOR, 2000.0, model, R)
+    np.testing.assert_array_equal(frozen, P)
+
+
+def test_a_miss_on_the_top_fills_in_from_the_top_not_from_the_floor():
+    surfaces = table_room()
+    table = surfaces == RAISED
+    spec = GridSpec((0.0, 0.0), R, (20, 20))
+    pmap = ProbabilityMap(spec)
+    pmap.observe(
+        LocalSearchDetection((7, 9), 0, DetectionModel(alpha=0.05, beta=0.1, neighbour_radius_m=0.0))
+    )
+    before = pmap.P.copy()
+    after = predict(before, surfaces, 10.0, MotionModel(speed_mps=0.05), R)
+    assert after[7, 9] > before[7, 9]  # mass flowed back into the missed cell
+    assert after[table].sum() == pytest.approx(before[table].sum(), abs=1e-15)  # from the top only
+
+
+def test_surfaces_are_the_costmaps_passable_cells_and_its_raised_ones():
+    costmap = GridSpec((0.0, 0.0), 0.1, (8, 6))
+    pmap = GridSpec((0.0, 0.0), 0.2, (4, 3))
+    state = np.full(costmap.shape, CellState.FREE, dtype=np.int8)
+    state[0:4, 0:2] = CellState.OBSTACLE  # map cells (0, 0) and (1, 0): a table's top, seen
+    state[6:8, 4:6] = CellState.UNKNOWN
+    got = surfaces_from_costmap(state, costmap, pmap)
+    expected = np.full(pmap.shape, FLOOR)
+    expected[0:2, 0] = RAISED
+    np.testing.assert_array_equal(got, expected)
+    np.testing.assert_array_equal(got == FLOOR, passable_from_costmap(state, costmap, pmap))

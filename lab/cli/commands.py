@@ -138,14 +138,22 @@ def _cmd_identify(args) -> int:
 
 
 def _moving(args):
-    """``lab search``'s moving object (--moving, --object-speed, --pause, --static-map), or None."""
+    """``lab search``'s moving object (--moving, --object-speed, --pause, --static-map, --surface), or
+    None."""
     if args.moving is None:
         if args.static_map:
             raise LabError("--static-map is the baseline for a moving object: give --moving too")
+        if args.surface is not None:
+            raise LabError("--surface is where a moving object's carrier drives: give --moving too")
         return None
+    if args.surface is not None and args.place is not None:
+        raise LabError("--surface draws a seeded placement on that surface; --place puts the object itself")
     from lab.runs.moving import MovingOptions
 
-    return MovingOptions(args.moving, args.object_speed, args.pause, predict=not args.static_map)
+    surface = args.surface or "floor"
+    return MovingOptions(
+        args.moving, args.object_speed, args.pause, predict=not args.static_map, surface=surface
+    )
 
 
 def _cmd_search(args) -> int:

@@ -282,9 +282,15 @@ def build_parser() -> argparse.ArgumentParser:
     se.add_argument(
         "--moving",
         choices=("random", "evasive"),
-        help="the object moves on a carrier over the floor (simulator only): random, a random walk in free "
-        "space; evasive, it leaves the camera's view when seen. The search then predicts its map between "
-        "updates (default: the stationary object of the paper)",
+        help="the object moves on a carrier over the floor or a table's top (simulator only): random, a "
+        "random walk in free space; evasive, it leaves the camera's view when seen. The search then "
+        "predicts its map between updates (default: the stationary object of the paper)",
+    )
+    se.add_argument(
+        "--surface",
+        choices=("floor", "table"),
+        help="with --moving and no --place: the surface of the seeded placement, the floor (default) or a "
+        "table's top, where the carrier then drives",
     )
     se.add_argument(
         "--object-speed", type=float, default=0.1, help="with --moving: its speed [m/s] (default 0.1)"
@@ -526,8 +532,8 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument(
         "--moving",
         choices=("random", "evasive"),
-        help="the object moves (floor placements): each trial runs with the map's prediction step and with "
-        "the static-map baseline",
+        help="the object moves (floor placements, or --surfaces floor,table: on a table's top too): each "
+        "trial runs with the map's prediction step and with the static-map baseline",
     )
     es.add_argument(
         "--object-speed", type=float, help="with --moving: the object's speed [m/s] (default 0.1)"

@@ -13,9 +13,10 @@ collision-free path from the start to local search range of the object on the sc
 (evaluation only, the robot never sees it), from which the report computes SPL (success weighted by path
 length).
 
-**A moving object** (``--moving random|evasive``, :mod:`lab.runs.moving`): the floor placements only,
-and every trial twice on the same placement, seed and motion: with the map's prediction step
-(``map = predict``) and the static-map baseline (``map = static``); the report groups by both.
+**A moving object** (``--moving random|evasive``, :mod:`lab.runs.moving`): the floor placements (and
+with ``--surfaces floor,table`` the table placements too: the carrier drives on the table's top), and
+every trial twice on the same placement, seed and motion: with the map's prediction step (``map =
+predict``) and the static-map baseline (``map = static``); the report groups by both and by surface.
 """
 
 from __future__ import annotations
@@ -146,9 +147,13 @@ class SearchSweep:
         if self.moving is not None:
             if self.moving not in MOVING_KINDS:
                 raise ConfigError(f"unknown --moving {self.moving!r}; allowed: {', '.join(MOVING_KINDS)}")
-            if tuple(self.surfaces) != ("floor",):
-                raise ConfigError("a moving object rides on the floor: --surfaces floor")
-            from lab.runs.moving import MovingOptions
+            from lab.runs.moving import MOVING_SURFACES, MovingOptions
+
+            if not set(self.surfaces) <= set(MOVING_SURFACES):
+                raise ConfigError(
+                    f"a moving object rides on the floor or a table's top: --surfaces within "
+                    f"{','.join(MOVING_SURFACES)}, got {','.join(self.surfaces)}"
+                )
 
             MovingOptions(self.moving, self.object_speed, self.pause)  # one clear line for a bad speed
 
@@ -268,7 +273,7 @@ def search_job(
         localization=localization,
         moving=None
         if moving is None
-        else MovingOptions(moving, object_speed, pause, predict=map == "predict"),
+        else MovingOptions(moving, object_speed, pause, predict=map == "predict", surface=surface),
     )
     d = r.to_json()
     d["n_snapshots"] = len(d.pop("map_snapshots", []))
@@ -377,7 +382,8 @@ SEARCH = SweepKind(
     ),
 )
 
-#: ``lab eval search --moving``: the same sweep, its rows grouped by the motion and the map as well.
+#: ``lab eval search --moving``: the same sweep, its rows grouped by the motion, the map and the surface
+#: (the floor, a table's top) as well.
 SEARCH_MOVING = replace(
     SEARCH,
     columns=(
@@ -390,5 +396,5 @@ SEARCH_MOVING = replace(
         *SEARCH.columns[-2:],
     ),
     params=(*SEARCH.params, "moving", "map", "object_speed", "pause"),
-    conditions=("moving", "map", *SEARCH.conditions),
+    conditions=("moving", "map", "surface", *SEARCH.conditions),
 )

@@ -1,13 +1,15 @@
 """A search trial with an object that moves (``lab search --moving random|evasive``).
 
-The object stands on the floor (its placement is drawn on the floor only) and rides a carrier of the
-world (:mod:`lab.sim.moving_object`) at ``--object-speed``, pausing ``--pause`` after each leg. The
-agent, unless it is the static-map baseline (``predict=False``), runs the probability map's prediction
-step (:mod:`lab.search.motion`) with the object's speed as its speed bound, over the cells its
-navigator's costmap leaves passable, and its local search's pose EKF lets the object move by the same
-bound (:class:`~lab.estimation.noise.ProcessNoise` ``sigma_v``). A find is scored against the truth
-at the moment it was confirmed (the local search's event), which the result records as
-``moving.truth_time_s``.
+The object stands on the floor or on a table's top (a seeded placement on the surface ``--surface``
+names, the floor by default, or ``--place``) and rides a carrier of the world
+(:mod:`lab.sim.moving_object`) over that surface at ``--object-speed``, pausing ``--pause`` after each
+leg. The agent, unless it is the static-map baseline (``predict=False``), runs the probability map's
+prediction step (:mod:`lab.search.motion`) with the object's speed as its speed bound, over the
+surfaces its navigator's costmap shows (the floor, and the raised cells a table's top is among: the
+agent does not know which one the object is on), and its local search's pose EKF lets the object move
+by the same bound (:class:`~lab.estimation.noise.ProcessNoise` ``sigma_v``). A find is scored against
+the truth at the moment it was confirmed (the local search's event), which the result records as
+``moving.truth_time_s``, beside where the object drove (:func:`moving_record`).
 """
 
 from __future__ import annotations
@@ -19,19 +21,24 @@ import numpy as np
 
 from lab.errors import ConfigError
 from lab.search.config import SearchAgentConfig
-from lab.search.motion import MotionModel, passable_from_costmap
+from lab.search.motion import MotionModel, surfaces_from_costmap
 
 __all__ = [
     "MOVING_POSITION_STD_M",
     "MOVING_REFINE_UPSAMPLE",
+    "MOVING_SURFACES",
     "MovingOptions",
     "agent_config",
+    "check_moving_surface",
     "found_time",
+    "moving_record",
     "passable_of",
     "start_mover",
 ]
 
 MOVING_KINDS = ("random", "evasive")
+#: The surfaces a carrier drives on (a shelf's board is too narrow for one).
+MOVING_SURFACES = ("floor", "table")
 
 #: "Found" for a moving object's pose: the largest position standard deviation may reach this [m]
 #: (the stationary object's bound is 1 cm). Under the pose EKF's constant-position model with the speed
@@ -63,12 +70,16 @@ class MovingOptions:
         How long it stands after each leg.
     predict : bool
         The agent's map has the prediction step (False: the static-map baseline on the same motion).
+    surface : {"floor", "table"}
+        Where a seeded placement puts it (``--surface``); a given placement (``--place``) is where it
+        stands, and must be on one of these.
     """
 
     kind: str = "random"
     speed_mps: float = 0.1
     pause_s: float = 5.0
     predict: bool = True
+    surface: str = "floor"
 
     def __post_init__(self):
         if self.kind not in MOVING_KINDS:
@@ -79,15 +90,42 @@ class MovingOptions:
             raise ConfigError(f"--object-speed must be a finite number > 0 m/s, got {self.speed_mps!r}")
         if not (_number(self.pause_s) and self.pause_s >= 0):
             raise ConfigError(f"--pause must be a finite number >= 0 s, got {self.pause_s!r}")
+        if self.surface not in MOVING_SURFACES:
+            raise ConfigError(
+                f"a moving object rides on {' or '.join(MOVING_SURFACES)}: --surface must be one of "
+                f"{', '.join(MOVING_SURFACES)}, got {self.surface!r}"
+            )
 
     def as_dict(self) -> dict:
-        """The result JSON's ``moving`` (the trial adds ``truth_time_s``)."""
+        """The options in the result JSON's ``moving`` (:func:`moving_record` adds what happened)."""
         return {
             "kind": self.kind,
             "speed_mps": self.speed_mps,
             "pause_s": self.pause_s,
             "predict": self.predict,
         }
+
+
+def check_moving_surface(surface: str) -> None:
+    """Refuse a placement's ``surface`` (its kind) that a carrier cannot drive on."""
+    if surface not in MOVING_SURFACES:
+        raise ConfigError(
+            f"--moving puts the object on the floor or a table's top; --place put it on the {surface}"
+        )
+
+
+def moving_record(moving: MovingOptions, mover, truth_time_s: float) -> dict:
+    """The result JSON's ``moving``: the options, where it drove (``support``: ``floor`` or the name of
+    the table whose top it drove on; the result's ``surface`` says ``table``), how far and in how many
+    legs, how often it evaded, and ``truth_time_s``, the moment the find is scored at."""
+    return {
+        **moving.as_dict(),
+        "support": mover.surface,
+        "path_length_m": round(mover.path_length_m(), 4),
+        "legs": int(mover.legs),
+        "evasions": int(mover.evasions),
+        "truth_time_s": truth_time_s,
+    }
 
 
 def _number(v) -> bool:
@@ -118,13 +156,15 @@ def start_mover(world, object: str, moving: MovingOptions, seed: int):
 
 
 def passable_of(navigate, spec):
-    """``passable()`` for the agent from the navigator's costmap (the robot's belief), or None (every
-    cell) when the navigate callable has no navigator."""
+    """``passable()`` for the agent from the navigator's costmap (the robot's belief): the map's cells
+    labelled by surface (:func:`lab.search.motion.surfaces_from_costmap`: the floor, and the raised
+    cells that hold a table's top), or None (every cell one floor) when the navigate callable has no
+    navigator."""
     navigator = getattr(navigate, "navigator", None)
     if navigator is None:
         return None
     costmap = navigator.costmap
-    return lambda: passable_from_costmap(costmap.state, costmap.spec, spec)
+    return lambda: surfaces_from_costmap(costmap.state, costmap.spec, spec)
 
 
 def found_time(out) -> float | None:

@@ -3,13 +3,15 @@
 Used by the trials (:func:`lab.runs.search.run_search`) to place the object by seed, and to refuse a
 placement that puts it inside a wall, outside the room, inside furniture or in mid-air. Footprints are
 the bodies' rectangles (boxes, tables, shelves, turned by their yaw) and circles (cylinders) on the
-floor; a placement's pose is the scene file's ``(x, y, z_underside, yaw_deg)``.
+floor; a placement's pose is the scene file's ``(x, y, z_underside, yaw_deg)``. The boxes a trial puts
+on the robot's way to the object (the paper's second set of trials) are placed here too
+(:func:`path_obstacles`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -22,6 +24,7 @@ __all__ = [
     "check_placement",
     "circle_polygon",
     "footprint",
+    "path_obstacles",
     "polygon_inside",
     "polygons_overlap",
     "random_placement",
@@ -236,3 +239,42 @@ def random_placement(
         if got.kind == kind:
             return place
     raise ConfigError(f"found no valid {kind} placement for {name} in {max_tries} tries")
+
+
+def path_obstacles(
+    scene: Scene, name: str, place, rng: np.random.Generator, n: int = 2, size=(0.3, 0.3, 0.5)
+) -> tuple[Scene, list[tuple[float, float, float, float]]]:
+    """Put ``n`` boxes on the straight line from the robot's start to the object (the "obstacles placed
+    in the planned path" of the paper's second set of trials).
+
+    Each box goes at a random point along the middle of the line (jittered sideways by up to 15 cm),
+    clear of other bodies by 0.35 m, at least 0.8 m from the start and 1.0 m from the object, so the
+    robot can still get past and stand near the object. Boxes that find no such spot are left out.
+    """
+    rx, ry, _ = scene.robot_start
+    ox, oy = float(place[0]), float(place[1])
+    length = math.hypot(ox - rx, oy - ry)
+    room = supports(scene)[0].polygon
+    out_bodies, poses = list(scene.bodies), []
+    ux, uy = ((ox - rx) / length, (oy - ry) / length) if length > 1e-9 else (1.0, 0.0)
+    for k in range(n):
+        for _ in range(200):
+            s = rng.uniform(0.8, max(0.8, length - 1.0))
+            lat = rng.uniform(-0.15, 0.15)
+            x, y = rx + s * ux - lat * uy, ry + s * uy + lat * ux
+            yaw = float(rng.uniform(0, 90))
+            body = BodySpec(
+                f"obstacle_{k + 1}", "box", tuple(size), (x, y, 0.0, yaw), "obstacle", (0.45, 0.4, 0.35)
+            )
+            fp = footprint(body)
+            if not polygon_inside(footprint(body, 0.35), room):
+                continue
+            if any(polygons_overlap(fp, footprint(b, 0.35)) for b in out_bodies if b.role != "decor"):
+                continue
+            near_start = polygons_overlap(fp, circle_polygon(rx, ry, 0.6))
+            if near_start or polygons_overlap(fp, circle_polygon(ox, oy, 1.0)):
+                continue
+            out_bodies.append(body)
+            poses.append((x, y, 0.0, yaw))
+            break
+    return replace(scene, bodies=tuple(out_bodies)), poses

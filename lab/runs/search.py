@@ -49,17 +49,16 @@ from lab.localization import LocalizationMode
 from lab.mounts import HeadMounts, load_mounts
 from lab.navigation.grid import GridSpec
 from lab.robot import Robot
-from lab.runs.moving import MovingOptions, agent_config, found_time, passable_of, start_mover
-from lab.runs.placement import (
-    check_placement,
-    circle_polygon,
-    footprint,
-    polygon_inside,
-    polygons_overlap,
-    random_placement,
-    searchable_objects,
-    supports,
+from lab.runs.moving import (
+    MovingOptions,
+    agent_config,
+    check_moving_surface,
+    found_time,
+    moving_record,
+    passable_of,
+    start_mover,
 )
+from lab.runs.placement import check_placement, path_obstacles, random_placement, searchable_objects, supports
 from lab.runs.robots import RobotKind, load_robot_config, make_robot, robot_kind
 from lab.runs.room import localize, robot_start, room_landmarks
 from lab.runs.search_result import (
@@ -73,7 +72,7 @@ from lab.runs.search_result import (
     scored,
 )
 from lab.runs.tracks import TrackedRobot
-from lab.scene import BodySpec, Scene, load_scene
+from lab.scene import Scene, load_scene
 from lab.search.agent import INTERRUPTED, SearchAgent, SearchEvent, Strategy
 from lab.search.budget import BudgetedRobot
 from lab.search.config import SearchAgentConfig
@@ -108,45 +107,6 @@ def map_spec(scene: Scene, resolution: float = 0.2) -> GridSpec:
         raise ConfigError(f"scene {scene.name!r} has no room to search")
     sx, sy = scene.room.size
     return GridSpec.from_bounds(-sx / 2, -sy / 2, sx / 2, sy / 2, resolution)
-
-
-def path_obstacles(
-    scene: Scene, name: str, place, rng: np.random.Generator, n: int = 2, size=(0.3, 0.3, 0.5)
-) -> tuple[Scene, list[tuple[float, float, float, float]]]:
-    """Put ``n`` boxes on the straight line from the robot's start to the object (the "obstacles placed
-    in the planned path" of the paper's second set of trials).
-
-    Each box goes at a random point along the middle of the line (jittered sideways by up to 15 cm),
-    clear of other bodies by 0.35 m, at least 0.8 m from the start and 1.0 m from the object, so the
-    robot can still get past and stand near the object. Boxes that find no such spot are left out.
-    """
-    rx, ry, _ = scene.robot_start
-    ox, oy = float(place[0]), float(place[1])
-    length = math.hypot(ox - rx, oy - ry)
-    room = supports(scene)[0].polygon
-    out_bodies, poses = list(scene.bodies), []
-    ux, uy = ((ox - rx) / length, (oy - ry) / length) if length > 1e-9 else (1.0, 0.0)
-    for k in range(n):
-        for _ in range(200):
-            s = rng.uniform(0.8, max(0.8, length - 1.0))
-            lat = rng.uniform(-0.15, 0.15)
-            x, y = rx + s * ux - lat * uy, ry + s * uy + lat * ux
-            yaw = float(rng.uniform(0, 90))
-            body = BodySpec(
-                f"obstacle_{k + 1}", "box", tuple(size), (x, y, 0.0, yaw), "obstacle", (0.45, 0.4, 0.35)
-            )
-            fp = footprint(body)
-            if not polygon_inside(footprint(body, 0.35), room):
-                continue
-            if any(polygons_overlap(fp, footprint(b, 0.35)) for b in out_bodies if b.role != "decor"):
-                continue
-            near_start = polygons_overlap(fp, circle_polygon(rx, ry, 0.6))
-            if near_start or polygons_overlap(fp, circle_polygon(ox, oy, 1.0)):
-                continue
-            out_bodies.append(body)
-            poses.append((x, y, 0.0, yaw))
-            break
-    return replace(scene, bodies=tuple(out_bodies)), poses
 
 
 @dataclass(frozen=True)
@@ -198,8 +158,9 @@ class TrialOptions:
     emulator_setup : callable, optional
         A rehearsal's fault injection (:func:`lab.runs.rehearsal.rehearsal`).
     moving : MovingOptions, optional
-        The simulator only: the object moves over the floor, and the agent predicts it unless it is the
-        static-map baseline (:mod:`lab.runs.moving`). None: the paper's stationary object.
+        The simulator only: the object moves over the floor or a table's top, and the agent predicts it
+        unless it is the static-map baseline (:mod:`lab.runs.moving`). None: the paper's stationary
+        object.
     view3d : path, optional
         Write the recorded 3D view there (:mod:`lab.viz.view3d`: one HTML page, one step per event).
     mounts : path or HeadMounts, optional
@@ -364,7 +325,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
         robot=run.name,
         watchdog_stops=watchdog,
         t0=t0,
-        moving=None if opts.moving is None else {**opts.moving.as_dict(), "truth_time_s": truth_end.time_s},
+        moving=None if opts.moving is None else moving_record(opts.moving, truth_of.mover, truth_end.time_s),
     )
 
 
@@ -384,8 +345,8 @@ def _trial_world(kind: RobotKind, scene: Scene, object: str, opts: TrialOptions,
             "--truth is the object's measured pose on the real robot; in the simulator and a rehearsal "
             "the truth is known (put the object with --place)"
         )
-    floor = None if opts.moving is None else "floor"  # a moving object rides a carrier on the floor
-    scene, place, surface, obstacle_poses = _place_object(scene, object, place, opts.obstacles, rng, floor)
+    moving = None if opts.moving is None else opts.moving.surface  # a carrier's: the floor or a table
+    scene, place, surface, obstacle_poses = _place_object(scene, object, place, opts.obstacles, rng, moving)
     return scene, place, surface, obstacle_poses, None
 
 
@@ -397,7 +358,7 @@ class _TruthOf:
     G_WC: Callable  # () -> the camera in W at the last frame or None
     robot_pose: Callable  # () -> Pose2D of the base in W or None
     collisions: Callable  # () -> int
-    G_WO_at: Callable | None = None  # (t) -> the object in W at robot time t (a moving object)
+    mover: object = None  # a moving object's carrier: G_WO_at(t), the object in W at robot time t
 
 
 def _session(stack, kind, robot_config, scene, object, seed, opts: TrialOptions, G_WO):
@@ -410,8 +371,8 @@ def _session(stack, kind, robot_config, scene, object, seed, opts: TrialOptions,
         w = stack.enter_context(SimWorld(scene, RenderSettings(supersample=supersample)))
         run = stack.enter_context(make_robot(world=w, seed=seed, sensing=sensing, mounts=mounts))
         t = w.truth
-        at = None if opts.moving is None else start_mover(w, object, opts.moving, seed).G_WO_at
-        return run, _TruthOf(lambda: t.G_W(object), t.G_WC, t.robot_pose, lambda: int(t.collisions), at)
+        mover = None if opts.moving is None else start_mover(w, object, opts.moving, seed)
+        return run, _TruthOf(lambda: t.G_W(object), t.G_WC, t.robot_pose, lambda: int(t.collisions), mover)
     robot = make_robot(
         robot_config, seed=seed, scene=scene, emulator_setup=emulator_setup, sensing=sensing, mounts=mounts
     )
@@ -510,9 +471,9 @@ def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, 
     if out.reason != INTERRUPTED:
         out, report_reloc = policy.report(out)
     tracked.record(force=True)  # where the run ended
-    t_found = found_time(out) if truth_of.G_WO_at is not None else None  # a moving object: at the find
+    t_found = found_time(out) if truth_of.mover is not None else None  # a moving object: at the find
     truth = TrialTruth(
-        G_WO=truth_of.G_WO() if t_found is None else truth_of.G_WO_at(t_found),
+        G_WO=truth_of.G_WO() if t_found is None else truth_of.mover.G_WO_at(t_found),
         G_WC=G_WC,
         robot_pose=truth_of.robot_pose(),
         collisions=truth_of.collisions(),
@@ -567,19 +528,19 @@ def _check_trial(scene: Scene, object: str, navigate, max_time, record):
     return Recorder(record)
 
 
-def _place_object(scene: Scene, object: str, place, obstacles: bool, rng: np.random.Generator, floor=None):
-    """Put the object at ``place`` (checked) or at a seeded random valid spot (on the ``floor`` only
-    when it is ``"floor"``), and the path's obstacles: returns the scene, the placement, its surface and
-    the obstacles' poses."""
+def _place_object(scene: Scene, object: str, place, obstacles: bool, rng: np.random.Generator, moving=None):
+    """Put the object at ``place`` (checked) or at a seeded random valid spot (on the surface ``moving``
+    names for a moving object), and the path's obstacles: returns the scene, the placement, its surface
+    and the obstacles' poses."""
     if place is None:
         place = (
             random_placement(scene, object, rng)
-            if floor is None
-            else random_placement(scene, object, rng, floor)
+            if moving is None
+            else random_placement(scene, object, rng, moving)
         )
     surface = check_placement(scene, object, place).kind
-    if floor is not None and surface != floor:
-        raise ConfigError(f"--moving puts the object on the floor; --place put it on the {surface}")
+    if moving is not None:
+        check_moving_surface(surface)
     place = tuple(float(v) for v in place)
     scene = scene.with_pose(object, place)
     obstacle_poses: list = []

@@ -5,7 +5,8 @@ The data flow, one module per stage::
     probability_map  M_p: Eqs. (1)-(3), the detection model with alpha and beta, the growing beta;
                      ProbabilityMap.observe applies either search's detections
     motion           the prediction step for a moving object: mass diffuses at the speed bound over
-                     the cells the robot's costmap leaves passable (a no-op at speed 0)
+                     each surface the robot's costmap shows, the floor and the raised cells a table's
+                     top is among (a no-op at speed 0); map_log replays a run's map without it
     global_search    pan-tilt scan -> colour back-projection -> N_hist clusters -> sparse stereo -> M_p
     local_search     9 pan-tilt views -> SIFT + EKF (RANSAC start, ROI, gate) -> 6D pose, or a second
                      look at the colour peaks near the cell on enlarged regions -> 6D pose or a miss;

@@ -43,6 +43,29 @@ any of the 4 steps, a lazy random walk at the speed bound.
 and FREE and UNKNOWN cells pass (:func:`passable_from_costmap`). A miss (the local search's ``y = 0``)
 lowers the cells it covered through Eq. (1); the prediction then lets mass flow back into them at the
 rate the speed bound allows.
+
+**Surfaces: an object on a table's top.** The map is a floor grid, and a cell under a table holds the
+belief that the object is anywhere in that column, on the top too. The costmap marks a table's cells
+OBSTACLE (its top at 0.75 m is something the robot's head would hit), so with a passable mask a
+table-top object's mass is frozen where it lies: it is kept, but never moves over the top, and a miss
+on the top never fills in from the cells beside it. A carrier neither climbs onto a table nor drives
+off one, so the motion model has *surfaces* instead: ``m_c`` becomes a label ``s_c`` (0 blocks) and
+mass moves only between neighbours of the same surface,
+
+.. math::
+
+    P'_c = P_c + q(\tau) \sum_{n \in N_4(c)} [s_c = s_n \neq 0]\, (P_n - P_c)              \quad (P2)
+
+with the same exact conservation and speed bound, and no mass crossing between surfaces: the floor's
+stays on the floor, a table top's on the top (a passable mask is the labels 1 and 0, and (P2) is (P1)).
+:func:`surfaces_from_costmap` labels the robot's costmap, not the truth: FREE and UNKNOWN cells are the
+floor (1), OBSTACLE cells the raised surface (2). The robot is not told where the tables are (its map
+is the room's floor, and the table's cells become raised once it has seen them), nor which surface the
+object is on, so every raised cell's mass moves among raised neighbours: a table top's over the top,
+and a crate's or a wall's (what the prior and the colour peaks gave them) only over that obstacle, as
+it stayed on it before. The alternative, the room's plan of its tables, is not something the robot is
+given; and a table's cells that the costmap has not seen yet are floor (UNKNOWN), so until then the
+two exchange mass as before.
 """
 
 from __future__ import annotations
@@ -57,13 +80,20 @@ from lab.navigation.costmap import CellState
 from lab.navigation.grid import GridSpec
 
 __all__ = [
+    "FLOOR",
     "Q_MAX",
+    "RAISED",
     "MotionModel",
     "diffusion_coefficient",
     "diffuse_step",
     "passable_from_costmap",
     "predict",
+    "surfaces_from_costmap",
 ]
+
+#: The labels of :func:`surfaces_from_costmap`: the floor (FREE and UNKNOWN cells) and the raised cells
+#: (OBSTACLE: a table's top among them); 0 would block.
+FLOOR, RAISED = 1, 2
 
 #: The share of a cell's mass that moves to each of its 4 neighbours in one interval ``r / v``: the
 #: object stays or takes any of the 4 steps with equal probability (must be <= 1/4 for P >= 0).
@@ -103,13 +133,15 @@ def diffusion_coefficient(model: MotionModel, resolution: float) -> float:
 
 
 def diffuse_step(P: np.ndarray, passable: np.ndarray, q: float) -> np.ndarray:
-    """One interval of Eq. (P1): ``P'_c = P_c + q sum_n m_c m_n (P_n - P_c)`` over the 4 neighbours.
+    """One interval of Eq. (P1), ``P'_c = P_c + q sum_n m_c m_n (P_n - P_c)`` over the 4 neighbours, or
+    with surface labels Eq. (P2), ``P'_c = P_c + q sum_n [s_c = s_n != 0] (P_n - P_c)``.
 
     Parameters
     ----------
     P : ndarray, shape (nx, ny)
-    passable : ndarray of bool, shape (nx, ny)
-        ``m_c``: True where the object may be or pass.
+    passable : ndarray of bool or int, shape (nx, ny)
+        ``m_c``: True where the object may be or pass; or ``s_c``, each cell's surface label (0:
+        blocked; mass moves only between neighbours of the same label).
     q : float
         Share per neighbour, within [0, 1/4].
 
@@ -118,11 +150,13 @@ def diffuse_step(P: np.ndarray, passable: np.ndarray, q: float) -> np.ndarray:
     ndarray, shape (nx, ny)
         A new array, with the same total as ``P``.
     """
-    m = passable.astype(float)
+    s = np.asarray(passable)
     out = P.copy()
-    # the flux across each vertical and horizontal cell edge, only where both cells pass
-    fx = q * m[1:, :] * m[:-1, :] * (P[1:, :] - P[:-1, :])  # from cell (i+1, j) into (i, j)
-    fy = q * m[:, 1:] * m[:, :-1] * (P[:, 1:] - P[:, :-1])  # from cell (i, j+1) into (i, j)
+    # the edges mass crosses: both cells on one surface (both passable, for a mask)
+    lx = ((s[1:, :] == s[:-1, :]) & (s[1:, :] != 0)).astype(float)
+    ly = ((s[:, 1:] == s[:, :-1]) & (s[:, 1:] != 0)).astype(float)
+    fx = q * lx * (P[1:, :] - P[:-1, :])  # from cell (i+1, j) into (i, j)
+    fy = q * ly * (P[:, 1:] - P[:, :-1])  # from cell (i, j+1) into (i, j)
     out[:-1, :] += fx
     out[1:, :] -= fx
     out[:, :-1] += fy
@@ -139,8 +173,9 @@ def predict(
     ----------
     P : ndarray, shape (nx, ny)
         ``P(h^{k-1} | Y_1:k-1)``.
-    passable : ndarray of bool, shape (nx, ny)
-        Where the object may go (:func:`passable_from_costmap`).
+    passable : ndarray of bool or int, shape (nx, ny)
+        Where the object may go (:func:`passable_from_costmap`), or the cells' surfaces
+        (:func:`surfaces_from_costmap`, Eq. (P2)).
     dt_s : float [s]
         Time since the last update (>= 0).
     model : MotionModel
@@ -196,3 +231,25 @@ def passable_from_costmap(
     blocked = np.bincount(k, weights=obstacle.astype(float), minlength=nx * ny)
     share = np.divide(blocked, total, out=np.zeros(nx * ny), where=total > 0)
     return (share < blocked_share).reshape(nx, ny)
+
+
+def surfaces_from_costmap(
+    state: np.ndarray, costmap_spec: GridSpec, map_spec: GridSpec, blocked_share: float = 0.5
+) -> np.ndarray:
+    """The probability map's cells labelled by surface for Eq. (P2), from the robot's costmap (its
+    belief, not the truth): :data:`RAISED` where :func:`passable_from_costmap` blocks (a table's top
+    among them), :data:`FLOOR` elsewhere.
+
+    Parameters
+    ----------
+    state : ndarray of CellState, shape costmap_spec.shape
+    costmap_spec, map_spec : GridSpec
+    blocked_share : float
+        Within (0, 1]: as :func:`passable_from_costmap`.
+
+    Returns
+    -------
+    ndarray of int8, shape map_spec.shape
+    """
+    floor = passable_from_costmap(state, costmap_spec, map_spec, blocked_share)
+    return np.where(floor, FLOOR, RAISED).astype(np.int8)
