@@ -5,7 +5,9 @@ world (:mod:`lab.sim.moving_object`) at ``--object-speed``, pausing ``--pause`` 
 agent, unless it is the static-map baseline (``predict=False``), runs the probability map's prediction
 step (:mod:`lab.search.motion`) with the object's speed as its speed bound, over the cells its
 navigator's costmap leaves passable, and its local search's pose EKF lets the object move by the same
-bound (:class:`~lab.estimation.noise.ProcessNoise` ``sigma_v``). A find is scored against the truth
+bound (:class:`~lab.estimation.noise.ProcessNoise` ``sigma_v``), and its global colour detections become
+tracks that the head follows while the robot approaches their predicted position
+(:mod:`lab.search.follow`). A find is scored against the truth
 at the moment it was confirmed (the local search's event), which the result records as
 ``moving.truth_time_s``.
 """
@@ -18,6 +20,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from lab.errors import ConfigError
+from lab.search.colour_track import ColourTrackConfig
 from lab.search.config import SearchAgentConfig
 from lab.search.motion import MotionModel, passable_from_costmap
 
@@ -88,15 +91,17 @@ def _number(v) -> bool:
 
 def agent_config(cfg: SearchAgentConfig, moving: MovingOptions) -> SearchAgentConfig:
     """The agent's config for a moving object: the map's motion model, the pose EKF's object motion
-    at the speed bound, and the found pose's position deviation bound that this motion allows
-    (:data:`MOVING_POSITION_STD_M`); the baseline keeps the static config."""
+    at the speed bound, the found pose's position deviation bound that this motion allows
+    (:data:`MOVING_POSITION_STD_M`) and the colour tracks the head follows (:mod:`lab.search.follow`);
+    the baseline keeps the static config."""
     if not moving.predict:
         return cfg
     ls = cfg.local_search
     process = replace(ls.process, sigma_v=float(moving.speed_mps))  # constant position, velocity noise
     std = max(ls.max_position_std_m, MOVING_POSITION_STD_M)
     local = replace(ls, process=process, max_position_std_m=std)
-    return replace(cfg, motion=MotionModel(speed_mps=float(moving.speed_mps)), local_search=local)
+    motion = MotionModel(speed_mps=float(moving.speed_mps))
+    return replace(cfg, motion=motion, local_search=local, colour_track=ColourTrackConfig())
 
 
 def start_mover(world, object: str, moving: MovingOptions, seed: int):
