@@ -104,7 +104,15 @@ class ColourTrackConfig:
     match_m: float = 0.45
 
     def __post_init__(self):
-        positive = ("tau_s", "sigma_px", "sigma_disparity_px", "gate_chi2", "gate_px", "lost_after_s", "leg_m")
+        positive = (
+            "tau_s",
+            "sigma_px",
+            "sigma_disparity_px",
+            "gate_chi2",
+            "gate_px",
+            "lost_after_s",
+            "leg_m",
+        )
         for name in positive:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):

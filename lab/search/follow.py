@@ -65,7 +65,9 @@ class FollowResult:
     detail: str
 
 
-def start_tracks(result: GlobalSearchResult, speed_mps: float, config: ColourTrackConfig) -> list[ColourTrack]:
+def start_tracks(
+    result: GlobalSearchResult, speed_mps: float, config: ColourTrackConfig
+) -> list[ColourTrack]:
     """A track for each used colour peak of a global search, at the peak's stereo point and the time
     its view was captured."""
     tracks = []
@@ -132,7 +134,9 @@ def approach_track(
         d = math.hypot(here[0] - pose.x, here[1] - pose.y)
         if lo - 0.05 <= d <= hi + 0.05 and leg > 0:
             moved = math.dist(track.start_xy, xy)
-            detail = f"followed a colour track: {leg} legs, {seen} re-detections, {moved:.2f} m from where seen"
+            detail = (
+                f"followed a colour track: {leg} legs, {seen} re-detections, {moved:.2f} m from where seen"
+            )
             return FollowResult(True, nav, xy, detail)
         if leg == cfg.max_legs:
             break
