@@ -13,9 +13,12 @@ legs of ``leg_m``:
         goal = the track's predicted position when the robot will get there (distance / travel speed)
         drive leg_m towards the goal, or (the last leg) into the goal's local-search band
 
-The navigator owns the head while it drives (it watches the floor ahead), so the head follows the
-object between legs: one rendered frame per leg keeps the frame budget small. The local search then
-looks at the track's predicted position, not at the cell where the object was seen.
+Aiming at the predicted point is the identification paper's tracking (Sec. IV, Eqs. (16)-(17),
+:mod:`lab.identification.head`: keep the object's image position at the image centre) in position
+mode: its proportional law run to convergence in one command, on the filter's prediction rather than
+the last image. The navigator owns the head while it drives (it watches the floor ahead), so the head
+follows the object between legs: one rendered frame per leg keeps the frame budget small. The local
+search then looks at the track's predicted position, not at the cell where the object was seen.
 """
 
 from __future__ import annotations
