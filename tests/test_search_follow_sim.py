@@ -73,7 +73,7 @@ def test_a_colour_detection_of_a_driving_book_is_followed_by_the_head():
                 t_next = robot.now() + EVERY_S
                 while robot.now() < t_next:
                     robot.step(0.1)
-                seen += reobserve(robot, track, model, space)
+                seen += reobserve(robot, track, model, db)
             truth = m.G_WO_at(track.t)[:2, 3]
     err = float(np.linalg.norm(track.position_at(track.t) - truth))
     last_seen = float(np.linalg.norm(np.asarray(track.start_xy) - truth))

@@ -444,13 +444,12 @@ class SearchAgent:
             return None
         self.tracks.remove(track)
         lc = self.config.local_search
-        space = self.db.meta.get("colour_space", "rg")
         res = approach_track(
             self.robot,
             self._navigate,
             track,
             self._colour_model,
-            space,
+            self.db,
             (lc.min_distance_m, lc.max_distance_m),
             self.config.travel_speed_m_s,
         )

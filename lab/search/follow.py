@@ -92,10 +92,11 @@ def track_for(tracks: list[ColourTrack], xy, t: float) -> ColourTrack | None:
     return best
 
 
-def reobserve(robot, track: ColourTrack, colour_model: np.ndarray, space: str) -> bool:
+def reobserve(robot, track: ColourTrack, colour_model: np.ndarray, db) -> bool:
     """Aim the head at the track's predicted point (:func:`~lab.search.tracking.aim_at`), take one frame,
     and update the track with the colour blob nearest the predicted pixel; True when it was
-    re-detected (the gate let the blob through)."""
+    re-detected (the gate let the blob through). ``colour_model``: the global search's ratio histogram
+    of the object's database ``db`` (whose colour space it is in)."""
     t = robot.now()
     track.predict(t)
     p_R = transform_points(se3_inv(robot.odometry().G()), track.point_at(t))
@@ -108,6 +109,7 @@ def reobserve(robot, track: ColourTrack, colour_model: np.ndarray, space: str) -
     uv = predicted_pixel(frame, track.point_at(track.t))
     if uv is None:
         return False
+    space = db.meta.get("colour_space", "rg")
     blob = find_blob(frame, colour_model, space, uv, track.config)
     return blob is not None and track.update(blob.p_W[:2], blob.R_xy, track.t)
 
@@ -117,7 +119,7 @@ def approach_track(
     navigate: Callable,
     track: ColourTrack,
     colour_model: np.ndarray,
-    space: str,
+    db,
     band: tuple[float, float],
     travel_speed_m_s: float,
 ) -> FollowResult:
@@ -127,7 +129,7 @@ def approach_track(
     lo, hi = band
     nav, seen = None, 0
     for leg in range(cfg.max_legs + 1):
-        seen += reobserve(robot, track, colour_model, space)
+        seen += reobserve(robot, track, colour_model, db)
         now = robot.now()
         here = track.position_at(now)
         xy = (float(here[0]), float(here[1]))
