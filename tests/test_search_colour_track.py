@@ -88,6 +88,15 @@ def test_the_gate_refuses_a_far_blob_and_the_track_is_lost_later():
     assert not tr.update([1.0, 0.0], np.diag([0.001, 0.001]), 1.0)
     assert tr.updates == 0 and tr.t_seen == 0.0 and tr.t == 1.0
     assert not tr.lost(CFG.lost_after_s) and tr.lost(CFG.lost_after_s + 0.1)
+    assert not tr.lost(CFG.lost_after_s + 0.1, since=1.0)  # counted from when the looks began
+
+
+def test_the_pixel_gate_grows_with_the_tracks_deviation():
+    tr = ColourTrack([0.0, 0.0, 0.2], np.diag([0.01, 0.04]), 0.0, V, CFG)
+    assert tr.gate_px(4.0, 200.0) == CFG.gate_px  # 3 * 0.2 m at 4 m is 30 px: the floor
+    tr.predict(10.0)  # var grows by 100 * V^2 / 2 + q 1000 / 3 = 0.5 + 0.167
+    sigma = math.sqrt(0.04 + 0.5 + V**2 / (2 * CFG.tau_s) * 1000 / 3)
+    assert tr.gate_px(2.0, 200.0) == pytest.approx(3 * sigma * 200.0 / 2.0)
     with pytest.raises(ConfigError, match="back in time"):
         tr.predict(0.5)
 
@@ -110,8 +119,8 @@ def test_a_pixel_and_its_disparity_go_to_the_world_and_project_back():
     frame = StereoFrame(2.0, empty, empty, cam, PanTiltState(pan, tilt, 2.0, pan, tilt), odom)
     d = cam.fx * cam.baseline / 3.0  # 3 m away
     p_W, R = measurement_xy(frame, (200.0, 150.0), d, CFG)
-    uv = predicted_pixel(frame, p_W)
-    np.testing.assert_allclose(uv, (200.0, 150.0), atol=1e-9)
+    u, v, Z = predicted_pixel(frame, p_W)
+    np.testing.assert_allclose((u, v, Z), (200.0, 150.0, 3.0), atol=1e-9)
     G_WC = odom.G() @ frame.G_RC
     assert np.linalg.norm(p_W - G_WC[:3, 3]) == pytest.approx(
         3.0 * math.sqrt(1 + ((200 - cam.cx) / cam.fx) ** 2 + ((150 - cam.cy) / cam.fy) ** 2)

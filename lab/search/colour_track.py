@@ -77,11 +77,14 @@ class ColourTrackConfig:
     gate_chi2 : float
         Largest Mahalanobis distance squared of a measurement (9.21: 99 % of a 2-D Gaussian).
     gate_px : float [px]
-        The blob is looked for within this many pixels of the predicted one.
+        The blob is looked for within this many pixels of the predicted one, or within the track's
+        three-sigma position deviation seen from the camera when that is wider (:meth:`ColourTrack.gate_px`:
+        a track seen early in a scan may have driven a metre since).
     min_strength : float
         The blob's smallest window mean (as the global search's peaks).
     lost_after_s : float [s]
-        A track not re-detected for this long is lost: the approach falls back to the map's cell.
+        A track not re-detected for this long (counted from its last sighting, or from the start of the
+        approach when that is later) is lost: the approach falls back to the map's cell.
     leg_m : float [m]
         How far the robot drives between two re-observations while it approaches.
     max_legs : int
@@ -217,9 +220,17 @@ class ColourTrack:
         """The predicted 3D point [m] (the seen height) at time ``t``, to aim the head at."""
         return np.array([*self.position_at(t), self.z])
 
-    def lost(self, t: float) -> bool:
-        """Not re-detected for ``lost_after_s`` at time ``t``."""
-        return float(t) - self.t_seen > self.config.lost_after_s
+    def lost(self, t: float, since: float = -math.inf) -> bool:
+        """Not re-detected for ``lost_after_s`` at time ``t`` [s], counted from the last sighting or from
+        ``since`` [s] (when the re-observations began), whichever is later."""
+        return float(t) - max(self.t_seen, float(since)) > self.config.lost_after_s
+
+    def gate_px(self, depth_m: float, f_px: float) -> float:
+        """The search radius [px] round the predicted pixel of a point ``depth_m`` [m] in front of a
+        camera of focal length ``f_px``: ``gate_px``, or three position deviations (the covariance's
+        largest axis) as seen at that depth, whichever is larger."""
+        sigma = math.sqrt(max(0.0, float(np.linalg.eigvalsh(self.P[:2, :2])[-1])))
+        return max(self.config.gate_px, 3.0 * sigma * f_px / max(depth_m, 0.1))
 
 
 @dataclass(frozen=True)
@@ -249,16 +260,16 @@ def measurement_xy(
     return transform_points(G_WC, p_C), S_W[:2, :2] + config.sigma_floor_m**2 * np.eye(2)
 
 
-def predicted_pixel(frame: StereoFrame, p_W) -> tuple[float, float] | None:
-    """Where the world point ``p_W`` [m] falls in the frame's left image, or None (behind the camera or
-    outside the image)."""
+def predicted_pixel(frame: StereoFrame, p_W) -> tuple[float, float, float] | None:
+    """Where the world point ``p_W`` [m] falls in the frame's left image, and its depth [m]: ``(u, v,
+    Z)``; None when it is behind the camera or outside the image."""
     p_C = transform_points(se3_inv(frame.odom.G() @ frame.G_RC), np.asarray(p_W, float))
     if p_C[2] <= 0.05:
         return None
     u, v = frame.camera.project(p_C[None, :])[0]
     if not (0 <= u < frame.camera.width and 0 <= v < frame.camera.height):
         return None
-    return float(u), float(v)
+    return float(u), float(v), float(p_C[2])
 
 
 def find_blob(
@@ -267,10 +278,12 @@ def find_blob(
     space: str,
     uv_pred,
     config: ColourTrackConfig,
+    gate_px: float | None = None,
     window_px: int = 7,
     num_disparities: int = 48,
 ) -> Blob | None:
-    """The strongest colour blob within ``gate_px`` of the predicted pixel ``uv_pred``: the global
+    """The strongest colour blob within ``gate_px`` [px] (default ``config.gate_px``) of the predicted
+    pixel ``uv_pred``: the global
     search's back-projection of ``colour_model`` (its ratio histogram), window means, the strongest
     cluster in the gate, its median disparity and stereo point. None when there is no blob of at least
     ``min_strength`` or no disparity at it."""
@@ -278,7 +291,8 @@ def find_blob(
     wm = window_mean(bp, window_px)
     H, W = wm.shape
     vv, uu = np.mgrid[0:H, 0:W]
-    wm[(uu - uv_pred[0]) ** 2 + (vv - uv_pred[1]) ** 2 > config.gate_px**2] = 0.0
+    gate = config.gate_px if gate_px is None else gate_px
+    wm[(uu - uv_pred[0]) ** 2 + (vv - uv_pred[1]) ** 2 > gate**2] = 0.0
     clusters = strongest_clusters(wm, 1, config.min_strength, 1)
     if not clusters:
         return None

@@ -7,8 +7,9 @@ legs of ``leg_m``:
 
     loop (at most max_legs):
         aim the head at the track's predicted point, take one frame, find the colour blob near the
-        predicted pixel, update the track                                  (reobserve)
-        the track lost (no re-detection for lost_after_s): give up -> the agent approaches the cell
+        predicted pixel (within the track's deviation as seen), update the track      (reobserve)
+        the track lost (no re-detection for lost_after_s since the approach began or it was last
+        seen): give up -> the agent approaches the cell
         the robot stands within the local-search band of the predicted position: arrived
         goal = the track's predicted position when the robot will get there (distance / travel speed)
         drive leg_m towards the goal, or (the last leg) into the goal's local-search band
@@ -106,11 +107,12 @@ def reobserve(robot, track: ColourTrack, colour_model: np.ndarray, db) -> bool:
     frame = robot.capture_stereo()
     track.frames += 1
     track.predict(max(frame.t, track.t))
-    uv = predicted_pixel(frame, track.point_at(track.t))
-    if uv is None:
+    pix = predicted_pixel(frame, track.point_at(track.t))
+    if pix is None:
         return False
     space = db.meta.get("colour_space", "rg")
-    blob = find_blob(frame, colour_model, space, uv, track.config)
+    gate = track.gate_px(pix[2], frame.camera.fx)
+    blob = find_blob(frame, colour_model, space, pix[:2], track.config, gate)
     return blob is not None and track.update(blob.p_W[:2], blob.R_xy, track.t)
 
 
@@ -127,13 +129,13 @@ def approach_track(
     agent's); ``band`` the local search's ``(min_distance_m, max_distance_m)`` [m]."""
     cfg = track.config
     lo, hi = band
-    nav, seen = None, 0
+    nav, seen, t0 = None, 0, robot.now()
     for leg in range(cfg.max_legs + 1):
         seen += reobserve(robot, track, colour_model, db)
         now = robot.now()
         here = track.position_at(now)
         xy = (float(here[0]), float(here[1]))
-        if track.lost(now):
+        if track.lost(now, since=t0):
             return FollowResult(False, nav, xy, f"colour track lost after {leg} legs ({seen} re-detections)")
         pose = robot.odometry()
         d = math.hypot(here[0] - pose.x, here[1] - pose.y)
