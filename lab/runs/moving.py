@@ -7,9 +7,11 @@ leg. The agent, unless it is the static-map baseline (``predict=False``), runs t
 prediction step (:mod:`lab.search.motion`) with the object's speed as its speed bound, over the
 surfaces its navigator's costmap shows (the floor, and the raised cells a table's top is among: the
 agent does not know which one the object is on), and its local search's pose EKF lets the object move
-by the same bound (:class:`~lab.estimation.noise.ProcessNoise` ``sigma_v``). A find is scored against
-the truth at the moment it was confirmed (the local search's event), which the result records as
-``moving.truth_time_s``, beside where the object drove (:func:`moving_record`).
+by the same bound (:class:`~lab.estimation.noise.ProcessNoise` ``sigma_v``), and its global colour
+detections become tracks that the head follows while the robot approaches their predicted position
+(:mod:`lab.search.follow`). A find is scored against the truth at the moment it was confirmed (the
+local search's event), which the result records as ``moving.truth_time_s``, beside where the object
+drove (:func:`moving_record`).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from lab.errors import ConfigError
+from lab.search.colour_track import ColourTrackConfig
 from lab.search.config import SearchAgentConfig
 from lab.search.motion import MotionModel, surfaces_from_costmap
 
@@ -135,8 +138,9 @@ def _number(v) -> bool:
 def agent_config(cfg: SearchAgentConfig, moving: MovingOptions) -> SearchAgentConfig:
     """The agent's config for a moving object: the map's motion model, the pose EKF's object motion
     at the speed bound, the found pose's position deviation bound that this motion allows
-    (:data:`MOVING_POSITION_STD_M`) and the refinement on enlarged regions
-    (:data:`MOVING_REFINE_UPSAMPLE`); the baseline keeps the static config."""
+    (:data:`MOVING_POSITION_STD_M`), the refinement on enlarged regions (:data:`MOVING_REFINE_UPSAMPLE`)
+    and the colour tracks the head follows (:mod:`lab.search.follow`); the baseline keeps the static
+    config."""
     if not moving.predict:
         return cfg
     ls = cfg.local_search
@@ -144,7 +148,8 @@ def agent_config(cfg: SearchAgentConfig, moving: MovingOptions) -> SearchAgentCo
     std = max(ls.max_position_std_m, MOVING_POSITION_STD_M)
     up = max(ls.refine_upsample, MOVING_REFINE_UPSAMPLE)
     local = replace(ls, process=process, max_position_std_m=std, refine_upsample=up)
-    return replace(cfg, motion=MotionModel(speed_mps=float(moving.speed_mps)), local_search=local)
+    motion = MotionModel(speed_mps=float(moving.speed_mps))
+    return replace(cfg, motion=motion, local_search=local, colour_track=ColourTrackConfig())
 
 
 def start_mover(world, object: str, moving: MovingOptions, seed: int):

@@ -64,6 +64,7 @@ from lab.geometry import wrap_angle
 from lab.robot import Robot
 from lab.search.budget import SearchBudgetExceeded
 from lab.search.config import SearchAgentConfig
+from lab.search.follow import approach_track, start_tracks, track_for
 from lab.search.global_search import GlobalSearchResult, global_search
 from lab.search.local_search import (
     LocalSearchResult,
@@ -138,9 +139,10 @@ class SearchAgent:
         ``observer(agent, event)`` after every :class:`SearchEvent` (live views and recordings,
         :mod:`lab.viz.live`). None (the default) costs nothing.
     passable : callable, optional
-        ``passable() -> (nx, ny) bool`` on the map's grid: where a moving object may go, as the robot
-        believes (:func:`lab.search.motion.passable_from_costmap` of its costmap); used only with a
-        moving ``config.motion``. None: every cell.
+        ``passable() -> (nx, ny)`` on the map's grid: where a moving object may go, as the robot
+        believes, either a bool mask (:func:`lab.search.motion.passable_from_costmap`) or the cells
+        labelled by surface (:func:`lab.search.motion.surfaces_from_costmap`, Eq. (P2): mass moves
+        between neighbours of one surface); used only with a moving ``config.motion``. None: every cell.
     """
 
     def __init__(
@@ -183,6 +185,8 @@ class SearchAgent:
         self.local_since_global = 0  # local searches since the last global search
         self.scan_points: list[tuple[float, float]] = []  # where the global searches stood [m]
         self._stands: list[tuple[tuple[float, float], tuple[float, float]]] = []  # (searched xy, stood at)
+        self.tracks: list = []  # the last global search's colour tracks (a moving object, lab.search.follow)
+        self._colour_model: np.ndarray | None = None  # that search's ratio histogram, to re-detect with
 
     # -- bookkeeping -------------------------------------------------------------------------------
     def _event(self, kind: str, cell=None, detail: str = "") -> None:
@@ -292,6 +296,9 @@ class SearchAgent:
         self.local_since_global = 0
         self._excluded_temp[:] = False
         self._globals.append(res)
+        if self.moving and self.config.colour_track is not None:
+            self.tracks = start_tracks(res, self.config.motion.speed_mps, self.config.colour_track)
+            self._colour_model = res.colour_model
         used = res.used_peaks
         self._event(
             "global", detail=f"{len(used)} colour peaks used of {len(res.peaks)}; max P {self.pmap.max:.4f}"
@@ -375,7 +382,13 @@ class SearchAgent:
         that saw the object's colours there is followed by a search from another side
         (``SearchAgentConfig.second_side``; ``second_side``: this is that search)."""
         lc = self.config.local_search
-        nav, how_arrived = self._approach(cell, xy)
+        followed = self._follow(xy)
+        if followed is not None:  # the robot stands in the band of the track's predicted position
+            nav, how_arrived, xy = followed.nav, followed.detail, followed.xy
+            ij, inside = self.pmap.spec.cells_of(np.array([xy]))
+            cell = (int(ij[0, 0]), int(ij[0, 1])) if inside[0] else cell
+        else:
+            nav, how_arrived = self._approach(cell, xy)
         self._nav_paths.append((xy, getattr(nav, "path_xy", None)))
         self._stuck = self._stuck + 1 if "START_IN_OBSTACLE" in str(nav.reason) else 0
         if self._stuck >= MAX_STUCK:
@@ -419,6 +432,33 @@ class SearchAgent:
                 return side
         if self.config.second_side and res.colour_peaks and not second_side and not self.excluded[cell]:
             return self._visit(cell, xy, second_side=True)
+        return res
+
+    def _follow(self, xy):
+        """Approach the colour track that started at the map target ``xy`` [m] (a moving object, with
+        ``config.colour_track``): the :class:`~lab.search.follow.FollowResult` when the robot arrived in
+        the local-search band of its predicted position; None when there is no such track or it was
+        lost or not reached (the agent then approaches the cell, as without tracks). A track is followed
+        once: the local search that follows answers for it."""
+        track = None if not self.tracks else track_for(self.tracks, xy, self.robot.now())
+        if track is None:
+            return None
+        self.tracks.remove(track)
+        lc = self.config.local_search
+        res = approach_track(
+            self.robot,
+            self._navigate,
+            track,
+            self._colour_model,
+            self.db,
+            (lc.min_distance_m, lc.max_distance_m),
+            self.config.travel_speed_m_s,
+        )
+        if res.nav is not None:
+            self._nav_paths.append((res.xy, getattr(res.nav, "path_xy", None)))
+        if not res.arrived:
+            self._event("track", None, res.detail + "; approaching the map's cell instead")
+            return None
         return res
 
     def _side_look(self, cell, peaks) -> LocalSearchResult | None:

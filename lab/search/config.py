@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from lab.errors import ConfigError
+from lab.search.colour_track import ColourTrackConfig
 from lab.search.global_search import GlobalSearchConfig
 from lab.search.local_search import LocalSearchConfig
 from lab.search.motion import MotionModel
@@ -89,6 +90,11 @@ class SearchAgentConfig:
         ``max_local_misses`` failed searches answered for are still given up: a distractor of the
         object's colours stays put while the object moves (docs/tuning/search-moving-object.md). None
         (the default) or a speed of 0: the paper's stationary object, the map untouched between updates.
+    colour_track : ColourTrackConfig, optional
+        With a moving ``motion``: each used colour peak of a global search becomes a track, and a map
+        target where one started is approached by following it with the head (:mod:`lab.search.follow`),
+        the local search looking at its predicted position. None (the default): the map's cell, as the
+        paper's search.
     """
 
     strategy: Strategy = Strategy.PAPER
@@ -110,6 +116,7 @@ class SearchAgentConfig:
     max_local_misses: int = 2
     max_actions: int = 500
     motion: MotionModel | None = None
+    colour_track: ColourTrackConfig | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "strategy", Strategy.parse(self.strategy))

@@ -66,7 +66,8 @@ class MapSnapshot:
 
 @dataclass(frozen=True)
 class SearchEvent:
-    """One step of the run, for the record: ``kind`` is global / navigate / skip / local / end."""
+    """One step of the run, for the record: ``kind`` is global / navigate / skip / local / track / end
+    (track: a colour track followed and given up, :mod:`lab.search.follow`)."""
 
     t: float
     kind: str
