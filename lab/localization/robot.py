@@ -342,8 +342,7 @@ class LocalizedRobot(RobotWrapper):
                 if n_views >= max_views:
                     break
                 pan, tilt, _name = view
-                self.base.command_pan_tilt(pan, tilt)
-                self._settle(self.base.wait_pan_tilt(timeout=15.0))  # a whole pan swing takes > 5 s
+                self._turn_head(pan, tilt)
                 n0 = len(self.localizer.history)
                 self.capture_stereo()
                 n_views += 1
@@ -358,9 +357,25 @@ class LocalizedRobot(RobotWrapper):
             views = productive
             if done or not views or n_views >= max_views:
                 break
-        self.base.command_pan_tilt(start.pan, start.tilt)
-        self.base.wait_pan_tilt(timeout=15.0)
+        self._turn_head(start.pan, start.tilt)
         return done
+
+    def _turn_head(self, pan: float, tilt: float) -> None:
+        """Point the head at ``(pan, tilt)`` and wait until it is there (a whole pan swing takes > 5 s).
+
+        With a camera latency the wait steps through :meth:`step` (:meth:`wait_pan_tilt`), so the
+        head's and the wheels' readings during the swing are kept and the next frame is taken back to
+        its image's stamp along them (:meth:`head_at_image`, :meth:`wheels_at_image`). Waiting on the
+        base alone left the whole swing out of the history: the head's angle at the image's stamp was
+        then interpolated between a reading from before the swing and one after it, short of where the
+        head stood by the swing times the latency over the gap (2.6-3 deg in the room's searches,
+        docs/tuning/room-errors.md), and every sighting of a re-localization was turned by it. Without a
+        latency nothing is taken back, and the base waits alone as before."""
+        self.base.command_pan_tilt(pan, tilt)
+        if self.camera_latency_s > 0:
+            self.wait_pan_tilt(timeout=15.0)
+        else:
+            self.base.wait_pan_tilt(timeout=15.0)
 
     def relocalize_to_report(self, at_W=None) -> bool:
         """The re-localization before a pose is reported in the room (a found object's, at ``at_W`` =
