@@ -43,12 +43,27 @@ def test_a_moving_sweep_runs_both_maps_on_the_same_trials(tmp_path):
         assert f"| random | {m} | floor | paper |" in report
 
 
+def test_the_baseline_is_added_later_on_the_same_trials(tmp_path):
+    """``--maps predict`` runs the prediction step alone; ``--maps predict,static --resume`` in the same
+    folder then runs only the baseline, and the report has both on the same trial."""
+    out = tmp_path / "sweep"
+    assert main(["eval", "search", *SWEEP, "--maps", "predict", "--out", str(out)]) == 0
+    base = "paper_free_ideal_landmarks_toy_block_floor_s3_moving-random"
+    first = (out / "jobs" / f"{base}-predict.json").read_text()
+    assert [r["map"] for r in csv.DictReader((out / "results.csv").open())] == ["predict"]
+    assert main(["eval", "search", *SWEEP, "--maps", "predict,static", "--resume", "--out", str(out)]) == 0
+    assert (out / "jobs" / f"{base}-predict.json").read_text() == first  # not run again
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    assert [r["key"] for r in rows] == [f"{base}-predict", f"{base}-static"]
+
+
 def test_bad_moving_sweeps_are_refused_in_one_line(tmp_path, capsys):
     out = tmp_path / "o"
     cases = [
         ([*SWEEP, "--surfaces", "table,shelf", "--out", str(out)], "a moving object rides on the floor or a"),
         ([*SWEEP, "--object-speed", "0", "--out", str(out)], "--object-speed must be a finite number > 0"),
         ([*SWEEP, "--pause", "-1", "--out", str(out)], "--pause must be a finite number >= 0"),
+        ([*SWEEP, "--maps", "predict,kf", "--out", str(out)], "unknown --maps kf; maps: predict,static"),
     ]
     for argv, msg in cases:
         assert main(["eval", "search", *argv]) == 2

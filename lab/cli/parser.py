@@ -540,6 +540,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     es.add_argument("--pause", type=float, help="with --moving: its pause after each leg [s] (default 5)")
     es.add_argument(
+        "--maps",
+        help="with --moving: comma-separated maps to run, predict (the prediction step) and static (the "
+        "baseline) (default both; add the other later with --resume in the same --out)",
+    )
+    es.add_argument(
         "--error-scale",
         help="comma-separated scales of every error of the sensing profile, e.g. 1,2,3 (default 1): the "
         "report's robustness curve, success against scale with Wilson intervals (report.md, robustness.png)",

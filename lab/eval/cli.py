@@ -82,6 +82,7 @@ def search_sweep(args):
         moving=spec.get("moving"),
         object_speed=float(spec.get("object_speed", 0.1)),
         pause=float(spec.get("pause", 5.0)),
+        maps=_names(spec.get("maps", "predict,static")),
         error_scale=parse_error_scales(spec.get("error_scale", "1")),
     )
     sw.check()

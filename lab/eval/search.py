@@ -17,6 +17,8 @@ length).
 with ``--surfaces floor,table`` the table placements too: the carrier drives on the table's top), and
 every trial twice on the same placement, seed and motion: with the map's prediction step (``map =
 predict``) and the static-map baseline (``map = static``); the report groups by both and by surface.
+``--maps predict`` runs the first alone, and ``--maps predict,static --resume`` in the same folder adds
+the baseline later on the same trials (a job's key names its map).
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ SEARCH_FIELDS = (
     "moving",
     "object_speed",
     "pause",
+    "maps",
     "error_scale",
 )
 
@@ -105,6 +108,7 @@ class SearchSweep:
     moving: str | None = None
     object_speed: float = 0.1
     pause: float = 5.0
+    maps: tuple[str, ...] = MAPS
     error_scale: tuple[float, ...] = (1.0,)
 
     def check(self) -> None:
@@ -156,6 +160,9 @@ class SearchSweep:
                 )
 
             MovingOptions(self.moving, self.object_speed, self.pause)  # one clear line for a bad speed
+            bad = [m for m in self.maps if m not in MAPS]
+            if bad or not self.maps:
+                raise ConfigError(f"unknown --maps {','.join(bad) or '(none)'}; maps: {','.join(MAPS)}")
 
     def jobs(self) -> list[Job]:
         """Every trial; the shelf's last (the slowest), strategies next to each other on a placement."""
@@ -194,7 +201,8 @@ class SearchSweep:
         if self.moving is None:
             return [Job(key, search_job, kw)]
         motion = dict(moving=self.moving, object_speed=self.object_speed, pause=self.pause)
-        return [Job(f"{key}_moving-{self.moving}-{m}", search_job, {**kw, **motion, "map": m}) for m in MAPS]
+        key = f"{key}_moving-{self.moving}"
+        return [Job(f"{key}-{m}", search_job, {**kw, **motion, "map": m}) for m in self.maps]
 
 
 def shortest_path_m(scene, place, local_max_m: float, local_min_m: float) -> float:
