@@ -471,6 +471,40 @@ def test_all_peaks_failed_triggers_a_new_global_search(monkeypatch):
     assert not out.found and "budget" in out.reason
 
 
+def test_a_vantage_point_not_reached_is_replaced_at_once_and_never_chosen_again(monkeypatch):
+    """A vantage point the navigator cannot reach (a closed-off corner) is followed at once by the next
+    one, and the scan is taken there, not where the last one stood (which sees the same colours again);
+    nothing within ``vantage_reach_m`` of it is asked for again. Before, the skip was forgotten at the
+    scan and the robot asked for the same corner before every scan of the run."""
+    asked, corner = [], []
+
+    def navigator(robot):
+        drive = straight_navigator(robot)
+
+        def navigate(target_xy, lo, hi):
+            if lo == 0.0:  # a vantage point: the agent asks for it with no minimum distance
+                asked.append(target_xy)
+                corner[:] = corner or [target_xy]  # the first one asked for is closed off
+            if corner and math.dist(target_xy, corner[0]) < 0.7:
+                return NavigationResult(False, "no path: UNREACHABLE", robot.odometry())
+            return drive(target_xy, lo, hi)
+
+        return navigate
+
+    out, _, _ = scripted_run(
+        monkeypatch, (2.5, 3.5), [((0.5, -2.0), 0.9)], max_time=400.0, navigate=navigator
+    )
+    reach = SearchAgentConfig().vantage_reach_m
+    assert len(asked) >= 3 and sum(math.dist(xy, corner[0]) < 0.7 for xy in asked) == 1, asked
+    i = next(k for k, e in enumerate(out.events) if e.kind == "skip")  # the corner; then, before any scan:
+    after = out.events[i + 1]
+    assert (
+        after.kind == "navigate" and "new vantage point" in after.detail and "arrived" in after.detail.lower()
+    )
+    assert all(math.dist(a, b) > reach for a, b in itertools.combinations(asked, 2))
+    assert out.global_searches >= 3
+
+
 def test_budget_ends_a_run_even_inside_a_navigator_that_never_returns(monkeypatch):
     def endless(robot):
         def navigate(target_xy, lo, hi):

@@ -170,6 +170,7 @@ class SearchAgent:
         shape = pmap.spec.shape
         self._excluded_temp = np.zeros(shape, bool)
         self._excluded = np.zeros(shape, bool)
+        self.vantage_failed = np.zeros(shape, bool)  # near a vantage point not reached: not chosen again
         self._nav_failures = np.zeros(shape, int)
         self._misses = np.zeros(shape, int)  # failed local searches that answered for each cell
         self._stuck = 0  # navigation requests in a row that found the robot's own cell blocked
@@ -311,6 +312,10 @@ class SearchAgent:
         self._nav_paths.append((target.xy, getattr(nav, "path_xy", None)))
         if not nav.arrived:
             self._excluded_temp[target.cell] = True
+            X, Y = self.pmap.spec.cell_centers()
+            near = np.hypot(X - target.xy[0], Y - target.xy[1]) <= self.config.vantage_reach_m + 1e-9
+            self.vantage_failed |= near
+            self.vantage_failed[target.cell] = True
             self._event("skip", target.cell, f"vantage point not reached ({nav.reason})")
         else:
             self._event(

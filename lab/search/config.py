@@ -40,6 +40,10 @@ class SearchAgentConfig:
         colours again and add the same evidence a second time (it is not an independent measurement):
         the robot first drives to a new vantage point, the map cell farthest from every earlier scan
         point and at least ``vantage_margin_m`` inside the map (within ``vantage_reach_m`` of it).
+        A vantage point the navigator did not reach is not chosen again, nor any cell within
+        ``vantage_reach_m`` of it (the navigator looked for a goal there and found none it could
+        reach), and the robot tries the next one at once, up to ``max_nav_failures`` drives in a row,
+        before it scans where it stands: scanning from the same spot again sees the same colours.
     vantage_margin_m, vantage_reach_m : float [m]
     revisit_turns_deg : tuple of float [deg]
         A cell searched again (the Bayes update may leave a cell with strong colour evidence the most

@@ -167,6 +167,7 @@ class SearchState(Protocol):
     global_searches: int  # global searches so far
     local_since_global: int  # local searches since the last global search
     scan_points: list[tuple[float, float]]  # where the global searches stood [m]
+    vantage_failed: np.ndarray  # (nx, ny) bool: cells near a vantage point the robot did not reach
     searched: np.ndarray  # (nx, ny) bool: cells the local searches covered (the frontier baseline's)
 
     @property
@@ -190,23 +191,29 @@ class MapPeakStrategy:
 
     def __init__(self, config: SearchAgentConfig):
         self.config = config
-        self.relocating = False  # driving to a new vantage point; the scan comes on the next turn
+        self.relocating: Target | None = None  # the vantage point driven to; the scan comes next turn
+        self.vantage_drives = 0  # vantage points tried in a row for the coming scan
 
     def next_target(self, state: SearchState, pose: Pose2D) -> Target | None:
         """The map's peak (rate: the best peak per second, :meth:`rate_cell`), after a global search
         when the map is flat; first a drive to a new vantage point when the robot stands near an
-        earlier scan point."""
+        earlier scan point, and another one when that one was not reached (up to ``max_nav_failures``
+        drives)."""
         spec = state.pmap.spec
         threshold = self.config.global_threshold / spec.n_cells
         selectable = ~state.excluded
         flat = not selectable.any() or float(state.pmap.P[selectable].max()) < threshold
         if state.global_searches == 0 or (flat and state.local_since_global > 0):
-            if self.near_scan_point(state, pose) and not self.relocating:
+            last = self.relocating
+            missed = last is not None and bool(state.vantage_failed[last.cell])
+            may_drive = last is None or (missed and self.vantage_drives < self.config.max_nav_failures)
+            if may_drive and self.near_scan_point(state, pose):
                 vantage = self.new_vantage_point(state)
                 if vantage is not None:
-                    self.relocating = True  # drive there first; the scan comes on the next turn
+                    self.relocating = vantage  # drive there first; the scan comes on the next turn
+                    self.vantage_drives += 1
                     return vantage
-            self.relocating = False
+            self.relocating, self.vantage_drives = None, 0
             state.global_search()
         cell = None
         if self.config.strategy is Strategy.RATE:
@@ -250,12 +257,14 @@ class MapPeakStrategy:
 
     def new_vantage_point(self, state: SearchState) -> Target | None:
         """The cell farthest from every earlier scan point, at least ``vantage_margin_m`` inside the map
-        (ties: nearest the robot); None when there is none left."""
+        and not near a vantage point the robot failed to reach (ties: nearest the robot); None when
+        there is none left."""
         spec = state.pmap.spec
         X, Y = spec.cell_centers()
         x0, x1, y0, y1 = spec.extent
         m = self.config.vantage_margin_m
-        ok = (X >= x0 + m) & (X <= x1 - m) & (Y >= y0 + m) & (Y <= y1 - m) & ~state.excluded
+        ok = (X >= x0 + m) & (X <= x1 - m) & (Y >= y0 + m) & (Y <= y1 - m)
+        ok &= ~state.excluded & ~state.vantage_failed
         if not ok.any():
             return None
         d = np.min([np.hypot(X - x, Y - y) for x, y in state.scan_points], axis=0)
