@@ -86,12 +86,39 @@ def test_bad_search_sweeps_are_refused_in_one_line_before_anything_starts(tmp_pa
         ),
         ([*SWEEP, "--scheduler", "tcp://127.0.0.1:9", "--out", str(out)], "cannot reach the Dask scheduler"),
         ([*SWEEP, "--job-timeout", "0", "--out", str(out)], "--job-timeout must be > 0 s"),
+        ([*SWEEP, "--sensing", "foggy", "--out", str(out)], "unknown sensing profile 'foggy'; profiles:"),
+        ([*SWEEP, "--sensing", str(tmp_path / "no.toml"), "--out", str(out)], "no.toml not found"),
+        (
+            [*SWEEP, "--sensing", str(bad_file), "--out", str(out)],
+            "sensing",
+        ),  # a sweep file, not a sensing one
     ]
     for argv, msg in cases:
         assert main(["eval", "search", *argv]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and msg in err[0], (argv, err)
         assert not out.exists()
+
+
+def test_a_sensing_file_is_a_sweeps_profile_named_by_its_stem(tmp_path, monkeypatch):
+    """``--sensing my_room.toml``: each job is ``lab search --sensing my_room.toml`` (the file read by
+    every worker from its absolute path), its key and report row named by the file's stem."""
+    room = tmp_path / "survey_only.toml"
+    room.write_text('[sensing]\nprofile = "ideal"\n[sensing.room]\nsurvey_m = 0.03\n')
+    monkeypatch.chdir(tmp_path)  # a relative path, as a user types it
+    out = tmp_path / "sweep"
+    argv = [*SWEEP, "--objects", "book", "--sensing", "survey_only.toml", "--out", str(out)]
+    assert main(["eval", "search", *argv]) == 0
+    (row,) = csv.DictReader((out / "results.csv").open())
+    assert row["key"] == "paper_free_survey_only_landmarks_book_floor_s3" and row["sensing"] == "survey_only"
+    job = json.loads((out / "jobs" / f"{row['key']}.json").read_text())
+    peer = tmp_path / "peer.json"
+    rng = np.random.default_rng([3, searchable_objects().index("book"), 0])
+    place = ",".join(map(repr, random_placement(load_scene("lab_room"), "book", rng, "floor")))
+    assert main(["search", "--object", "book", "--seed", "3", "--place=" + place, "--sensing", str(room),
+                 "--max-time", "0.5", "--json", str(peer)]) == 0  # fmt: skip
+    assert _strip(job) == _strip(json.loads(peer.read_text()))
+    assert "| paper | False | survey_only | landmarks | 0/1 |" in (out / "report.md").read_text()
 
 
 def _eval_search_script():

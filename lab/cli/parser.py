@@ -498,7 +498,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ei.add_argument("--planners", help="comma-separated: lut, mc, random, circle (default lut,random)")
     ei.add_argument("--movers", "--mover", dest="movers", help="comma-separated (default evasive)")
-    ei.add_argument("--sensing", help="comma-separated: realistic, ideal, room (default realistic)")
+    ei.add_argument(
+        "--sensing",
+        help="comma-separated: realistic, ideal, room, or sensing files (.toml with a [sensing] table, "
+        "as `lab search --sensing` reads) (default realistic)",
+    )
     ei.add_argument(
         "--localization",
         help="comma-separated: odometry, landmarks (default odometry, as `lab identify`)",
@@ -525,7 +529,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--strategies", help="comma-separated: paper, rate, lawnmower, frontier (default all four)"
     )
     es.add_argument("--obstacles", help="no, yes or both (default both): boxes on the straight path")
-    es.add_argument("--sensing", help="comma-separated: realistic, ideal, room (default realistic)")
+    es.add_argument(
+        "--sensing",
+        help="comma-separated: realistic, ideal, room, or sensing files (.toml with a [sensing] table, "
+        "as `lab search --sensing` reads) (default realistic)",
+    )
     es.add_argument("--localization", help="comma-separated: landmarks, odometry (default landmarks)")
     es.add_argument("--max-time", type=float, help="sim-time budget per trial [s] (default 600)")
     es.add_argument("--max-wall-time", type=float, help="the trial's own wall-clock cap [s] (default none)")

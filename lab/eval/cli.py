@@ -26,6 +26,11 @@ def _names(v) -> tuple[str, ...]:
     return tuple(v) if isinstance(v, list) else tuple(s.strip() for s in str(v).split(",") if s.strip())
 
 
+def _sensing(v) -> tuple[str, ...]:
+    """``--sensing``'s profiles; a sensing file as an absolute path, so every worker reads the same one."""
+    return tuple(str(Path(s).resolve()) if s.endswith(".toml") else s for s in _names(v))
+
+
 def _spec(args, fields) -> dict:
     """The sweep file's fields (``--sweep``) with the flags given on the command line over them."""
     from lab.eval.sweep import load_sweep_file
@@ -50,7 +55,7 @@ def identify_sweep(args):
         seeds=_ints(spec["seeds"], "seeds") if "seeds" in spec else tuple(fresh_report_seeds(IDENTIFY_SEEDS)),
         planners=_names(spec.get("planners", "lut,random")),
         movers=_names(spec.get("movers", "evasive")),
-        sensing=_names(spec.get("sensing", "realistic")),
+        sensing=_sensing(spec.get("sensing", "realistic")),
         localization=_names(spec.get("localization", "odometry")),
         max_actions=int(spec.get("max_actions", 8)),
         max_time=float(spec.get("max_time", 240.0)),
@@ -75,7 +80,7 @@ def search_sweep(args):
         seeds=_ints(spec["seeds"], "seeds") if "seeds" in spec else tuple(fresh_report_seeds(SEARCH_SEEDS)),
         strategies=_names(spec.get("strategies", ",".join(STRATEGIES))),
         obstacles=str(spec.get("obstacles", "both")),
-        sensing=_names(spec.get("sensing", "realistic")),
+        sensing=_sensing(spec.get("sensing", "realistic")),
         localization=_names(spec.get("localization", "landmarks")),
         max_time=float(spec.get("max_time", SEARCH_MAX_TIME_S)),
         max_wall_time=None if wall is None else float(wall),

@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 
 from lab.errors import ConfigError
 from lab.eval.executor import Job
-from lab.eval.sweep import SweepKind, confidently_wrong_pose
+from lab.eval.sweep import SweepKind, check_sensing, confidently_wrong_pose, sensing_label
 
 __all__ = [
     "SEARCH",
@@ -135,9 +135,7 @@ class SearchSweep:
             raise ConfigError(f"no strategies: give --strategies like {','.join(STRATEGIES)}")
         if self.obstacles not in OBSTACLES:
             raise ConfigError(f"obstacles must be one of {', '.join(OBSTACLES)}, got {self.obstacles!r}")
-        for s in self.sensing:
-            if s not in ("realistic", "ideal", "room"):
-                raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal, room")
+        check_sensing(self.sensing)
         for m in self.localization:
             if m not in LOCALIZATIONS:
                 raise ConfigError(f"unknown localization {m!r}; allowed: {', '.join(LOCALIZATIONS)}")
@@ -191,7 +189,8 @@ class SearchSweep:
                                         placement_key=[seed, objects.index(name), SURFACES.index(surface)],
                                         error_scale=k,
                                     )
-                                    key = search_key(strategy, ob, sensing, name, surface, seed, loc)
+                                    label = sensing_label(sensing)
+                                    key = search_key(strategy, ob, label, name, surface, seed, loc)
                                     key += scale_suffix(k)
                                     out.extend(self._moving_jobs(key, kw))
         return out

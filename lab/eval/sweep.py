@@ -222,9 +222,7 @@ class IdentifySweep:
         for m in self.movers:
             if m not in ("static", "scripted", "random", "evasive"):
                 raise ConfigError(f"unknown mover {m!r}; movers: static, scripted, random, evasive")
-        for s in self.sensing:
-            if s not in ("realistic", "ideal", "room"):
-                raise ConfigError(f"unknown sensing profile {s!r}; profiles: realistic, ideal, room")
+        check_sensing(self.sensing)
         if not self.localization:
             raise ConfigError("no localization: give --localization like odometry,landmarks")
         for loc in self.localization:
@@ -262,9 +260,34 @@ class IdentifySweep:
                         keep_direction=self.keep_direction,
                         error_scale=k,
                     )
-                    key = identify_key(planner, mover, sensing, m, seed, loc) + scale_suffix(k)
+                    key = identify_key(planner, mover, sensing_label(sensing), m, seed, loc) + scale_suffix(k)
                     out.append(Job(key, identify_job, kw))
         return out
+
+
+def check_sensing(names: tuple[str, ...]) -> None:
+    """Each of a sweep's sensing profiles is a profile's name or a sensing file (a ``.toml`` with a
+    ``[sensing]`` table, as ``lab identify --sensing my_room.toml`` reads), read here so that a missing
+    or bad file stops the sweep in one line before any job runs."""
+    from lab.sim.sensing import PROFILES, sensing_profile
+
+    if not names:
+        raise ConfigError(f"no sensing profile: give --sensing like {','.join(PROFILES)} or a .toml file")
+    for s in names:
+        if not s.endswith(".toml"):
+            if s not in PROFILES:
+                raise ConfigError(
+                    f"unknown sensing profile {s!r}; profiles: {', '.join(PROFILES)}, or a .toml file"
+                )
+        elif not Path(s).is_file():
+            raise ConfigError(f"sensing file {s} not found (a profile's name or a .toml file is allowed)")
+        else:
+            sensing_profile(Path(s))
+
+
+def sensing_label(sensing: str) -> str:
+    """A sensing profile's name in a job's key: the profile's name, or a sensing file's stem."""
+    return Path(sensing).stem if sensing.endswith(".toml") else sensing
 
 
 def identify_key(
@@ -335,6 +358,8 @@ def with_pose_columns(result: dict) -> dict:
 
 def _row(kind: SweepKind, key: str, job_kw: dict, res: dict | None, error: str | None, wall) -> dict:
     row = {k: job_kw.get(k) for k in kind.params}
+    if isinstance(row.get("sensing"), str):
+        row["sensing"] = sensing_label(row["sensing"])  # a sensing file by its stem, as in the key
     row["key"] = key
     if res is not None:
         res = res if kind.derive is None else {**res, **kind.derive(res)}
