@@ -7,12 +7,10 @@ is farther. Seeded, realistic sensing."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
+from moving_scenes import facing_on_the_floor
 
-from lab.geometry import Pose2D, se3_inv, transform_points
-from lab.runs.placement import random_placement
+from lab.geometry import se3_inv, transform_points
 from lab.runs.robots import make_robot
 from lab.runs.search import map_spec
 from lab.scene import load_scene
@@ -46,12 +44,7 @@ def first_look(robot, db, aim_W, gcfg):
 
 
 def test_a_colour_detection_of_a_driving_book_is_followed_by_the_head():
-    scene = load_scene("lab_room")
-    place = random_placement(scene, OBJECT, np.random.default_rng(SEED), surface="floor")
-    scene = scene.with_pose(OBJECT, place)
-    ox, oy, oz = scene.body(OBJECT).centre
-    a = math.atan2(-oy, -ox)  # the robot on the side towards the room's centre, facing the book
-    start = Pose2D(ox + RANGE_M * math.cos(a), oy + RANGE_M * math.sin(a), a + math.pi)
+    scene, (ox, oy, oz), start = facing_on_the_floor(OBJECT, SEED, RANGE_M)  # the robot facing the book
     db = search_database(OBJECT)
     cfg = ColourTrackConfig()
     with SimWorld(scene, RenderSettings(supersample=2)) as w:

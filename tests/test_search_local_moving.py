@@ -8,17 +8,14 @@ seeded, realistic sensing."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
 import pytest
+from moving_scenes import facing_on_the_floor
 
-from lab.geometry import Pose2D
 from lab.runs.moving import MOVING_POSITION_STD_M, MOVING_REFINE_UPSAMPLE, MovingOptions, agent_config
-from lab.runs.placement import random_placement
 from lab.runs.robots import make_robot
-from lab.scene import load_scene
 from lab.search.config import SearchAgentConfig
 from lab.search.local_search import local_search, make_matcher
 from lab.sim import RenderSettings, SimWorld
@@ -31,12 +28,7 @@ SPEED = 0.1
 def search_moving(config, obj="book", seed=7, range_m=1.0):
     """One local search ``range_m`` from ``obj`` on the floor, 6 s after it started to drive: the
     result, the true pose at its end and how far the object moved while the robot looked."""
-    scene = load_scene("lab_room")
-    place = random_placement(scene, obj, np.random.default_rng(seed), surface="floor")
-    scene = scene.with_pose(obj, place)
-    ox, oy = scene.body(obj).centre[:2]
-    a = math.atan2(-oy, -ox)  # the robot on the side towards the room's centre, facing the object
-    start = Pose2D(ox + range_m * math.cos(a), oy + range_m * math.sin(a), a + math.pi)
+    scene, (ox, oy, _), start = facing_on_the_floor(obj, seed, range_m)
     db = search_database(obj)
     with SimWorld(scene, RenderSettings(supersample=2)) as w:
         with make_robot(world=w, start=start, seed=seed, sensing="realistic") as run:
