@@ -123,6 +123,14 @@ class LocalizerConfig:
     relocalize_sigma_m, relocalize_sigma_rad : float [m], [rad]
         Active re-localization: the robot looks for a landmark when the position standard deviation
         (the larger axis of the covariance ellipse) or the heading's exceeds these.
+    drive_sigma_m, drive_sigma_rad : float [m], [rad]
+        A drive stops to re-localize when the position's or the heading's standard deviation passes
+        these (:meth:`LocalizedRobot.drive_guard`, the search's
+        :class:`~lab.search.report_policy.RelocalizingNavigate`): every frame the navigator maps is
+        placed with the pose, and frames from a pose this uncertain leave slanted copies of walls in its
+        costmap. Looser than ``relocalize_sigma_*`` (which every drive starts within when a landmark is
+        in view): an ordinary drive of a few metres ends at 5-20 cm / 3-7 deg without stopping. How
+        they were chosen: docs/tuning/room-errors.md.
     report_sigma_m, report_sigma_rad : float [m], [rad]
         The same thresholds before a run reports a pose in the room (a found object's): tighter, since
         the object's world pose inherits the robot's error whole. How they were chosen:
@@ -192,6 +200,8 @@ class LocalizerConfig:
     min_facing: float = 0.35
     relocalize_sigma_m: float = 0.05
     relocalize_sigma_rad: float = math.radians(0.5)
+    drive_sigma_m: float = 0.30
+    drive_sigma_rad: float = math.radians(10.0)
     report_sigma_m: float = 0.015
     report_sigma_rad: float = math.radians(0.5)
     report_max_views: int = 12
@@ -252,9 +262,10 @@ class LocalizerConfig:
                 "LocalizerConfig.odometry_calibration must be True or False, "
                 f"got {self.odometry_calibration!r}"
             )
-        for k in ("relocalize_sigma_m", "report_sigma_m"):
+        for k in ("relocalize_sigma_m", "report_sigma_m", "drive_sigma_m", "drive_sigma_rad"):
             if not getattr(self, k) > 0:
-                raise ConfigError(f"LocalizerConfig.{k} must be > 0 m, got {getattr(self, k)}")
+                unit = "rad" if k.endswith("_rad") else "m"
+                raise ConfigError(f"LocalizerConfig.{k} must be > 0 {unit}, got {getattr(self, k)}")
 
     def motion_noise(self, u) -> np.ndarray:
         r"""``M(u)``: covariance (3, 3) of an odometry increment ``u``, in its own frame.

@@ -236,6 +236,21 @@ class LocalizedRobot(RobotWrapper):
         s_pos = est.sigma_xy_m if at_W is None else est.point_sigma_m(at_W)
         return s_pos <= sm and est.sigma_theta_rad <= sr
 
+    def drive_guard(self) -> str | None:
+        """Why the pose is too uncertain to drive and map on (its position or heading standard deviation
+        past ``config.drive_sigma_m`` / ``drive_sigma_rad``), or None: the navigator's
+        :attr:`~lab.navigation.navigator.Navigator.pose_guard` during a search's drive. None on odometry
+        alone (no landmark would make it better)."""
+        if self.mode is LocalizationMode.ODOMETRY:
+            return None
+        est, c = self.pose_estimate(), self.config
+        if est.sigma_xy_m > c.drive_sigma_m or est.sigma_theta_rad > c.drive_sigma_rad:
+            return (
+                f"pose deviation {100 * est.sigma_xy_m:.0f} cm / {math.degrees(est.sigma_theta_rad):.1f} deg "
+                f"past the drive's {100 * c.drive_sigma_m:.0f} cm / {math.degrees(c.drive_sigma_rad):.1f} deg"
+            )
+        return None
+
     def landmark_views(self, tilt_max: float = math.radians(25.0)) -> list[tuple[float, float, str]]:
         """The head angles ``(pan, tilt, name)`` that point at each landmark the estimate says is in range,
         facing and within the pan range, best first (facing, wide, near: the most inliers)."""

@@ -7,7 +7,9 @@
     plan:      A* on the inflated costmap to the destination (none: NO_PATH at once)
     look:      the head turns along the path ahead, one frame, replan on what it saw
     drive:     drive_to with pure pursuit; at every control step the head follows the path ahead,
-               every frame_period a frame is integrated and the Replanner checks the path ahead:
+               every frame_period the pose guard (if any) is asked whether the pose is still good
+               enough to map and drive on (no: POSE_UNCERTAIN, before the frame is integrated),
+               then a frame is integrated and the Replanner checks the path ahead:
                a new path is handed to the follower; no path at all is confirmed only when the
                blockage lies within confirm_range (far cells come from noisy far views)
     face:      for go_near, a last turn towards the target from where the robot stopped
@@ -52,6 +54,7 @@ class NavOutcome(Enum):
     TIMEOUT = "timed out"
     BUMPED = "the base bumped into something (its bump count rose)"
     SAFETY_STOP = "the robot stopped itself (bump, cliff or wheel drop)"
+    POSE_UNCERTAIN = "the pose guard stopped the drive: the pose is too uncertain to map on (see the reason)"
 
 
 @dataclass(frozen=True)
@@ -64,7 +67,7 @@ class NavResult:
     reason : str or None
         For NO_PATH the :class:`~lab.navigation.astar.PathStatus` name (``"GOAL_OUTSIDE_MAP"``,
         ``"GOAL_IN_OBSTACLE"``, ``"UNREACHABLE"``, ``"START_IN_OBSTACLE"``, ...); a message for
-        SAFETY_STOP; None otherwise.
+        SAFETY_STOP and POSE_UNCERTAIN (the guard's); None otherwise.
     pose : Pose2D
         Odometry pose at the end.
     goal_xy : (float, float) or None [m]
@@ -317,8 +320,15 @@ class DriveLoop:
         return self._check_path(pose)
 
     def _check_path(self, pose: Pose2D) -> StepUpdate | None:
-        """Integrate a frame and replan: a new path for the follower, or an abort when there is none
-        and the blockage is within ``confirm_range``; None keeps to the path."""
+        """Ask the pose guard, integrate a frame and replan: a new path for the follower, or an abort when
+        the guard says the pose is too uncertain (before the frame is integrated: it would be placed
+        with that pose), or when there is no path and the blockage is within ``confirm_range``; None
+        keeps to the path."""
+        guard = self.nav.pose_guard
+        why = guard() if guard is not None else None
+        if why is not None:
+            self.outcome, self.reason = NavOutcome.POSE_UNCERTAIN, why
+            return StepUpdate(abort=True)
         self._observe()
         if self.follower.status in _AT_GOAL:
             return None  # turning in place at the goal: nothing ahead to check

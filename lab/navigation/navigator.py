@@ -65,7 +65,7 @@ StereoSGBM with 64 disparities; ``benchmarks/bench_navigation.py`` measures the 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -276,6 +276,14 @@ class Navigator:
         The last accepted ground plane.
     radius : float [m]
         Obstacles are grown by this for planning.
+    pose_guard : callable () -> str or None, or None
+        Asked before every frame of a drive is integrated (:class:`~lab.navigation.drive_loop.DriveLoop`):
+        a reason (a message) when the robot's pose has become too uncertain to map and drive on, which
+        ends the drive with POSE_UNCERTAIN; None drives on. The costmap places every frame with the
+        pose, so frames from a drifting pose leave slanted copies of walls behind that no later view
+        clears (after 88 s without a landmark, a search stood in its own phantom wall:
+        docs/tuning/room-errors.md). Whoever knows the pose's covariance sets it (the search's
+        :class:`~lab.search.report_policy.RelocalizingNavigate`); None (default): no guard.
 
     Examples
     --------
@@ -317,6 +325,7 @@ class Navigator:
         self._rng = np.random.default_rng(cfg.seed)
         self._grid: CostGrid | None = None
         self._plane_rejects = 0
+        self.pose_guard: Callable[[], str | None] | None = None
 
     @property
     def spec(self) -> GridSpec:

@@ -71,4 +71,7 @@ class NavigatorAdapter:
             raise SafetyStop(r.reason or r.outcome.value)
         arrived = r.outcome is NavOutcome.ARRIVED
         path = first.points_xy if first.found else None
-        return NavigationResult(arrived, r.reason or r.outcome.name, r.pose, path)
+        reason = r.outcome.name if r.reason is None else r.reason
+        if r.outcome is NavOutcome.POSE_UNCERTAIN:
+            reason = f"{r.outcome.name}: {r.reason}"  # what RelocalizingNavigate re-localizes on
+        return NavigationResult(arrived, reason, r.pose, path)

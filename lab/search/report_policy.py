@@ -6,7 +6,8 @@ landmarks at two moments, and :class:`ReportPolicy` decides both:
 * **before every drive** (:meth:`ReportPolicy.relocalize_before_drive`): when the pose is uncertain the
   robot looks for a landmark first, so the drive starts from a pose it can trust. The agent gets this as
   its ``navigate`` (:meth:`ReportPolicy.relocalizing`, a :class:`RelocalizingNavigate` round the search's
-  own navigate);
+  own navigate), which also stops a drive whose pose has drifted too far to map on (the navigator's
+  pose guard, :meth:`LocalizedRobot.drive_guard`), re-localizes and drives on;
 * **before a find is reported** (:meth:`ReportPolicy.report`): the object's world pose is only as good
   as the robot's pose when it was found, so the robot re-localizes to the report's tighter thresholds
   at the object's point, and when no landmark is seen well from there it makes a detour to one
@@ -31,11 +32,15 @@ import numpy as np
 from lab.errors import SafetyStop
 from lab.geometry import Pose2D, se3_inv
 from lab.localization import LocalizationMode, PlanarPoseEstimate
+from lab.navigation.drive_loop import NavOutcome
 from lab.search.budget import SearchBudgetExceeded
 from lab.search.records import AgentResult, NavigationResult
 from lab.search.world_pose import world_pose_std
 
-__all__ = ["RelocalizingNavigate", "ReportPolicy", "stated_pose_std", "unlimited"]
+__all__ = ["POSE_UNCERTAIN", "RelocalizingNavigate", "ReportPolicy", "stated_pose_std", "unlimited"]
+
+#: The start of a drive's reason when the navigator's pose guard stopped it (its NavOutcome's name).
+POSE_UNCERTAIN = NavOutcome.POSE_UNCERTAIN.name
 
 
 def unlimited() -> None:
@@ -47,16 +52,29 @@ class RelocalizingNavigate:
     (:meth:`ReportPolicy.relocalize_before_drive`): the same call, ``navigate(target_xy, min_distance,
     max_distance) -> NavigationResult``.
 
+    During the drive the navigator's pose guard (:attr:`Navigator.pose_guard
+    <lab.navigation.navigator.Navigator.pose_guard>`) is the robot's :meth:`LocalizedRobot.drive_guard`:
+    when the pose's deviation passes ``LocalizerConfig.drive_sigma_*`` the drive stops before mapping
+    another frame, the robot re-localizes where it stands and drives on to the same target, at most
+    ``max_drive_stops`` times. A stop the re-localization cannot help (no landmark in view brought the
+    pose back within those thresholds) drives on unguarded: standing still would not find one either.
+    The agent sees one drive and its result.
+
     Attributes
     ----------
     navigate : callable
         The navigate it drives with.
     policy : ReportPolicy
+    max_drive_stops : int
+        Re-localizations within one drive at most (then the drive goes on unguarded).
     """
 
-    def __init__(self, navigate: Callable[..., NavigationResult], policy: ReportPolicy):
+    def __init__(
+        self, navigate: Callable[..., NavigationResult], policy: ReportPolicy, max_drive_stops: int = 3
+    ):
         self.navigate = navigate
         self.policy = policy
+        self.max_drive_stops = int(max_drive_stops)
 
     @property
     def navigator(self):
@@ -65,8 +83,22 @@ class RelocalizingNavigate:
         return self.policy.navigator
 
     def __call__(self, *args, **kwargs) -> NavigationResult:
-        self.policy.relocalize_before_drive()
-        return self.navigate(*args, **kwargs)
+        policy, nav = self.policy, self.policy.navigator  # a guard implies a navigator
+        stops = 0
+        while True:
+            policy.relocalize_before_drive()
+            guard = policy.drive_guard() if stops < self.max_drive_stops else None
+            if guard is None:
+                return self.navigate(*args, **kwargs)
+            nav.pose_guard = guard
+            try:
+                r = self.navigate(*args, **kwargs)
+            finally:
+                nav.pose_guard = None
+            if not r.reason.startswith(POSE_UNCERTAIN):
+                return r
+            stops += 1
+            policy.robot.log(f"localization: drive stopped to re-localize ({r.reason})")
 
 
 class ReportPolicy:
@@ -105,6 +137,17 @@ class ReportPolicy:
     def relocalizing(self) -> RelocalizingNavigate:
         """The agent's ``navigate``: this policy's ``navigate`` with a re-localization before every drive."""
         return RelocalizingNavigate(self.navigate, self)
+
+    def drive_guard(self) -> Callable[[], str | None] | None:
+        """The navigator's pose guard for the next drive (:meth:`LocalizedRobot.drive_guard`), or None:
+        no navigator, not localized against landmarks, or the pose already past the drive's thresholds
+        (no landmark in view made it better, so stopping again would not either)."""
+        robot = self.robot
+        if self.navigator is None or getattr(robot, "mode", None) is not LocalizationMode.LANDMARKS:
+            return None  # (a scripted robot in a test has no mode)
+        if robot.drive_guard() is not None:
+            return None
+        return robot.drive_guard
 
     def relocalize_before_drive(self) -> None:
         """Active re-localization before a drive: when the pose is uncertain, look for a landmark first.
