@@ -269,6 +269,13 @@ angles, as a real one would; only the simulator knows what went wrong. The camer
 * **rectification residual**: the rows of the two images are off by up to 0.3 px, so a point's match
   sits slightly above or below its row (vertical disparity).
 
+`realistic` also has the real room's errors (`lab/sim/room_errors.py`): the localizer's map of the posters
+is a survey, 1-2 cm and about a degree off; the operator stands the robot 5 cm and 3 degrees off its mark;
+the camera's bracket and the pan-tilt's mount are half a degree off square; a frame is 50 ms old when it
+arrives (so the code below lets the head stand still before it captures); a bump makes the wheels slip;
+and every error the robot is told the size of is really 1.5 times that. (`sensors` is `realistic`'s
+sensors in an exact room.)
+
 Same pose and same seed under both profiles:""",
     ),
     (
@@ -282,6 +289,7 @@ def look(sensing, seed=0):
         r.enable()
         r.command_pan_tilt(0.0, math.radians(-12))
         r.wait_pan_tilt()
+        r.step(0.1)            # realistic: a frame is up to 0.1 s old when it arrives; let the head stand that long
         a, b = r.capture_stereo(), r.capture_stereo()
         G_WC = w.truth.G_WC()                                   # ground truth: for checking only
         seg = w.truth.segmentation(G_WC, a.camera) == w.body_id("target")
@@ -435,8 +443,8 @@ for a_, (name, p) in zip(ax, drives.items(), strict=True):
 print({k: f"{v:.3f} m" for k, v in end_err.items()})
 
 distance = 4 * LAPS * SIDE
-for name, p in drives.items():                      # the odometry believes it is back at the start
-    assert np.linalg.norm(p["odometry"][-1] - (-1.25, -1.25)) < 0.05, name
+for name, p in drives.items():                      # the odometry believes it is back where it started
+    assert np.linalg.norm(p["odometry"][-1] - p["odometry"][0]) < 0.05, name
 assert end_err["ideal"] < 0.10                      # ideal: a few centimetres after 30 m
 assert end_err["realistic"] > 5 * end_err["ideal"]  # realistic: much larger ...
 assert 0.005 < end_err["realistic"] / distance < 0.10   # ... and of the order of its documented 3 % (one episode)

@@ -208,8 +208,8 @@ check_kalman_update(my_kalman_update)
         r"""## One update in full, on rendered frames
 
 Now the same equations on real features. The robot stands 1.1 m from box $M_0$, whose unique face is
-turned 23 degrees away, under the **`realistic`** sensing profile (notebook 00): a new noise draw in every
-capture, and the calibration errors of a real camera. We record an episode once (the stereo features
+turned 23 degrees away, under the **`sensors`** sensing profile (`realistic`'s sensors in an exact room,
+notebook 00): a new noise draw in every capture, and the calibration errors of a real camera. We record an episode once (the stereo features
 matched to the box's database, and the simulator's true pose for checking), then run filters on the
 recording as often as we like.
 
@@ -229,7 +229,7 @@ from lab.geometry import euler_zyx_to_R
 N_FRAMES = 8 if FAST else 20
 with SimWorld("box_database") as w:
     box = w.add_carrier(model, Pose2D(0.0, 0.0, 0.0), box_yaw=math.pi - 0.4)
-    rob = SimRobot(w, start=Pose2D(-1.1, 0.1, 0.0), seed=3, sensing="realistic"); rob.enable()
+    rob = SimRobot(w, start=Pose2D(-1.1, 0.1, 0.0), seed=3, sensing="sensors"); rob.enable()
     rob.command_pan_tilt(-0.09, math.radians(-11)); rob.wait_pan_tilt()
     recording = []                                    # per frame: G_RC and the matched (d_C, b_O, Sigma_d)
     for _ in range(N_FRAMES):

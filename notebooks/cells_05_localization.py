@@ -383,8 +383,10 @@ check_landmark_measurement(my_landmark_measurement)
         r"""## A drive on odometry alone
 
 The robot stands at the room's start, $(0, -3)$ m, facing north, and drives 4 m straight towards the
-north poster under the **`realistic`** sensing profile, whose odometry has a systematic error (a scale
-error of the distance and a drift of the heading) besides its noise. At every control step the filter
+north poster under the **`sensors`** sensing profile (`realistic`'s sensors in an exact room), whose
+odometry has a systematic error (a scale error of the distance and a drift of the heading) besides its
+noise. (`realistic` adds the real room's errors: a surveyed map, the operator's start, the mounts' errors,
+the camera's latency; the drives at the end of this notebook run under it.) At every control step the filter
 predicts with the odometry's increment. The simulator's truth is read only to check.""",
     ),
     (
@@ -393,7 +395,7 @@ predicts with the odometry's increment. The simulator's truth is read only to ch
 from lab.sim import SimRobot, SimWorld
 
 world = SimWorld(scene)
-robot = SimRobot(world, seed=3, sensing="realistic")
+robot = SimRobot(world, seed=3, sensing="sensors")
 robot.enable()
 loc = Localizer(robot.odometry().as_array(), config=cfg)    # the start is known: 1 cm, 0.5 deg
 odom = robot.odometry()
@@ -447,6 +449,7 @@ from lab.vision import Matcher, stereo_features
 r_lm, bearing = landmarks.bearing_in_robot(lm, loc.x)
 robot.command_pan_tilt(wrap_angle(bearing), math.atan2(lm.centre_W[2] - robot.camera.mount_R[2], r_lm))
 robot.wait_pan_tilt()
+robot.step(0.1)   # a camera's frame is 30-100 ms old when it arrives: one taken now would show the head still turning
 frame = robot.capture_stereo()
 f3d = stereo_features(frame.left, frame.right, frame.camera)
 matches = Matcher(lm.database, method="brute").match(f3d)

@@ -120,9 +120,9 @@ def test_a_job_runs_with_the_profiles_errors_times_its_scale(monkeypatch):
 
     seen = {}
     monkeypatch.setattr(lab.runs.identify, "run_identify", lambda **kw: seen.update(kw) or {})
-    identify_job(error_scale=2.0, true_model=1, seed=0, sensing="room")
+    identify_job(error_scale=2.0, true_model=1, seed=0, sensing="realistic")
     p = seen["sensing"]
-    assert p == PROFILES["room"].scaled(2.0) and p.name == "room x2"
+    assert p == PROFILES["realistic"].scaled(2.0) and p.name == "realistic x2"
     assert p.room.survey_m == pytest.approx(2 * 0.015) and p.camera.noise_grey_at_mid == pytest.approx(4.0)
     identify_job(true_model=1, seed=0, sensing="ideal")
     assert seen["sensing"] is PROFILES["ideal"]
@@ -165,14 +165,14 @@ def test_the_report_tables_success_against_scale_and_draws_the_figure(tmp_path):
     assert "| lut | evasive | realistic | odometry | 3.0 | 2/8 |" in text  # the conditions split by scale too
     assert (tmp_path / "robustness.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # one curve per profile: another profile's rows are counted apart
-    rows += [dict(r, sensing="room", key="s" + r["key"]) for r in _rows(1.0, 3, 3, **cond)]
+    rows += [dict(r, sensing="sensors", key="s" + r["key"]) for r in _rows(1.0, 3, 3, **cond)]
     assert [(p.sensing, p.scale, p.successes) for p in robustness_points(rows)][:2] == [
         ("realistic", 1.0, 9),
         ("realistic", 2.0, 7),
     ]
-    assert ("room", 1.0, 3, 3) in [(p.sensing, p.scale, p.successes, p.runs) for p in robustness_points(rows)]
+    assert ("sensors", 1.0, 3, 3) in [(p.sensing, p.scale, p.successes, p.runs) for p in robustness_points(rows)]
     write_report(tmp_path, rows, IDENTIFY)
-    assert "| room | 1 | 3/3 | 100.0 % |" in (tmp_path / "report.md").read_text()
+    assert "| sensors | 1 | 3/3 | 100.0 % |" in (tmp_path / "report.md").read_text()
 
 
 def test_one_scale_writes_the_report_as_before(tmp_path):

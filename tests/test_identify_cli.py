@@ -134,7 +134,7 @@ def test_an_unknown_sensing_profile_is_one_clear_line(tmp_path):
         [sys.executable, "-m", "lab", "identify", "--sensing", "perfect"], capture_output=True, text=True
     )
     assert r.returncode == 2 and "argument --sensing: unknown sensing profile 'perfect'" in r.stderr
-    assert "allowed: realistic, ideal, room, or a .toml file" in r.stderr
+    assert "allowed: realistic, ideal, sensors, room (realistic's former name), or a .toml file" in r.stderr
     assert len(r.stderr.strip().splitlines()) <= 2  # usage + error
     bad_file = tmp_path / "room.toml"
     bad_file.write_text('[sensing]\nprofile = "realistic"\n[sensing.odometry]\nspin_slip = -0.1\n')

@@ -177,12 +177,12 @@ def test_a_missing_file_and_an_implausible_angle_are_refused(tmp_path):
 
 def test_simulator_calibration_recovers_half_degree_mounts(tmp_path):
     """The simulated robot's camera rendered through mounts drawn at 0.5 deg per axis (head and camera,
-    the realistic profile's pan-tilt zeros and camera errors); the routine sees the lab room's posters
+    realistic's pan-tilt zeros and camera errors in an exact room); the routine sees the lab room's posters
     from its centre in real rendered images. Four angles within 0.1 deg; the camera's yaw, the weakest
     (seen only as a roll that grows with the tilt), within 3 of its stated sigmas, which are under 0.1."""
     from lab.runs.calibrate import calibrate
 
-    sensing = {"profile": "realistic", "room": {"camera_mount_deg": 0.5, "head_mount_deg": 0.5}}
+    sensing = {"profile": "sensors", "room": {"camera_mount_deg": 0.5, "head_mount_deg": 0.5}}
     out = tmp_path / "mounts.toml"
     run = calibrate(None, out=out, sensing=sensing, seed=2, start=(0.0, 0.0, 90.0), log=print)
     r = run.result
@@ -213,7 +213,7 @@ def test_rehearsal_runs_the_calibration_end_to_end(tmp_path):
     cfg = tmp_path / "rehearsal.toml"
     cfg.write_text(text)
     pattern = {"pan": (-120, -80, -40, 0, 40, 80, 120), "tilt": (-8.0, 12.0, 30.0)}
-    run = calibrate(cfg, sensing="realistic", start=(0.0, 0.0, 90.0), pattern_deg=pattern, log=print)
+    run = calibrate(cfg, sensing="sensors", start=(0.0, 0.0, 90.0), pattern_deg=pattern, log=print)
     assert run.path == tmp_path / "mounts.toml" and run.path.is_file()
     truth = np.array([run.truth[k] for k in ESTIMATED])
     assert np.degrees(truth) == pytest.approx([0.4, -0.5, -0.4, -0.5, 0.5])

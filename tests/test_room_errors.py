@@ -20,7 +20,7 @@ from lab.sim.room_errors import TOLD_SIGMAS, rotation_rpy, survey_error
 from lab.sim.sensing import PROFILES
 from lab.training.landmarks import landmark_map_from_scene
 
-REALISTIC = PROFILES["room"]  # realistic sensors in a real room
+REALISTIC = PROFILES["realistic"]
 N = 4000  # draws per statistic: the sample std is within 3.5 % of sigma (3 standard errors: 3/sqrt(2N))
 TOL = 0.035
 LIGHT = (0.3, -0.4, 1.0)
@@ -41,7 +41,7 @@ def _angle_deg(R) -> float:
     return math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(R) - 1.0) / 2.0))))
 
 
-def test_the_room_profile_has_the_rooms_errors_with_their_stated_defaults():
+def test_realistic_has_the_rooms_errors_with_their_stated_defaults():
     r = REALISTIC.room
     assert (r.survey_m, r.survey_deg, r.start_m, r.start_deg) == (0.015, 0.7, 0.05, 3.0)
     assert (r.camera_mount_deg, r.head_mount_deg, r.latency_s) == (0.5, 0.5, 0.05)
@@ -91,7 +91,7 @@ def test_the_start_offsets_have_the_operators_placement_sigma():
 def test_the_odometry_starts_where_the_operator_believes_the_robot_stands():
     start = Pose2D(1.0, -2.0, 0.4)
     with SimWorld("arena") as w:
-        r = SimRobot(w, start=start, seed=11, sensing="room")
+        r = SimRobot(w, start=start, seed=11, sensing="realistic")
         dx, dy, dth = w.truth.sensing.room.start_offset
         assert w.truth.robot_pose() == start  # the robot stands on its mark
         G = relative_pose2d(start, r.odometry())  # the odometry's start seen from the true one
@@ -219,7 +219,7 @@ def test_a_bump_moves_the_true_pose_and_the_odometry_does_not_see_it():
 def test_the_error_scale_scales_every_error_of_every_section():
     k = 2.5
     s = REALISTIC.scaled(k)
-    assert s.name == "room x2.5" and s.mismatch == REALISTIC.mismatch
+    assert s.name == "realistic x2.5" and s.mismatch == REALISTIC.mismatch
     for section in ("camera", "odometry", "pan_tilt", "room"):
         a, b = getattr(REALISTIC, section), getattr(s, section)
         for f in dataclasses.fields(a):
@@ -232,16 +232,16 @@ def test_the_error_scale_scales_every_error_of_every_section():
 
 
 def test_the_room_section_and_the_mismatch_parse_from_a_sensing_table():
-    p = sensing_profile({"profile": "room", "room": {"survey_m": 0.02}, "mismatch": 1.2})
-    assert p.name == "room+custom" and p.room.survey_m == 0.02 and p.mismatch == 1.2
+    p = sensing_profile({"profile": "realistic", "room": {"survey_m": 0.02}, "mismatch": 1.2})
+    assert p.name == "realistic+custom" and p.room.survey_m == 0.02 and p.mismatch == 1.2
     assert p.room.start_m == REALISTIC.room.start_m
     with pytest.raises(
         ConfigError, match=r"sensing.room: unknown key\(s\) \['survey'\]; allowed: \['survey_m'"
     ):
-        sensing_profile({"profile": "room", "room": {"survey": 0.02}})
+        sensing_profile({"profile": "realistic", "room": {"survey": 0.02}})
     with pytest.raises(ConfigError, match="sensing.room.latency_s must be a finite number >= 0"):
         sensing_profile({"room": {"latency_s": -0.1}})
     with pytest.raises(ConfigError, match=r"sensing.room.latency_s must be within \[0, 1\] s"):
         sensing_profile({"room": {"latency_s": 3.0}})
     with pytest.raises(ConfigError, match="sensing.mismatch must be a finite number >= 1"):
-        sensing_profile({"profile": "room", "mismatch": 0.5})
+        sensing_profile({"profile": "realistic", "mismatch": 0.5})

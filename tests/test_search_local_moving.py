@@ -4,7 +4,7 @@ found pose, scored against the truth at the moment of the find, is within the su
 stationary object's 1 cm deviation bound refuses such a track (what made the moving-object search
 fail to confirm); a cereal box that drove out of local-search range is confirmed only with the
 refinement on enlarged regions (``refine_upsample``). The robot stands at the truth-placed range,
-seeded, realistic sensing."""
+seeded, realistic's sensors in an exact room (``sensors``)."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ def search_moving(config, obj="book", seed=7, range_m=1.0):
     scene, (ox, oy, _), start = facing_on_the_floor(obj, seed, range_m)
     db = search_database(obj)
     with SimWorld(scene, RenderSettings(supersample=2)) as w:
-        with make_robot(world=w, start=start, seed=seed, sensing="realistic") as run:
+        with make_robot(world=w, start=start, seed=seed, sensing="sensors") as run:
             robot = run.robot
             robot.enable()
             cfg = MovingObjectConfig(MovingKind.RANDOM, SPEED, 5.0)

@@ -16,11 +16,11 @@ HELP_VIEW3D = (
 
 def _sensing(value: str) -> str:
     """``--sensing``'s value: a profile name or a ``.toml`` file (read and checked by the command)."""
-    if value in ("realistic", "ideal", "room") or value.endswith(".toml"):
+    if value in ("realistic", "ideal", "sensors", "room") or value.endswith(".toml"):
         return value
     raise argparse.ArgumentTypeError(
-        f"unknown sensing profile {value!r}; allowed: realistic, ideal, room, "
-        "or a .toml file with a [sensing] table"
+        f"unknown sensing profile {value!r}; allowed: realistic, ideal, sensors, room (realistic's "
+        "former name), or a .toml file with a [sensing] table"
     )
 
 
@@ -30,11 +30,12 @@ def _sensing_argument(p: argparse.ArgumentParser) -> None:
         "--sensing",
         default="realistic",
         type=_sensing,
-        metavar="{realistic,ideal,room,FILE.toml}",
+        metavar="{realistic,ideal,sensors,FILE.toml}",
         help="the simulator's sensor errors (default: realistic: camera noise, calibration error, odometry "
-        "drift, pan-tilt backlash; room: those in a real room: a surveyed map, the operator's start, mount "
-        "errors, camera latency, slip on a bump, errors 1.5 x what the robot is told; ideal: exact sensors, "
-        "for teaching the mathematics; FILE.toml: a "
+        "drift, pan-tilt backlash, in a real room: a surveyed map, the operator's start, mount errors, "
+        "camera latency, slip on a bump, errors 1.5 x what the robot is told; sensors: realistic's sensors "
+        "in an exact room; ideal: exact sensors, for teaching the mathematics; room: realistic's former "
+        "name; FILE.toml: a "
         '[sensing] table, profile = "realistic" plus [sensing.camera], [sensing.odometry], '
         "[sensing.pan_tilt], [sensing.room] fields to change); with --robot on a rehearsal config, its "
         "rendered camera follows the camera section (odometry and pan-tilt are the emulators')",
@@ -500,7 +501,7 @@ def build_parser() -> argparse.ArgumentParser:
     ei.add_argument("--movers", "--mover", dest="movers", help="comma-separated (default evasive)")
     ei.add_argument(
         "--sensing",
-        help="comma-separated: realistic, ideal, room, or sensing files (.toml with a [sensing] table, "
+        help="comma-separated: realistic, ideal, sensors, or sensing files (.toml with a [sensing] table, "
         "as `lab search --sensing` reads) (default realistic)",
     )
     ei.add_argument(
@@ -531,7 +532,7 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("--obstacles", help="no, yes or both (default both): boxes on the straight path")
     es.add_argument(
         "--sensing",
-        help="comma-separated: realistic, ideal, room, or sensing files (.toml with a [sensing] table, "
+        help="comma-separated: realistic, ideal, sensors, or sensing files (.toml with a [sensing] table, "
         "as `lab search --sensing` reads) (default realistic)",
     )
     es.add_argument("--localization", help="comma-separated: landmarks, odometry (default landmarks)")

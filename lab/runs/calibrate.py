@@ -9,7 +9,7 @@ the robot's calibration file (:func:`lab.mounts.save_mounts`), which later runs 
 (:func:`lab.runs.robots.make_robot`: the config's ``[camera] mounts``, or ``lab search --mounts``).
 
 The same routine runs on three robots, as the search does (:mod:`lab.runs.robots`): the simulator
-(``--sensing room``: the camera rendered through the episode's drawn mounts), a rehearsal
+(the ``realistic`` profile: the camera rendered through the episode's drawn mounts), a rehearsal
 (``hardware/rehearsal.toml``: the device emulators, the room rendered from their true state through the
 config's ``[sim] head_mount_deg`` / ``camera_mount_deg``) and the real robot. It never drives the base.
 """
@@ -108,7 +108,7 @@ def calibrate(
     robot_config=None,
     *,
     out: str | Path | None = None,
-    sensing="room",
+    sensing="realistic",
     seed: int = 0,
     world: str = "lab_room",
     start=None,
