@@ -122,6 +122,11 @@ class SearchResult:
     odometry_calibration : dict or None
         The odometry's turn scale and curvature bias the localizer learned
         (:meth:`~lab.localization.LocalizedRobot.odometry_calibration`).
+    camera_level : dict or None
+        The camera levelled against the floor before the search (``lab.runs.search._levelled``,
+        :mod:`lab.navigation.level`): the views, the floor's tilt before and after, the mounts' angles
+        found and the time it took; ``levelled`` False with the reason when too few views showed the
+        floor; None when not levelled (``level=False``, or a calibration file was used).
     events : tuple of SearchEvent
     trace : SearchTrace
     recording : str or None
@@ -173,6 +178,7 @@ class SearchResult:
     localization_note: str | None = None
     odometry_calibration: dict | None = None
     report_relocalization: dict | None = None
+    camera_level: dict | None = None
     events: tuple[SearchEvent, ...] = field(default=(), repr=False)
     trace: SearchTrace | None = field(default=None, repr=False, compare=False)
     recording: str | None = None
@@ -221,6 +227,7 @@ class SearchResult:
             "localization_note": self.localization_note,
             "odometry_calibration": self.odometry_calibration,
             "report_relocalization": self.report_relocalization,
+            "camera_level": self.camera_level,
             "events": [{**e.as_dict(), "t": round(e.t - t0, 3)} for e in self.events],
             "recording": self.recording,
             "sensing": self.sensing,
