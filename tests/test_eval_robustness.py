@@ -170,7 +170,8 @@ def test_the_report_tables_success_against_scale_and_draws_the_figure(tmp_path):
         ("realistic", 1.0, 9),
         ("realistic", 2.0, 7),
     ]
-    assert ("sensors", 1.0, 3, 3) in [(p.sensing, p.scale, p.successes, p.runs) for p in robustness_points(rows)]
+    points = [(p.sensing, p.scale, p.successes, p.runs) for p in robustness_points(rows)]
+    assert ("sensors", 1.0, 3, 3) in points
     write_report(tmp_path, rows, IDENTIFY)
     assert "| sensors | 1 | 3/3 | 100.0 % |" in (tmp_path / "report.md").read_text()
 

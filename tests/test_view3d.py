@@ -322,8 +322,9 @@ def test_search_view_shows_the_local_searchs_views(search_run):
     assert len(cams) >= len(local.views)
     gap = np.linalg.norm(pos[:, None, :] - cams[None, :, :], axis=2).min(axis=1)
     # drawn from where the robot believed it stood at the end; a landmark correction during the search
-    # moves that belief by a centimetre or so
-    assert gap.max() < 0.03 and np.median(gap) < 1e-4, gap
+    # moves that belief by a centimetre or so, and in the real room's surveyed map (the posters in the
+    # background of most views refine it) by a few millimetres at most views
+    assert gap.max() < 0.03 and np.median(gap) < 0.005, gap
     assert np.ptp(pos, axis=0).max() > 0.02  # the views differ: the head panned or tilted
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
+import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from enum import Enum
@@ -30,9 +31,18 @@ from lab.errors import ConfigError
 from lab.geometry import Pose2D, wrap_angle
 from lab.hardware.config import HardwareConfig, load_config
 from lab.mounts import CalibratedRobot, HeadMounts, load_mounts
+from lab.navigation.level import NotLevelled, level_camera
 from lab.robot import Robot, RobotWrapper, StereoFrame
 
-__all__ = ["PlacedRobot", "RobotKind", "RobotSession", "load_robot_config", "make_robot", "robot_kind"]
+__all__ = [
+    "PlacedRobot",
+    "RobotKind",
+    "RobotSession",
+    "levelled",
+    "load_robot_config",
+    "make_robot",
+    "robot_kind",
+]
 
 
 class RobotKind(Enum):
@@ -191,6 +201,43 @@ def make_robot(
 def _calibrated(robot: Robot, mounts: HeadMounts | None) -> Robot:
     """``robot`` seeing through the calibrated camera frame (None: as it is)."""
     return robot if mounts is None else CalibratedRobot(robot, mounts)
+
+
+def levelled(robot: Robot) -> tuple[Robot, dict | None]:
+    """The session's robot with its camera levelled against the floor before a search
+    (:func:`~lab.navigation.level.level_camera`: a
+    :class:`~lab.mounts.CalibratedRobot` with the mounts found) and what was found, for the JSON's
+    ``camera_level``; the robot as it is (and None) when it already has a calibration (a robot config's
+    ``[camera] mounts``, or ``--mounts``: the operator's, kept), and (robot, the reason) when too few views
+    showed the floor."""
+    if isinstance(robot, CalibratedRobot):
+        return robot, None
+    robot.enable()
+    t0 = robot.now()
+    try:
+        lv = level_camera(robot)
+    except NotLevelled as e:
+        print(f"lab: camera not levelled: {e}", file=sys.stderr)
+        return robot, {"levelled": False, "reason": str(e), "sim_time_s": round(robot.now() - t0, 3)}
+    m = lv.mounts
+    info = {
+        "levelled": True,
+        "views": lv.views,
+        "floor_tilt_before_deg": round(lv.rms_before_deg, 4),
+        "floor_tilt_after_deg": round(lv.rms_deg, 4),
+        "head_rpy_deg": [round(math.degrees(a), 4) for a in m.head_rpy],
+        "camera_rpy_deg": [round(math.degrees(a), 4) for a in m.camera_rpy],
+        "tilt_zero_deg": round(math.degrees(m.tilt_zero), 4),
+        "sim_time_s": round(robot.now() - t0, 3),
+    }
+    head, cam = info["head_rpy_deg"], info["camera_rpy_deg"]
+    print(
+        f"lab: camera levelled on the floor ({lv.views} views; the floor's tilt {lv.rms_before_deg:.2f} -> "
+        f"{lv.rms_deg:.2f} deg): head roll/pitch {head[0]:+.2f}/{head[1]:+.2f}, tilt zero "
+        f"{info['tilt_zero_deg']:+.2f}, camera roll/yaw {cam[0]:+.2f}/{cam[2]:+.2f} deg",
+        file=sys.stderr,
+    )
+    return CalibratedRobot(robot, m), info
 
 
 class PlacedRobot(RobotWrapper):

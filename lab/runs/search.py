@@ -46,9 +46,8 @@ import numpy as np
 from lab.errors import ConfigError
 from lab.geometry import Rz, se3
 from lab.localization import LocalizationMode
-from lab.mounts import CalibratedRobot, HeadMounts, load_mounts
+from lab.mounts import HeadMounts, load_mounts
 from lab.navigation.grid import GridSpec
-from lab.navigation.level import NotLevelled, level_camera
 from lab.robot import Robot
 from lab.runs.moving import (
     MovingOptions,
@@ -60,7 +59,7 @@ from lab.runs.moving import (
     start_mover,
 )
 from lab.runs.placement import check_placement, path_obstacles, random_placement, searchable_objects, supports
-from lab.runs.robots import RobotKind, load_robot_config, make_robot, robot_kind
+from lab.runs.robots import RobotKind, levelled, load_robot_config, make_robot, robot_kind
 from lab.runs.room import localize, robot_start, room_landmarks
 from lab.runs.search_result import (
     SUCCESS_ORIENTATION_DEG,
@@ -169,10 +168,11 @@ class TrialOptions:
         includes it. Default: none in the simulator; a robot config's ``[camera] mounts`` if it exists.
     level : bool
         Without a mount calibration, level the camera against the floor before the search
-        (:func:`lab.navigation.level.level_camera`: the head turns round looking down, about 20 s of the
-        budget; the mounts' roll and pitch it finds are in every later frame, and in the JSON's
-        ``camera_level``). A bracket half a degree off square put found objects 1-2 cm too high and
-        decided the room's failures (docs/tuning/room-errors.md). False: the nominal kinematics.
+        (:func:`lab.runs.robots.levelled`: the head turns round looking down for about 16 s before the
+        search's clock and budget start; the mounts' roll and pitch it finds are in every later frame,
+        and in the JSON's ``camera_level``). A bracket half a degree off square put found objects 1-2 cm
+        too high and decided the room's failures (docs/tuning/room-errors.md). False: the nominal
+        kinematics.
     """
 
     place: tuple | None = None
@@ -288,17 +288,15 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     spec = map_spec(scene)
     with contextlib.ExitStack() as stack:
         run, truth_of = _session(stack, kind, hw, scene, object, seed, opts, G_WO_measured)
-        t0 = 0.0 if kind is RobotKind.SIM else run.robot.now()
-        base, level = _levelled(run.robot) if opts.level else (run.robot, None)
+        base, level = levelled(run.robot) if opts.level else (run.robot, None)
         # on a robot its odometry starts at (0, 0, 0): placed at the start in the room (lab/runs/room.py)
         robot = localize(base, kind, room, start_pose, seed)
-        spent = robot.now() - t0 if level is not None else 0.0
+        t0 = robot.now()  # the search's start: after the levelling (the simulator's clock is 0 without it)
         hook = _with_progress(opts.attach, t0) if opts.progress else opts.attach
         if viewer is not None:  # the world's bodies and the tables' and shelves' tops: display only
             viewer.world, hook = run.world, viewer.attach_search(hook)
             viewer.set_surfaces([(s.name, s.z, s.polygon) for s in supports(scene) if s.kind != "floor"])
-        budgets = (opts.max_time - spent, opts.max_wall_time)  # the levelling's views are the run's time
-        parts = (db, opts.navigate, spec, cfg, seed, recorder, hook, budgets)
+        parts = (db, opts.navigate, spec, cfg, seed, recorder, hook, (opts.max_time, opts.max_wall_time))
         out, truth_end, budget, odom, track, report_reloc = _search(robot, truth_of, *parts)
         profile, applies = run.sensing, tuple(run.sensing_applies_to)
         estimate = robot.pose_estimate()
@@ -456,42 +454,6 @@ def measured_pose(scene: Scene, object: str, truth) -> np.ndarray:
         )
     body = scene.with_pose(object, (x, y, z, yaw)).body(object)
     return se3(Rz(body.yaw), np.array(body.centre))
-
-
-def _levelled(robot) -> tuple:
-    """The session's robot with its camera levelled against the floor (:func:`level_camera`: a
-    :class:`~lab.mounts.CalibratedRobot` with the mounts found) and what was found, for the JSON's
-    ``camera_level``; the robot as it is (and None) when it already has a calibration (a robot config's
-    ``[camera] mounts``, or ``--mounts``: the operator's, kept), and (robot, the reason) when too few views
-    showed the floor."""
-    if isinstance(robot, CalibratedRobot):
-        return robot, None
-    robot.enable()
-    t0 = robot.now()
-    try:
-        lv = level_camera(robot)
-    except NotLevelled as e:
-        print(f"lab: camera not levelled: {e}", file=sys.stderr)
-        return robot, {"levelled": False, "reason": str(e), "sim_time_s": round(robot.now() - t0, 3)}
-    m = lv.mounts
-    info = {
-        "levelled": True,
-        "views": lv.views,
-        "floor_tilt_before_deg": round(lv.rms_before_deg, 4),
-        "floor_tilt_after_deg": round(lv.rms_deg, 4),
-        "head_rpy_deg": [round(math.degrees(a), 4) for a in m.head_rpy],
-        "camera_rpy_deg": [round(math.degrees(a), 4) for a in m.camera_rpy],
-        "tilt_zero_deg": round(math.degrees(m.tilt_zero), 4),
-        "sim_time_s": round(robot.now() - t0, 3),
-    }
-    head, cam = info["head_rpy_deg"], info["camera_rpy_deg"]
-    print(
-        f"lab: camera levelled on the floor ({lv.views} views; the floor's tilt {lv.rms_before_deg:.2f} -> "
-        f"{lv.rms_deg:.2f} deg): head roll/pitch {head[0]:+.2f}/{head[1]:+.2f}, tilt zero "
-        f"{info['tilt_zero_deg']:+.2f}, camera roll/yaw {cam[0]:+.2f}/{cam[2]:+.2f} deg",
-        file=sys.stderr,
-    )
-    return CalibratedRobot(robot, m), info
 
 
 def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, attach, budgets):

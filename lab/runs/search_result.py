@@ -146,8 +146,8 @@ class SearchResult:
         predicted it, and ``truth_time_s``, the robot time of the truth the find is scored against (the
         moment it was confirmed); None (and absent from the JSON) for a stationary object.
     t0 : float [s]
-        The robot's time at the start of the search (0 in the simulator): the JSON's event and snapshot
-        times are from it.
+        The robot's time at the start of the search (after the camera's levelling; 0 in the simulator
+        without it): the JSON's event and snapshot times, and ``sim_time_s``, are from it.
     """
 
     object: str

@@ -36,7 +36,8 @@ TOLD_SIGMAS = ("survey_m", "survey_deg", "camera_mount_deg", "head_mount_deg")
 
 @dataclass(frozen=True)
 class RoomErrors:
-    """The real room's errors (``realistic``'s defaults, each with its source; :meth:`none` is ``ideal``'s and ``sensors``').
+    """The real room's errors (``realistic``'s defaults, each with its source; :meth:`none` is ``ideal``'s
+    and ``sensors``').
 
     Attributes
     ----------

@@ -100,7 +100,10 @@ def panorama(result: GlobalSearchResult, tilt: float | None = None) -> np.ndarra
     largest pan (the robot's left) to the smallest: a panoramic view like the paper's Fig. 6."""
     tilts = np.array([v.frame.pan_tilt.tilt for v in result.views])
     t = tilts[np.argmin(np.abs(tilts))] if tilt is None else tilt
-    row = [v for v in result.views if abs(v.frame.pan_tilt.tilt - t) < 1e-6]
+    # one row: the head's angle at each image's stamp differs from view to view by up to a degree (a late
+    # camera's frame is taken back to its exposure along the head's readings, the backlash); rows are
+    # tens of degrees apart
+    row = [v for v in result.views if abs(v.frame.pan_tilt.tilt - t) < math.radians(5.0)]
     row.sort(key=lambda v: -v.frame.pan_tilt.pan)
     return np.concatenate([v.frame.left for v in row], axis=1)
 
