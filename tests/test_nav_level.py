@@ -77,6 +77,20 @@ def test_one_pan_cannot_tell_the_heads_tilt_from_the_cameras_and_says_so():
     assert lv.mounts.std["tilt_zero"] > math.radians(0.5) and lv.mounts.std["head_rpy"][1] > math.radians(0.5)
 
 
+def test_a_view_whose_floor_disagrees_is_left_out():
+    """Two views with their floor turned by 1.5 deg (a strip of floor by a wall): left out, and the rest
+    solved as if they were not there."""
+    cfg = LevelConfig()
+    views = _views(DRAWN, cfg.pans_deg, cfg.tilts_deg)
+    for k in (0, 7):
+        n = np.asarray(views[k].normal_C)
+        turned = n + np.array([math.radians(1.5), 0.0, 0.0])
+        views[k] = FloorView(views[k].pan, views[k].tilt, tuple(turned / np.linalg.norm(turned)), 100)
+    lv = solve_level(views, CAMERA, cfg)
+    assert lv.dropped == 2 and lv.views == 12
+    np.testing.assert_allclose(_angles(lv.mounts)[:3], _angles(DRAWN)[:3], atol=0.002)
+
+
 def test_too_few_views_of_the_floor_is_a_clear_error():
     with pytest.raises(NotLevelled, match="only 2 views showed the floor, need at least 6"):
         solve_level(_views(DRAWN, (0.0, 50.0), (-20.0,)), CAMERA)
