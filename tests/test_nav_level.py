@@ -121,7 +121,7 @@ def test_the_simulators_drawn_mounts_are_levelled_out():
                 for cam, out in ((CAMERA, before), (levelled, after)):
                     up = cam.G_RC(st.pan, st.tilt)[:3, :3].T[:, 2]
                     out.append(math.degrees(math.acos(min(1.0, float(up @ up_true)))))
-    assert lv.views == 14
+    assert lv.views + lv.dropped == 14 and lv.views >= 12
     assert np.median(before) > 0.5 and max(after) < 0.25, (before, after)
 
 
