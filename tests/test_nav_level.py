@@ -77,6 +77,20 @@ def test_one_pan_cannot_tell_the_heads_tilt_from_the_cameras_and_says_so():
     assert lv.mounts.std["tilt_zero"] > math.radians(0.5) and lv.mounts.std["head_rpy"][1] > math.radians(0.5)
 
 
+def test_a_view_whose_floor_disagrees_is_left_out():
+    """Two views with their floor turned by 1.5 deg (a strip of floor by a wall): left out, and the rest
+    solved as if they were not there."""
+    cfg = LevelConfig()
+    views = _views(DRAWN, cfg.pans_deg, cfg.tilts_deg)
+    for k in (0, 7):
+        n = np.asarray(views[k].normal_C)
+        turned = n + np.array([math.radians(1.5), 0.0, 0.0])
+        views[k] = FloorView(views[k].pan, views[k].tilt, tuple(turned / np.linalg.norm(turned)), 100)
+    lv = solve_level(views, CAMERA, cfg)
+    assert lv.dropped == 2 and lv.views == 12
+    np.testing.assert_allclose(_angles(lv.mounts)[:3], _angles(DRAWN)[:3], atol=0.002)
+
+
 def test_too_few_views_of_the_floor_is_a_clear_error():
     with pytest.raises(NotLevelled, match="only 2 views showed the floor, need at least 6"):
         solve_level(_views(DRAWN, (0.0, 50.0), (-20.0,)), CAMERA)
@@ -84,8 +98,10 @@ def test_too_few_views_of_the_floor_is_a_clear_error():
 
 def test_the_simulators_drawn_mounts_are_levelled_out():
     """The simulator draws the head's and the camera's mounts at 0.5 deg (exact sensors otherwise): the
-    camera's vertical, which the nominal kinematics have 0.5-1 deg off, is within 0.25 deg of the true
-    one after levelling, at pans and tilts the levelling never looked at."""
+    camera's vertical, which the nominal kinematics have 0.5-1 deg off, is within 0.3 deg of the true one
+    after levelling (0.2 at the median), at pans and tilts the levelling never looked at (the stereo
+    floor's normal carries a few hundredths of a degree of its own, which the split between the head's
+    pitch and the tilt's zero amplifies)."""
     from lab.sim import RenderSettings, SimRobot, SimWorld
     from lab.sim.sensing import sensing_profile
 
@@ -107,8 +123,8 @@ def test_the_simulators_drawn_mounts_are_levelled_out():
                 for cam, out in ((CAMERA, before), (levelled, after)):
                     up = cam.G_RC(st.pan, st.tilt)[:3, :3].T[:, 2]
                     out.append(math.degrees(math.acos(min(1.0, float(up @ up_true)))))
-    assert lv.views == 14
-    assert np.median(before) > 0.5 and max(after) < 0.25, (before, after)
+    assert lv.views + lv.dropped == 14 and lv.views >= 12
+    assert np.median(before) > 0.5 and np.median(after) < 0.2 and max(after) < 0.3, (before, after)
 
 
 def _Rz(a: float) -> np.ndarray:

@@ -83,6 +83,10 @@ class LevelConfig:
     prior_deg : float [deg]
         The prior standard deviation of every angle: a bracket's 0.5 deg (the mounts' stated accuracy,
         ``[room] camera_mount_deg``), widened so that the floor, not the prior, decides.
+    gate_deg : float [deg]
+        A view whose floor stays tilted by more than this after a robust first solve is left out (a
+        strip of floor between the robot and a wall a metre away, in the corner of a view: 1-2 deg off;
+        the others are within 0.15 deg).
     min_views : int
         Fewer views with a floor than this: no levelling (:class:`NotLevelled`).
     """
@@ -93,6 +97,7 @@ class LevelConfig:
     pixel_step: int = 2
     sigma_view_deg: float = 0.1
     prior_deg: float = 1.0
+    gate_deg: float = 0.4
     min_views: int = 6
 
 
@@ -127,17 +132,20 @@ class Level:
     mounts : HeadMounts
         The estimated angles (the head's yaw and the pan zero 0), with ``std`` and ``estimated``.
     views : int
-        Views used.
+        Views used (within the gate).
     rms_deg : float [deg]
         The views' residual root-mean-square after the fit (how level the floor looks now).
     rms_before_deg : float [deg]
-        The same with the nominal kinematics (how tilted it looked).
+        The same with the nominal kinematics (how tilted it looked), over the same views.
+    dropped : int
+        Views left out: their floor disagreed with the others' by more than ``gate_deg``.
     """
 
     mounts: HeadMounts
     views: int
     rms_deg: float
     rms_before_deg: float
+    dropped: int = 0
 
 
 def floor_normal(frame, config: LevelConfig | None = None, rng=None) -> FloorView | None:
@@ -194,16 +202,27 @@ def solve_level(views: Sequence[FloorView], camera, config: LevelConfig | None =
         )
     s_view, s_prior = math.radians(cfg.sigma_view_deg), math.radians(cfg.prior_deg)
 
-    def f(theta):
-        return np.concatenate([_residuals(theta, views, camera) / s_view, theta / s_prior])
+    def f(theta, used):
+        return np.concatenate([_residuals(theta, used, camera) / s_view, theta / s_prior])
 
-    sol = least_squares(f, np.zeros(len(ANGLES)), method="lm", x_scale=s_prior)
+    # a robust first solve, then the views within the gate solved again by least squares: a view that
+    # looks at a wall a metre away sees a strip of floor in its corner, tilted by a degree or two
+    x0 = np.zeros(len(ANGLES))
+    first = least_squares(f, x0, args=(views,), loss="soft_l1", f_scale=2.0, x_scale=s_prior)
+    tilt = np.hypot(*_residuals(first.x, views, camera).reshape(-1, 2).T)
+    used = [v for v, e in zip(views, tilt, strict=True) if e <= math.radians(cfg.gate_deg)]
+    if len(used) < cfg.min_views:
+        raise NotLevelled(
+            f"only {len(used)} of {len(views)} views showed a floor that agrees with the others within "
+            f"{cfg.gate_deg:g} deg, need at least {cfg.min_views} to level the camera"
+        )
+    sol = least_squares(f, first.x, args=(used,), method="lm", x_scale=s_prior)
     J = sol.jac
-    dof = max(2 * len(views) - len(ANGLES), 1)
-    chi2 = float(np.sum(sol.fun[: 2 * len(views)] ** 2)) / dof
+    dof = max(2 * len(used) - len(ANGLES), 1)
+    chi2 = float(np.sum(sol.fun[: 2 * len(used)] ** 2)) / dof
     cov = np.linalg.inv(J.T @ J) * max(chi2, 1.0)
     std = np.sqrt(np.diag(cov))
-    rms = lambda th: math.degrees(float(np.sqrt(np.mean(_residuals(th, views, camera) ** 2))))  # noqa: E731
+    rms = lambda th: math.degrees(float(np.sqrt(np.mean(_residuals(th, used, camera) ** 2))))  # noqa: E731
     m = _mounts(sol.x)
     sd = {
         "head_rpy": (float(std[0]), float(std[1]), 0.0),
@@ -212,7 +231,7 @@ def solve_level(views: Sequence[FloorView], camera, config: LevelConfig | None =
         "pan_zero": 0.0,
     }
     mounts = HeadMounts(m.head_rpy, m.camera_rpy, 0.0, m.tilt_zero, sd, ANGLES, "levelled on the floor")
-    return Level(mounts, len(views), rms(sol.x), rms(np.zeros(len(ANGLES))))
+    return Level(mounts, len(used), rms(sol.x), rms(np.zeros(len(ANGLES))), len(views) - len(used))
 
 
 def level_camera(robot, config: LevelConfig | None = None) -> Level:
