@@ -195,6 +195,7 @@ def _cmd_search(args) -> int:
         start=args.start,
         moving=_moving(args),
         mounts=args.mounts,
+        level=args.level,
     )
     data = res.to_json()
     if args.view3d is not None:

@@ -340,6 +340,14 @@ def build_parser() -> argparse.ArgumentParser:
         "config's [camera] mounts is used without it)",
     )
     se.add_argument(
+        "--no-level",
+        dest="level",
+        action="store_false",
+        help="do not level the camera on the floor before the search (by default, without a mount "
+        "calibration, the standing robot looks down at 14 views and estimates its mounts' roll and pitch: "
+        "lab/navigation/level.py)",
+    )
+    se.add_argument(
         "--truth",
         type=lambda s: _floats(s, 4, "--truth"),
         metavar="X,Y,Z,YAW_DEG",

@@ -223,6 +223,7 @@ def levelled(robot: Robot) -> tuple[Robot, dict | None]:
     info = {
         "levelled": True,
         "views": lv.views,
+        "views_left_out": lv.dropped,
         "floor_tilt_before_deg": round(lv.rms_before_deg, 4),
         "floor_tilt_after_deg": round(lv.rms_deg, 4),
         "head_rpy_deg": [round(math.degrees(a), 4) for a in m.head_rpy],
