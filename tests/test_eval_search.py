@@ -8,6 +8,7 @@ import json
 import numpy as np
 
 from lab.cli import main
+from lab.eval.search import SearchSweep
 from lab.evaluation import wilson_interval
 from lab.runs.placement import random_placement, searchable_objects
 from lab.scene import load_scene
@@ -207,3 +208,20 @@ def test_the_evaluation_budget_is_lab_searchs_own():
     assert inspect.signature(run_search).parameters["max_time"].default == SEARCH_MAX_TIME_S
     args = build_parser().parse_args(["search", "--object", "book"])
     assert args.max_time == SEARCH_MAX_TIME_S
+
+
+def test_half_runs_every_placement_once_with_the_boxes_on_every_other_one():
+    """Issue 52's "placements, half with obstacles": ``--obstacles half`` gives each placement one trial,
+    the boxes on half of them, balanced over the objects and the surfaces."""
+    from collections import Counter
+
+    both = SearchSweep(seeds=(100, 101), strategies=("paper",), obstacles="both").jobs()
+    half = SearchSweep(seeds=(100, 101), strategies=("paper",), obstacles="half").jobs()
+    place = lambda j: (j.kwargs["object"], j.kwargs["surface"], j.kwargs["seed"])  # noqa: E731
+    assert len(both) == 2 * len(half) == 36
+    assert sorted(map(place, half)) == sorted(set(map(place, both)))  # every placement, once
+    on = [j for j in half if j.kwargs["obstacles"]]
+    assert len(on) == len(half) // 2
+    assert set(Counter(j.kwargs["object"] for j in on).values()) == {3}
+    assert set(Counter(j.kwargs["surface"] for j in on).values()) == {3}
+    assert {j.key for j in half} <= {j.key for j in both}  # the same jobs as `both` runs: --resume finds them

@@ -537,7 +537,11 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument(
         "--strategies", help="comma-separated: paper, rate, lawnmower, frontier (default all four)"
     )
-    es.add_argument("--obstacles", help="no, yes or both (default both): boxes on the straight path")
+    es.add_argument(
+        "--obstacles",
+        help="no, yes, both or half (default both): boxes on the straight path; half: each placement once, "
+        "every other one with the boxes",
+    )
     es.add_argument(
         "--sensing",
         help="comma-separated: realistic, ideal, sensors, or sensing files (.toml with a [sensing] table, "

@@ -66,7 +66,9 @@ MOVING_KINDS = ("random", "evasive")
 MAPS = ("predict", "static")  # the map of a moving-object trial: with the prediction step, the baseline
 
 STRATEGIES = ("paper", "rate", "lawnmower", "frontier")
-OBSTACLES = {"no": (False,), "yes": (True,), "both": (False, True)}
+#: ``half``: every placement once, with the obstacle boxes on every other one (alternating over seed, object
+#: and surface, so each object and each surface gets half): the issue's "placements, half with obstacles"
+OBSTACLES = {"no": (False,), "yes": (True,), "both": (False, True), "half": None}
 
 
 LOCALIZATIONS = ("landmarks", "odometry")
@@ -172,7 +174,7 @@ class SearchSweep:
         for surface in sorted(self.surfaces, key=SURFACES.index):
             for seed in self.seeds:
                 for name in self.objects:
-                    for ob in OBSTACLES[self.obstacles]:
+                    for ob in self._obstacles(seed, objects.index(name), SURFACES.index(surface)):
                         for sensing, k in [(s, k) for s in self.sensing for k in self.error_scale]:
                             for loc in self.localization:
                                 for strategy in self.strategies:
@@ -194,6 +196,11 @@ class SearchSweep:
                                     key += scale_suffix(k)
                                     out.extend(self._moving_jobs(key, kw))
         return out
+
+    def _obstacles(self, seed: int, i_object: int, i_surface: int) -> tuple[bool, ...]:
+        """With and/or without the obstacle boxes at one placement (``half``: on every other one)."""
+        choice = OBSTACLES[self.obstacles]
+        return choice if choice is not None else ((seed + i_object + i_surface) % 2 == 1,)
 
     def _moving_jobs(self, key: str, kw: dict) -> list[Job]:
         """The job of a stationary object as it always was; for a moving one, one job per map."""
