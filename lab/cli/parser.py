@@ -340,12 +340,12 @@ def build_parser() -> argparse.ArgumentParser:
         "config's [camera] mounts is used without it)",
     )
     se.add_argument(
-        "--no-level",
-        dest="level",
-        action="store_false",
-        help="do not level the camera on the floor before the search (by default, without a mount "
-        "calibration, the standing robot looks down at 14 views and estimates its mounts' roll and pitch: "
-        "lab/navigation/level.py)",
+        "--level",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="level the camera on the floor before the search: the standing robot looks down at 14 views "
+        "and estimates its mounts' roll and pitch (lab/navigation/level.py); default: in the simulator "
+        "without --mounts (a robot is calibrated with lab hardware calibrate)",
     )
     se.add_argument(
         "--truth",

@@ -166,12 +166,14 @@ class TrialOptions:
     mounts : path or HeadMounts, optional
         A mount calibration file (``lab hardware calibrate``, :mod:`lab.mounts`): the robot's camera frame
         includes it. Default: none in the simulator; a robot config's ``[camera] mounts`` if it exists.
-    level : bool
+    level : bool or None
         Without a mount calibration, level the camera against the floor before the search
         (:func:`lab.runs.robots.levelled`: the head turns round looking down for about 16 s before the
         search's clock and budget start; the mounts' roll and pitch it finds are in every later frame,
         and in the JSON's ``camera_level``). A bracket half a degree off square put found objects 1-2 cm
-        too high and decided the room's failures (docs/tuning/room-errors.md). False: the nominal
+        too high and decided the room's failures (docs/tuning/room-errors.md). None (default): in the
+        simulator only (a robot is calibrated once with ``lab hardware calibrate``, and its rehearsal's
+        levelling is not yet checked, docs/tuning/camera-level.md); True: on a robot too; False: the nominal
         kinematics.
     """
 
@@ -196,7 +198,7 @@ class TrialOptions:
     moving: MovingOptions | None = None
     view3d: object = None
     mounts: object = None
-    level: bool = True
+    level: bool | None = None
 
 
 def run_search(
@@ -224,7 +226,7 @@ def run_search(
     moving: MovingOptions | None = None,
     view3d=None,
     mounts=None,
-    level: bool = True,
+    level: bool | None = None,
 ) -> SearchResult:
     """Run one search trial (in the simulator, a rehearsal or on the robot) and score it.
 
@@ -288,7 +290,8 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     spec = map_spec(scene)
     with contextlib.ExitStack() as stack:
         run, truth_of = _session(stack, kind, hw, scene, object, seed, opts, G_WO_measured)
-        base, level = levelled(run.robot) if opts.level else (run.robot, None)
+        to_level = opts.level if opts.level is not None else kind is RobotKind.SIM
+        base, level = levelled(run.robot) if to_level else (run.robot, None)
         # on a robot its odometry starts at (0, 0, 0): placed at the start in the room (lab/runs/room.py)
         robot = localize(base, kind, room, start_pose, seed)
         t0 = robot.now()  # the search's start: after the levelling (the simulator's clock is 0 without it)
