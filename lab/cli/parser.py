@@ -7,7 +7,10 @@ from pathlib import Path
 
 __all__ = ["build_parser"]
 
-
+HELP_LEVEL = (
+    "level the camera on the floor before the search: the standing robot looks down in 14 views, estimates "
+    "its mounts' roll and pitch (lab/navigation/level.py); default: in the simulator, without --mounts"
+)
 HELP_VIEW3D = (
     "write a recorded 3D view of the run: one self-contained HTML page with a time slider, opens offline "
     "in any browser (needs the optional package viser: pip install 'lab[view3d]')"
@@ -339,14 +342,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a mount calibration (lab hardware calibrate): the robot's camera frame includes it (a robot "
         "config's [camera] mounts is used without it)",
     )
-    se.add_argument(
-        "--level",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="level the camera on the floor before the search: the standing robot looks down at 14 views "
-        "and estimates its mounts' roll and pitch (lab/navigation/level.py); default: in the simulator "
-        "without --mounts (a robot is calibrated with lab hardware calibrate)",
-    )
+    se.add_argument("--level", action=argparse.BooleanOptionalAction, help=HELP_LEVEL)
     se.add_argument(
         "--truth",
         type=lambda s: _floats(s, 4, "--truth"),
@@ -537,11 +533,7 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument(
         "--strategies", help="comma-separated: paper, rate, lawnmower, frontier (default all four)"
     )
-    es.add_argument(
-        "--obstacles",
-        help="no, yes, both or half (default both): boxes on the straight path; half: each placement once, "
-        "every other one with the boxes",
-    )
+    es.add_argument("--obstacles", help="no, yes, both or half (each placement once, every other with them)")
     es.add_argument(
         "--sensing",
         help="comma-separated: realistic, ideal, sensors, or sensing files (.toml with a [sensing] table, "
