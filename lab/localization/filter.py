@@ -93,6 +93,14 @@ class LocalizerConfig:
         turn it further than the fit's covariance says (not traced; depth errors along the line of
         sight, where a stereo point's own covariance is long, are the likely cause). How they were
         chosen: docs/tuning/localizer-observation-floor.md and docs/tuning/localizer-heading-floor.md.
+    shared_floor : bool
+        Sightings of one landmark from one place (the robot has not driven ``recount_m`` or turned
+        ``recount_rad`` since the first of them) share the floor's error: a second look brings fresh
+        image noise (the fit's own covariance) but the same calibration. The ``n``-th such sighting's
+        covariance is then the one that leaves the filter's information what ``n`` sightings really
+        hold (:meth:`shared_floor_covariance`), not ``n`` times one sighting's. False: every sighting
+        counted as independent (the filter before issue 52's survey showed a robot standing at its
+        find, 8 looks at one poster, 2.5 cm off while stating 1.1 cm; docs/tuning/localizer-shared-floor.md).
     gate_prob : float
         Observations whose innovation's Mahalanobis distance exceeds the chi-square(3) quantile are
         rejected as outliers.
@@ -189,6 +197,7 @@ class LocalizerConfig:
     obs_sigma_per_m: float = 0.001
     obs_sigma_rel_across: float = 0.001
     obs_sigma_rad: float = math.radians(0.75)
+    shared_floor: bool = True
     gate_prob: float = 0.999
     max_rejected_in_a_row: int = 3
     reject_inflation: float = 9.0
@@ -257,6 +266,8 @@ class LocalizerConfig:
                 f"LocalizerConfig.update_iterations must be an integer >= 1 (1: the plain EKF), "
                 f"got {self.update_iterations!r}"
             )
+        if not isinstance(self.shared_floor, bool):
+            raise ConfigError(f"LocalizerConfig.shared_floor must be True or False, got {self.shared_floor!r}")
         if not isinstance(self.odometry_calibration, bool):
             raise ConfigError(
                 "LocalizerConfig.odometry_calibration must be True or False, "
@@ -312,6 +323,32 @@ class LocalizerConfig:
         Q[:2, :2] = s_along**2 * np.outer(u, u) + s_across**2 * np.outer(v, v)  # R_u diag(.) R_u^T
         Q[2, 2] = self.obs_sigma_rad**2
         return Q
+
+    @staticmethod
+    def shared_floor_covariance(R, F, n: int) -> np.ndarray:
+        r"""The covariance (3, 3) to give the ``n``-th sighting of a landmark from one place, whose
+        fit's own covariance ``R`` is fresh each time while the floor's error ``F`` is the same one.
+
+        ``n`` such sightings measure the landmark to :math:`R/n + F` (the image noise averages down, the
+        calibration does not), so the information they add up to must be :math:`(R/n + F)^{-1}`. Each
+        update adds :math:`Q_n^{-1}`; the ``n``-th must add the difference:
+
+        .. math:: Q_1 = R + F, \qquad
+                  Q_n = \left[(R/n + F)^{-1} - (R/(n-1) + F)^{-1}\right]^{-1}
+
+        (for scalars :math:`Q_n = (R + nF)(R + (n-1)F) / R`: a sighting whose error is mostly the floor's
+        adds little the second time). Exact when the pose does not move between the sightings (the
+        filter's linearisation the same); a direction the difference leaves without information gets a
+        variance of 1e6.
+        """
+        R, F = np.asarray(R, float), np.asarray(F, float)
+        if n < 1:
+            raise ValueError(f"the sighting's count n must be >= 1, got {n}")
+        if n == 1:
+            return R + F
+        A = np.linalg.inv(R / n + F) - np.linalg.inv(R / (n - 1) + F)  # the n-th sighting's information
+        w, V = np.linalg.eigh(0.5 * (A + A.T))
+        return (V * (1.0 / np.maximum(w, 1e-6))) @ V.T
 
 
 @dataclass(frozen=True)
@@ -461,6 +498,7 @@ class Localizer:
         self.n_inflations = 0
         self._rejected_here: set[str] = set()  # landmarks whose rejection counted since the last move
         self._moved = np.zeros(2)  # driven [m] and turned [rad] since then
+        self._seen_here: dict[str, int] = {}  # accepted sightings per landmark since then (shared_floor)
         self._clone: _Clone | None = None  # a past pose kept in the state (start_clone)
 
     # the pose: the first three of the state
@@ -521,6 +559,7 @@ class Localizer:
         self._moved += (math.hypot(u[0], u[1]), abs(u[2]))
         if self._moved[0] >= self.config.recount_m or self._moved[1] >= self.config.recount_rad:
             self._rejected_here.clear()  # a new place: every landmark's rejection counts again
+            self._seen_here.clear()  # and its sightings bring a fresh view of the floor's error
             self._moved[:] = 0.0
 
     def update(self, z, Q, landmark: Landmark, t: float = 0.0, n_inliers: int = 0) -> UpdateRecord:
@@ -531,7 +570,7 @@ class Localizer:
         if self.first_sighting_pending:
             return self.first_sighting(z, Q, landmark, t, n_inliers)
         z = np.asarray(z, float)
-        Q = np.asarray(Q, float) + self.config.observation_floor(z)
+        Q = self._sighting_covariance(z, Q, landmark)
         j = self._poster_block(landmark)  # H = [dh/dx, 0, (dh/dl_j)]: the pose, a surveyed poster
         x_bar, Sigma_bar = self.x, self.Sigma
         s_bar, P_bar = self.s.copy(), self.P.copy()
@@ -570,6 +609,7 @@ class Localizer:
                 self._clone.update(P_bar, H, S, Q, v)
             self.s, self.P = s_i, 0.5 * (P + P.T)
             self.rejected_in_a_row = 0
+            self._seen_here[landmark.name] = self._seen_here.get(landmark.name, 0) + 1
         elif landmark.name not in self._rejected_here:  # once per landmark per place (recount_m)
             self._rejected_here.add(landmark.name)
             self.rejected_in_a_row += 1
@@ -582,6 +622,13 @@ class Localizer:
                 self.n_inflations += 1
                 self._rejected_here.clear()  # the doubted estimate is tried against them all again
         return self._record(t, landmark, z, Q, x_bar, Sigma_bar, nis, bool(accepted), n_inliers)
+
+    def _sighting_covariance(self, z, Q, landmark: Landmark) -> np.ndarray:
+        """An observation's covariance: the fit's own ``Q`` plus the floor, the floor shared with this
+        landmark's earlier sightings from the same place (``LocalizerConfig.shared_floor``)."""
+        F = self.config.observation_floor(z)
+        n = self._seen_here.get(landmark.name, 0) + 1 if self.config.shared_floor else 1
+        return LocalizerConfig.shared_floor_covariance(np.asarray(Q, float), F, n)
 
     def _poster_block(self, landmark: Landmark) -> int | None:
         """The index of a surveyed landmark's block in the state, added (seeded by its survey,
@@ -673,7 +720,7 @@ class Localizer:
         fusion's ``H = [I, 0, -J_l]``; a reset's pose keeps its correlation with the landmark.
         """
         z = np.asarray(z, float)
-        Q = np.asarray(Q, float) + self.config.observation_floor(z)
+        Q = self._sighting_covariance(z, Q, landmark)
         j = self._poster_block(landmark)
         x_bar, Sigma_bar = self.x, self.Sigma
         P_bar = self.P.copy()
@@ -710,4 +757,5 @@ class Localizer:
             kind, accepted = "outlier", False  # rejected
         if accepted:
             self.first_sighting_pending = False
+            self._seen_here[landmark.name] = self._seen_here.get(landmark.name, 0) + 1
         return self._record(t, landmark, z, Q, x_bar, Sigma_bar, nis, accepted, n_inliers, kind)
