@@ -130,3 +130,18 @@ def test_the_simulators_drawn_mounts_are_levelled_out():
 def _Rz(a: float) -> np.ndarray:
     c, s = math.cos(a), math.sin(a)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_a_search_levels_only_a_camera_whose_mounts_the_profile_states_uncertain(tmp_path):
+    """``lab search``'s default: ``realistic`` states half a degree per mount, so the floor levels it;
+    a profile that states the mounts exact (``sensors``, ``ideal``, a sensing file with both mount sigmas
+    0, issue 52's survey-and-start condition) has nothing for the levelling to find."""
+    from lab.runs.robots import mounts_stated
+
+    assert mounts_stated("realistic") and mounts_stated("room")
+    assert not mounts_stated("sensors") and not mounts_stated("ideal")
+    f = tmp_path / "exact_mounts.toml"
+    f.write_text('[sensing]\nprofile = "realistic"\n[sensing.room]\ncamera_mount_deg = 0.0\nhead_mount_deg = 0.0\n')
+    assert not mounts_stated(f)
+    f.write_text('[sensing]\nprofile = "sensors"\n[sensing.room]\nhead_mount_deg = 0.3\n')
+    assert mounts_stated(f)

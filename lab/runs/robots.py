@@ -41,6 +41,7 @@ __all__ = [
     "levelled",
     "load_robot_config",
     "make_robot",
+    "mounts_stated",
     "robot_kind",
 ]
 
@@ -201,6 +202,19 @@ def make_robot(
 def _calibrated(robot: Robot, mounts: HeadMounts | None) -> Robot:
     """``robot`` seeing through the calibrated camera frame (None: as it is)."""
     return robot if mounts is None else CalibratedRobot(robot, mounts)
+
+
+def mounts_stated(sensing) -> bool:
+    """Whether the simulator's sensing profile (a name, a file or a section:
+    :func:`lab.sim.sensing.sensing_profile`) tells the robot its camera's mounts are off by some error
+    (``[sensing.room] camera_mount_deg`` or ``head_mount_deg`` above 0), which the floor's levelling then
+    estimates. A profile that states them exact (``ideal``, ``sensors``, issue 52's survey-and-start
+    condition) has nothing for it to find: its own 0.2-0.3 deg would be the only error left
+    (docs/tuning/camera-level.md)."""
+    from lab.sim.sensing import sensing_profile  # lab.sim only where a simulated robot runs
+
+    room = sensing_profile(sensing).room
+    return room.camera_mount_deg > 0 or room.head_mount_deg > 0
 
 
 def levelled(robot: Robot) -> tuple[Robot, dict | None]:

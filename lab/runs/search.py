@@ -59,7 +59,7 @@ from lab.runs.moving import (
     start_mover,
 )
 from lab.runs.placement import check_placement, path_obstacles, random_placement, searchable_objects, supports
-from lab.runs.robots import RobotKind, levelled, load_robot_config, make_robot, robot_kind
+from lab.runs.robots import RobotKind, levelled, load_robot_config, make_robot, mounts_stated, robot_kind
 from lab.runs.room import localize, robot_start, room_landmarks
 from lab.runs.search_result import (
     SUCCESS_ORIENTATION_DEG,
@@ -172,9 +172,12 @@ class TrialOptions:
         search's clock and budget start; the mounts' roll and pitch it finds are in every later frame,
         and in the JSON's ``camera_level``). A bracket half a degree off square put found objects 1-2 cm
         too high and decided the room's failures (docs/tuning/room-errors.md). None (default): in the
-        simulator only (a robot is calibrated once with ``lab hardware calibrate``, and its rehearsal's
-        levelling is not yet checked, docs/tuning/camera-level.md); True: on a robot too; False: the nominal
-        kinematics.
+        simulator when the sensing profile states a mount error (:func:`lab.runs.robots.mounts_stated`:
+        ``realistic``'s half a degree; a robot told its mounts are exact, as under ``sensors`` or a
+        sensing file with both mount sigmas 0, keeps its kinematics, since the floor levels the camera to
+        0.2-0.3 deg and would only add that), not on a robot (calibrated once with ``lab hardware
+        calibrate``; its rehearsal's levelling is not yet checked, docs/tuning/camera-level.md); True: on
+        a robot too; False: the nominal kinematics.
     """
 
     place: tuple | None = None
@@ -290,7 +293,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     spec = map_spec(scene)
     with contextlib.ExitStack() as stack:
         run, truth_of = _session(stack, kind, hw, scene, object, seed, opts, G_WO_measured)
-        to_level = opts.level if opts.level is not None else kind is RobotKind.SIM
+        to_level = opts.level if opts.level is not None else kind is RobotKind.SIM and mounts_stated(opts.sensing)
         base, level = levelled(run.robot) if to_level else (run.robot, None)
         # on a robot its odometry starts at (0, 0, 0): placed at the start in the room (lab/runs/room.py)
         robot = localize(base, kind, room, start_pose, seed)
