@@ -70,8 +70,9 @@ def _stand_and_look(rng, n_looks, shared, move_between=False):
 
 def test_looks_from_one_place_leave_a_consistent_pose_and_counted_as_independent_do_not():
     """200 seeded trials of 10 looks from one place: with the floor shared, the pose's NEES is
-    chi-square(3) (mean within [2.2, 4.2]: over seeds 0-4 3.0-3.7, a little above 3 as the sequential weighting predicts); counting each look as independent it is far above (the
-    filter trusting ten copies of one calibration error)."""
+    chi-square(3) (mean within [2.2, 4.2]: 3.0-3.7 over seeds 0-4, a little above 3 as the sequential
+    weighting predicts); counting each look as independent it is far above (the filter trusting ten
+    copies of one calibration error)."""
     rng = np.random.default_rng(3)
     nees = {True: [], False: []}
     for _ in range(200):

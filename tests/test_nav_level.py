@@ -141,7 +141,9 @@ def test_a_search_levels_only_a_camera_whose_mounts_the_profile_states_uncertain
     assert mounts_stated("realistic") and mounts_stated("room")
     assert not mounts_stated("sensors") and not mounts_stated("ideal")
     f = tmp_path / "exact_mounts.toml"
-    f.write_text('[sensing]\nprofile = "realistic"\n[sensing.room]\ncamera_mount_deg = 0.0\nhead_mount_deg = 0.0\n')
+    f.write_text(
+        '[sensing]\nprofile = "realistic"\n[sensing.room]\ncamera_mount_deg = 0.0\nhead_mount_deg = 0.0\n'
+    )
     assert not mounts_stated(f)
     f.write_text('[sensing]\nprofile = "sensors"\n[sensing.room]\nhead_mount_deg = 0.3\n')
     assert mounts_stated(f)

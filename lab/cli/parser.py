@@ -8,9 +8,8 @@ from pathlib import Path
 __all__ = ["build_parser"]
 
 HELP_LEVEL = (
-    "level the camera on the floor before the search: the standing robot looks down in 14 views, estimates "
-    "its mounts' roll and pitch (lab/navigation/level.py); default: in the simulator when the sensing "
-    "profile states a mount error (realistic does; sensors and ideal do not), without --mounts"
+    "level the camera on the floor (14 views looking down; lab/navigation/level.py) before the search; "
+    "default: in the simulator when the profile states a mount error (realistic), without --mounts"
 )
 HELP_VIEW3D = (
     "write a recorded 3D view of the run: one self-contained HTML page with a time slider, opens offline "

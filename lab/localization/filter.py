@@ -267,7 +267,9 @@ class LocalizerConfig:
                 f"got {self.update_iterations!r}"
             )
         if not isinstance(self.shared_floor, bool):
-            raise ConfigError(f"LocalizerConfig.shared_floor must be True or False, got {self.shared_floor!r}")
+            raise ConfigError(
+                f"LocalizerConfig.shared_floor must be True or False, got {self.shared_floor!r}"
+            )
         if not isinstance(self.odometry_calibration, bool):
             raise ConfigError(
                 "LocalizerConfig.odometry_calibration must be True or False, "

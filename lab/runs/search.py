@@ -265,6 +265,12 @@ def run_search(
     return run_trial(object, seed, options)
 
 
+def _levels_by_default(kind: RobotKind, sensing) -> bool:
+    """Whether a search levels its camera without ``--level/--no-level``: a simulated robot whose sensing
+    profile states its mounts uncertain (:func:`lab.runs.robots.mounts_stated`)."""
+    return kind is RobotKind.SIM and mounts_stated(sensing)
+
+
 def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     """Run one search trial with its :class:`TrialOptions` and score it (:func:`run_search`): set up
     the world and the robot, run the agent under its report policy, score."""
@@ -293,7 +299,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     spec = map_spec(scene)
     with contextlib.ExitStack() as stack:
         run, truth_of = _session(stack, kind, hw, scene, object, seed, opts, G_WO_measured)
-        to_level = opts.level if opts.level is not None else kind is RobotKind.SIM and mounts_stated(opts.sensing)
+        to_level = opts.level if opts.level is not None else _levels_by_default(kind, opts.sensing)
         base, level = levelled(run.robot) if to_level else (run.robot, None)
         # on a robot its odometry starts at (0, 0, 0): placed at the start in the room (lab/runs/room.py)
         robot = localize(base, kind, room, start_pose, seed)
