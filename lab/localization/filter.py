@@ -99,8 +99,10 @@ class LocalizerConfig:
         image noise (the fit's own covariance) but the same calibration. The ``n``-th such sighting's
         covariance is then the one that leaves the filter's information what ``n`` sightings really
         hold (:meth:`shared_floor_covariance`), not ``n`` times one sighting's. False: every sighting
-        counted as independent (the filter before issue 52's survey showed a robot standing at its
-        find, 8 looks at one poster, 2.5 cm off while stating 1.1 cm; docs/tuning/localizer-shared-floor.md).
+        counted as independent, as before (under issue 52's survey a robot standing at its find looked
+        8 times at one poster and ended 2.5 cm off while stating 1.1 cm). The gate sees the same
+        covariance, so a repeated look's wrong fit passes more easily, and moves the estimate little.
+        Why and what it changed: docs/tuning/localizer-shared-floor.md.
     gate_prob : float
         Observations whose innovation's Mahalanobis distance exceeds the chi-square(3) quantile are
         rejected as outliers.
@@ -339,9 +341,11 @@ class LocalizerConfig:
                   Q_n = \left[(R/n + F)^{-1} - (R/(n-1) + F)^{-1}\right]^{-1}
 
         (for scalars :math:`Q_n = (R + nF)(R + (n-1)F) / R`: a sighting whose error is mostly the floor's
-        adds little the second time). Exact when the pose does not move between the sightings (the
-        filter's linearisation the same); a direction the difference leaves without information gets a
-        variance of 1e6.
+        adds little the second time). The information is exact when the pose does not move between the
+        sightings (the filter's linearisation the same); the mean is not the batch's (the sequential
+        updates weight the first look most), unbiased but spread a little more than stated (NEES 3.0-3.7
+        for chi-square 3 in tests/test_localization_shared_floor.py). A direction the difference leaves
+        without information gets a variance of 1e6.
         """
         R, F = np.asarray(R, float), np.asarray(F, float)
         if n < 1:
