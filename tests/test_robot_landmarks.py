@@ -103,8 +103,8 @@ def test_hardware_check_reads_the_room_map_trains_it_and_says_where_to_stand(tmp
 
     room = lines_of(load_config(REPO / "hardware" / "robot.toml"))
     ok, detail, _ = room["landmark map"]
-    assert ok and "7 posters (poster_north, poster_west" in detail and str(LANDMARKS_TOML) in detail
-    assert len(trained_landmark_map(LANDMARKS_TOML, progress=False)) == 7  # trained: in the cache now
+    assert ok and "12 posters (poster_north, poster_west" in detail and str(LANDMARKS_TOML) in detail
+    assert len(trained_landmark_map(LANDMARKS_TOML, progress=False)) == 12  # trained: in the cache now
     ok, detail, _ = room["start"]
     assert ok and "lab search assumes (0 m, -3 m, 90 deg), from the search room's [robot] start" in detail
     assert "known to 5 cm and 3 deg" in detail

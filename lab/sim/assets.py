@@ -331,7 +331,7 @@ def build_textures(out: Path | None = None) -> list[Path]:
 
 #: Posters 3, 4, ... are grey: landmarks for localization that hold no colour the global search could
 #: take for an object's (its back-projection scores grey near zero, like the walls).
-GREY_POSTERS = 4
+GREY_POSTERS = 9
 
 
 def grey_texture(img: np.ndarray) -> np.ndarray:
