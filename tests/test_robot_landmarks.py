@@ -70,6 +70,9 @@ def _cli_error(capsys, args) -> str:
 
 def test_a_bad_landmark_file_or_start_is_one_line_before_any_port_is_opened(tmp_path, capsys):
     """The emulated config's ports do not exist here: each error comes before the robot is built."""
+    from lab.training.landmarks import trained_landmark_map
+
+    trained_landmark_map(LANDMARKS_TOML, progress=False)  # a cold cache would print its training lines first
     bad = LANDMARKS_TOML.read_text().replace("../worlds", str(REPO / "worlds"))
     bad = bad.replace('name = "poster_west"', 'name = "poster_north"')  # a duplicate name
     (tmp_path / "dup.toml").write_text(bad)
