@@ -269,7 +269,7 @@ def test_a_map_surveyed_to_its_stated_accuracy_is_refined_consistently():
         f"{np.mean(poster_nees):.2f}; robot error {100 * np.mean(err_slam):.2f} cm (fixed "
         f"{100 * np.mean(err_fixed):.2f} cm); poster_north {np.round(100 * np.array(north_err), 2)} cm"
     )
-    assert len(poster_nees) == 8 * 7
+    assert len(poster_nees) == 8 * len(landmark_map_from_scene("lab_room"))
     assert 2.0 < nees.mean() < 4.0 and 2.0 < np.mean(poster_nees) < 4.0
     assert nees_fixed.mean() > 2 * nees.mean()
     assert np.mean(err_slam) < 0.8 * np.mean(err_fixed) and sum(np.less(err_slam, err_fixed)) >= 7
@@ -330,10 +330,12 @@ def test_the_localized_robot_reports_what_it_learned_of_a_surveyed_map():
 def test_a_start_known_to_10cm_5deg_against_a_surveyed_map_converges_from_the_first_sightings():
     """Starts drawn from 10 cm / 5 deg (an operator's mark), a map surveyed to 1.5 cm / 0.7 deg, eight
     seeded one-lap drives: every first sighting is fused (the gate's S holds the start's and the
-    poster's covariance), three sightings bring the robot within 2 cm, the lap ends within 2 cm (the
-    map's own error), and the NEES over every sighting is chi-square(3) (its pooled mean within [2, 4])."""
+    poster's covariance); three sightings (from the first place the robot sees posters) bring it within
+    2 cm in most drives and within its stated covariance in every one (the 99.9 % chi-square(3) bound:
+    the first posters' surveys are the frame it can know, 1-3 cm); the lap ends within 2 cm (the map's
+    own error), and the NEES over every sighting is chi-square(3) (its pooled mean within [2, 4])."""
     Sigma0 = np.diag([0.1**2, 0.1**2, math.radians(5.0) ** 2])
-    kinds, after3, final, nees = [], [], [], []
+    kinds, after3, nees3, final, nees = [], [], [], [], []
     for seed in range(8):
         rng = np.random.default_rng(100 + seed)
         truth, mapped = _surveyed_room(rng)
@@ -349,12 +351,14 @@ def test_a_start_known_to_10cm_5deg_against_a_surveyed_map_converges_from_the_fi
                 e = loc.x - x_true
                 e[2] = wrap_angle(e[2])
                 nees.append(float(e @ np.linalg.solve(loc.Sigma, e)))
-                after3 += [math.hypot(e[0], e[1])] if len(loc.history) == 3 else []
+                if len(loc.history) == 3:
+                    after3.append(math.hypot(e[0], e[1]))
+                    nees3.append(nees[-1])
         final.append(math.hypot(e[0], e[1]))
     print(f"after 3 sightings {np.round(100 * np.array(after3), 2)} cm")
     print(f"after a lap {np.round(100 * np.array(final), 2)} cm; NEES {np.mean(nees):.2f}")
     assert kinds == ["fused"] * 8
-    assert max(after3) < 0.02 and max(final) < 0.02
+    assert np.median(after3) < 0.02 and max(nees3) < chi2.ppf(0.999, 3) and max(final) < 0.02
     assert 2.0 < np.mean(nees) < 4.0
 
 
@@ -384,46 +388,40 @@ def test_the_camera_yaws_jacobians_match_finite_differences(k):
 
 def test_a_half_degree_camera_yaw_is_recovered_to_a_tenth_of_a_degree_by_driving():
     """The camera sits 0.5 deg turned on the base (a pan zero and mount error the robot does not know);
-    every sighting is turned by it. Held as exact, the localizer puts the error into the robot's
-    heading (a bias of about 0.5 deg after each sighting); estimated (prior 1 deg), five laps of the
-    room bring it within 0.1 deg of the truth, and over the last third of them the heading's bias is
-    below 0.1 deg (held exact: above 0.3 deg)."""
+    every sighting is turned by it. Over six seeded five-lap drives of the room: estimated (prior 1
+    deg), the yaw ends within 0.1 deg of the truth (root mean square) and within 3 of its standard
+    deviations in each drive, and the heading's error over the last third of a drive averages below 0.1
+    deg over the drives; held as exact, the localizer puts the yaw into the robot's heading, a bias above
+    0.3 deg. (One drive's heading error is not a bias: it wanders by its 0.1-0.3 deg deviation.)"""
     beta = math.radians(0.5)
-    rng = np.random.default_rng(9)
     truth = landmark_map_from_scene("lab_room")
-    steps = _drive(rng, truth, laps=5)
-    c, sn = math.cos(beta), math.sin(beta)
-    turned = []  # every sighting as the turned camera reports it
-    for u, x_true, seen in steps:
-        turned.append(
-            (
-                u,
-                x_true,
-                [
-                    (n, np.array([c * z[0] + sn * z[1], -sn * z[0] + c * z[1], z[2] - beta]), Q)
-                    for n, z, Q in seen
-                ],
-            )
-        )
     lms = {lm.name: lm for lm in truth}
-    heading_err = {}
-    for sigma in (0.0, math.radians(1.0)):
-        loc = Localizer(
-            X0, SIGMA0, LocalizerConfig(**NO_FLOOR, gate_prob=0.99999, camera_yaw_sigma_rad=sigma)
-        )
-        errs = []
-        for u, x_true, seen in turned:
-            loc.predict(u)
-            for name, z, Q in seen:
-                loc.update(z, Q, lms[name])
-            if seen:
-                errs.append(wrap_angle(loc.x[2] - x_true[2]))
-        heading_err[sigma] = np.mean(errs[2 * len(errs) // 3 :])  # the bias, once the yaw has been learned
-    b = loc.s[loc.camera_yaw]
-    sd = math.sqrt(loc.P[loc.camera_yaw, loc.camera_yaw])
+    c, sn = math.cos(beta), math.sin(beta)
+    yaw_err, yaw_z, bias = [], [], {0.0: [], math.radians(1.0): []}
+    for seed in range(9, 15):
+        steps = _drive(np.random.default_rng(seed), truth, laps=5)
+        for sigma in bias:
+            loc = Localizer(
+                X0, SIGMA0, LocalizerConfig(**NO_FLOOR, gate_prob=0.99999, camera_yaw_sigma_rad=sigma)
+            )
+            errs = []
+            for u, x_true, seen in steps:
+                loc.predict(u)
+                for name, z, Q in seen:  # the sighting as the turned camera reports it
+                    loc.update(
+                        np.array([c * z[0] + sn * z[1], -sn * z[0] + c * z[1], z[2] - beta]), Q, lms[name]
+                    )
+                if seen:
+                    errs.append(wrap_angle(loc.x[2] - x_true[2]))
+            bias[sigma].append(np.mean(errs[2 * len(errs) // 3 :]))  # once the yaw has been learned
+        b, sd = loc.s[loc.camera_yaw], math.sqrt(loc.P[loc.camera_yaw, loc.camera_yaw])
+        yaw_err.append(b - beta)
+        yaw_z.append(abs(b - beta) / sd)
+    rms = math.sqrt(np.mean(np.square(yaw_err)))
+    held, est = np.mean(bias[0.0]), np.mean(bias[math.radians(1.0)])
     print(
-        f"camera yaw 0.5 deg -> {math.degrees(b):.3f} +- {math.degrees(sd):.3f} deg; heading error "
-        f"bias {math.degrees(heading_err[sigma]):.3f} deg (held exact: {math.degrees(heading_err[0.0]):.3f})"
+        f"camera yaw 0.5 deg: errors {np.round(np.degrees(yaw_err), 3)} deg (rms {math.degrees(rms):.3f}); "
+        f"heading bias {math.degrees(est):.3f} deg (held exact: {math.degrees(held):.3f})"
     )
-    assert abs(b - beta) < math.radians(0.1) and abs(b - beta) < 3 * sd
-    assert abs(heading_err[sigma]) < math.radians(0.1) and abs(heading_err[0.0]) > math.radians(0.3)
+    assert rms < math.radians(0.1) and max(yaw_z) < 3.0
+    assert abs(est) < math.radians(0.1) and held > math.radians(0.3)
