@@ -477,7 +477,8 @@ def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, 
     budget = BudgetedRobot(tracked, *budgets)
     drive = navigate(budget, spec)
     navigator = drive.navigator if isinstance(drive, NavigatorAdapter) else None
-    policy = ReportPolicy(tracked, drive, navigator, check=budget.check)
+    upright = cfg.local_search.max_rest_tilt_deg is not None  # the boxes rest on a face (pose_check)
+    policy = ReportPolicy(tracked, drive, navigator, check=budget.check, rests_on_face=upright)
     nav = policy.relocalizing()
     passable = passable_of(drive, spec) if cfg.motion is not None else None
     agent = SearchAgent(

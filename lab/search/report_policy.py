@@ -35,7 +35,7 @@ from lab.localization import LocalizationMode, PlanarPoseEstimate
 from lab.navigation.drive_loop import NavOutcome
 from lab.search.budget import SearchBudgetExceeded
 from lab.search.records import AgentResult, NavigationResult
-from lab.search.world_pose import world_pose_std
+from lab.search.world_pose import rest_on_face, world_pose_covariance, world_pose_std_of
 
 __all__ = ["POSE_UNCERTAIN", "RelocalizingNavigate", "ReportPolicy", "stated_pose_std", "unlimited"]
 
@@ -120,6 +120,10 @@ class ReportPolicy:
     check : callable () -> None
         The time budget's check (:meth:`BudgetedRobot.check <lab.search.budget.BudgetedRobot.check>`);
         default: :func:`unlimited`.
+    rests_on_face : bool
+        The searched object is a box resting on a face of a level surface (the floor, a table, a shelf):
+        the reported pose is conditioned on it (:func:`lab.search.world_pose.rest_on_face`). False: the
+        pose as the local search estimated it.
     """
 
     def __init__(
@@ -128,11 +132,13 @@ class ReportPolicy:
         navigate: Callable[..., NavigationResult] | None = None,
         navigator=None,
         check: Callable[[], None] = unlimited,
+        rests_on_face: bool = True,
     ):
         self.robot = robot
         self.navigate = navigate
         self.navigator = navigator
         self.check = check
+        self.rests_on_face = bool(rests_on_face)
 
     def relocalizing(self) -> RelocalizingNavigate:
         """The agent's ``navigate``: this policy's ``navigate`` with a re-localization before every drive."""
@@ -175,12 +181,13 @@ class ReportPolicy:
         object moved, and the detour (None: none was needed or possible).
 
         The result carries the reported pose's stated deviation in the world (:func:`stated_pose_std`)
-        with the robot's covariance as reported (on odometry alone: dead reckoning's)."""
+        with the robot's covariance as reported (on odometry alone: dead reckoning's), and with
+        ``rests_on_face`` the pose and its deviation conditioned on the box resting on a face."""
         robot = self.robot
         if not out.found or out.G_WO is None:
             return out, None
         if robot.mode is not LocalizationMode.LANDMARKS:
-            return stated_pose_std(out, robot.pose_estimate().Sigma, robot.camera), None
+            return stated_pose_std(out, robot.pose_estimate().Sigma, robot.camera, self.rests_on_face), None
         p_W = out.G_WO[:2, 3].copy()
         est0 = robot.pose_estimate()
         robot.relocalize_to_report(at_W=p_W)
@@ -201,7 +208,7 @@ class ReportPolicy:
             "shift_m": round(float(np.linalg.norm(G_WO[:3, 3] - out.G_WO[:3, 3])), 4),
             "detour": detour,
         }
-        return stated_pose_std(replace(out, G_WO=G_WO), Sigma_R, robot.camera), info
+        return stated_pose_std(replace(out, G_WO=G_WO), Sigma_R, robot.camera, self.rests_on_face), info
 
     def detour(self) -> tuple[PlanarPoseEstimate | None, dict | None]:
         """Keep the robot's pose in the filter (:meth:`Localizer.start_clone`), drive to the nearest place
@@ -256,15 +263,23 @@ class ReportPolicy:
         return kept, info
 
 
-def stated_pose_std(out: AgentResult, Sigma_R, camera) -> AgentResult:
+def stated_pose_std(out: AgentResult, Sigma_R, camera, rests_on_face: bool = False) -> AgentResult:
     """``out`` with its ``pose_std``: how well the robot knows the found ``G_WO`` in the world
-    (:func:`lab.search.world_pose.world_pose_std`) from the local search's estimate in the camera, the
-    camera's stated pointing accuracy on the robot (``camera.pointing_std_deg``: the pan-tilt's zero and
-    the mounts) and the robot's pose covariance ``Sigma_R`` (3, 3); unchanged without a found track."""
+    (:func:`lab.search.world_pose.world_pose_covariance`) from the local search's estimate in the camera,
+    the camera's stated pointing accuracy on the robot (``camera.pointing_std_deg``: the pan-tilt's zero
+    and the mounts) and the robot's pose covariance ``Sigma_R`` (3, 3); unchanged without a found track.
+
+    With ``rests_on_face`` the pose and the covariance are conditioned on the box resting on one of its
+    faces (:func:`lab.search.world_pose.rest_on_face`): ``G_WO`` is the upright pose, ``pose_std`` the
+    conditioned deviation."""
     loc = out.local
     if out.G_WO is None or loc is None or loc.estimate is None or loc.frame is None:
         return out
-    G_RC, G_CO = loc.frame.G_RC, loc.estimate.G_CO
+    G_RC, G_CO, Sigma_o = loc.frame.G_RC, loc.estimate.G_CO, loc.estimate.Sigma_rv
     G_WR = out.G_WO @ se3_inv(G_RC @ G_CO)  # the robot pose the reported G_WO rests on
     pointing = math.radians(camera.pointing_std_deg)
-    return replace(out, pose_std=world_pose_std(G_WR, Sigma_R, G_RC, pointing, G_CO, loc.estimate.Sigma_rv))
+    S = world_pose_covariance(G_WR, Sigma_R, G_RC, pointing, G_CO, Sigma_o)
+    G_WO = out.G_WO
+    if rests_on_face:
+        G_WO, S = rest_on_face(G_WO, S)
+    return replace(out, G_WO=G_WO, pose_std=world_pose_std_of(S, Sigma_o))

@@ -25,6 +25,18 @@ related), so ``Sigma_WO = J_R Sigma_R J_R^T + J_d Sigma_d J_d^T + J_o Sigma_rv J
 deviations are those of the larger axes, as the local search's "found" uses them
 (:func:`lab.search.tracking.pose_stds`). What they say against the errors of tuning runs, and which of
 the room's errors the found pose's error comes from: docs/tuning/search-found-pose.md.
+
+**Resting on a face** (:func:`rest_on_face`). The searched objects are boxes standing on the floor, a
+table or a shelf, which are level: one of the box's axes is vertical, exactly. An estimate is tilted by
+its errors, and the tilt is information: the constraint ``E_xy Exp(phi_W) a = 0`` (``a`` the box's axis
+nearest the vertical, ``E_xy`` its horizontal components) is a perfect measurement of ``[dp, phi_W]``.
+Conditioning ``Sigma_WO`` on it corrects the tilt and, through the covariance's cross terms, what is
+correlated with it: a camera pitched by its mount error tilts the box and moves it by the same
+rotation about the camera, so removing the tilt moves the box back. The stated deviations are then the
+conditioned ones; the tilt's two directions are known, the yaw's is not. The local search rejects a
+tilt above ``max_rest_tilt_deg`` before it calls a pose found (:mod:`lab.search.pose_check`): a tilt
+that large says the pose is wrong, not slightly off. What it changed on tuning runs:
+docs/tuning/search-rest-on-face.md.
 """
 
 from __future__ import annotations
@@ -33,10 +45,18 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from lab.errors import ConfigError
 
-__all__ = ["WorldPoseStd", "larger_axes_std", "world_pose_covariance", "world_pose_std"]
+__all__ = [
+    "WorldPoseStd",
+    "larger_axes_std",
+    "rest_on_face",
+    "world_pose_covariance",
+    "world_pose_std",
+    "world_pose_std_of",
+]
 
 
 def _skew(v) -> np.ndarray:
@@ -127,6 +147,69 @@ def larger_axes_std(S) -> tuple[float, float]:
 def world_pose_std(G_WR, Sigma_R, G_RC, pointing_std_rad: float, G_CO, Sigma_CO_rv) -> WorldPoseStd:
     """:func:`world_pose_covariance` and its larger axes, with the camera frame's own."""
     S = world_pose_covariance(G_WR, Sigma_R, G_RC, pointing_std_rad, G_CO, Sigma_CO_rv)
+    return world_pose_std_of(S, Sigma_CO_rv)
+
+
+def world_pose_std_of(Sigma_WO, Sigma_CO_rv) -> WorldPoseStd:
+    """The :class:`WorldPoseStd` of a world covariance ``Sigma_WO`` (6, 6) and the camera frame's
+    ``Sigma_CO_rv`` (6, 6) it rests on."""
+    S = np.asarray(Sigma_WO, float)
     pos, rot = larger_axes_std(S)
     cpos, crot = larger_axes_std(np.asarray(Sigma_CO_rv, float))
     return WorldPoseStd(pos, rot, cpos, crot, S)
+
+
+def _upright(R: np.ndarray) -> np.ndarray:
+    """The box's axis nearest the vertical, in W, pointing up."""
+    k = int(np.argmax(np.abs(R[2])))
+    return R[:, k] * (1.0 if R[2, k] >= 0 else -1.0)
+
+
+def rest_on_face(G_WO, Sigma_WO, iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """The found pose and its covariance conditioned on the box resting on a face of a level surface
+    (the module docstring): ``(G_WO', Sigma_WO')``, with one of the box's axes exactly vertical.
+
+    The constraint ``c(x) = E_xy Exp(phi) a = 0`` on the error ``x = [dp, phi_W]`` (``p' = p + dp``,
+    ``R' = Exp(phi) R``, ``x ~ N(0, Sigma_WO)``) is solved as a perfect measurement by Gauss-Newton: at
+    ``x_i``, with ``C_i = [0, -E_xy [a_i]_x]`` (``a_i = Exp(phi_i) a``),
+    ``x_{i+1} = Sigma C_i^T (C_i Sigma C_i^T)^{-1} (C_i x_i - c(x_i))``, the most probable ``x`` on the
+    linearised constraint; ``Sigma' = Sigma - Sigma C^T (C Sigma C^T)^{-1} C Sigma`` (rank 4). What is
+    left of the tilt after ``iterations`` steps (second order in the tilt) is turned away by the
+    smallest rotation about the box's centre.
+
+    Parameters
+    ----------
+    G_WO : ndarray, shape (4, 4)
+        The found pose in W (z up).
+    Sigma_WO : ndarray, shape (6, 6)
+        Its covariance over ``[dp, phi_W]`` (:func:`world_pose_covariance`).
+    iterations : int
+        Gauss-Newton steps (3: the tilts the local search lets through, under 10 degrees, are then
+        corrected to a small fraction of a degree before the last turn).
+    """
+    G = np.asarray(G_WO, float)
+    S = np.asarray(Sigma_WO, float)
+    if G.shape != (4, 4) or S.shape != (6, 6):
+        raise ConfigError(f"rest_on_face needs G_WO (4, 4) and Sigma_WO (6, 6), got {G.shape}, {S.shape}")
+    a0 = _upright(G[:3, :3])
+    x = np.zeros(6)
+    C = np.zeros((2, 6))
+    for _ in range(max(1, int(iterations))):
+        a = Rotation.from_rotvec(x[3:]).apply(a0)
+        C[:, 3:] = -_skew(a)[:2]  # d(E_xy Exp(phi) a0) = E_xy (dphi x a) = -E_xy [a]_x dphi
+        W = C @ S @ C.T
+        if np.linalg.cond(W) > 1e12:  # no stated tilt uncertainty: nothing to learn from it
+            x = np.zeros(6)
+            break
+        x = S @ C.T @ np.linalg.solve(W, C @ x - a[:2])
+    else:
+        S = S - S @ C.T @ np.linalg.solve(W, C @ S)
+    R = Rotation.from_rotvec(x[3:]).as_matrix() @ G[:3, :3]
+    a = _upright(R)
+    turn = np.cross(a, [0.0, 0.0, 1.0])  # the rest of the tilt: |turn| = sin(angle)
+    if np.linalg.norm(turn) > 0:
+        angle = math.atan2(float(np.linalg.norm(turn)), float(a[2]))
+        R = Rotation.from_rotvec(turn / np.linalg.norm(turn) * angle).as_matrix() @ R
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = R, G[:3, 3] + x[:3]
+    return out, 0.5 * (S + S.T)
