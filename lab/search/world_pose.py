@@ -29,13 +29,14 @@ the room's errors the found pose's error comes from: docs/tuning/search-found-po
 **Resting on a face** (:func:`rest_on_face`). The searched objects are boxes standing on the floor, a
 table or a shelf, which are level: one of the box's axes is vertical, exactly. An estimate is tilted by
 its errors, and the tilt is information: the constraint ``E_xy Exp(phi_W) a = 0`` (``a`` the box's axis
-nearest the vertical, ``E_xy`` its horizontal components) is a perfect measurement of ``[dp, phi_W]``.
-Conditioning ``Sigma_WO`` on it corrects the tilt and, through the covariance's cross terms, what is
-correlated with it: a camera pitched by its mount error tilts the box and moves it by the same
-rotation about the camera, so removing the tilt moves the box back. The stated deviations are then the
-conditioned ones; the tilt's two directions are known, the yaw's is not. The local search rejects a
-tilt above ``max_rest_tilt_deg`` before it calls a pose found (:mod:`lab.search.pose_check`): a tilt
-that large says the pose is wrong, not slightly off. What it changed on tuning runs:
+nearest the vertical, ``E_xy`` its horizontal components) is a perfect measurement of ``phi_W``.
+Conditioning the orientation on it removes the tilt and corrects the yaw by what the covariance says is
+correlated with the tilt; the stated rotation deviation is then the yaw's. The position is left as
+estimated: through ``Sigma_WO``'s cross terms the tilt would also move it, by the camera pointing's
+share of the tilt, but on tuning runs the tilt was mostly the local search's own orientation error,
+which its EKF understates, and the moves made the position worse as often as better. The local search
+rejects a tilt above ``max_rest_tilt_deg`` before it calls a pose found (:mod:`lab.search.pose_check`):
+a tilt that large says the pose is wrong, not slightly off. What it changed on tuning runs:
 docs/tuning/search-rest-on-face.md.
 """
 
@@ -166,16 +167,19 @@ def _upright(R: np.ndarray) -> np.ndarray:
 
 
 def rest_on_face(G_WO, Sigma_WO, iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
-    """The found pose and its covariance conditioned on the box resting on a face of a level surface
-    (the module docstring): ``(G_WO', Sigma_WO')``, with one of the box's axes exactly vertical.
+    """The found pose and its covariance with the orientation conditioned on the box resting on a face of
+    a level surface (the module docstring): ``(G_WO', Sigma_WO')``, one of the box's axes exactly vertical
+    and the position as it was.
 
-    The constraint ``c(x) = E_xy Exp(phi) a = 0`` on the error ``x = [dp, phi_W]`` (``p' = p + dp``,
-    ``R' = Exp(phi) R``, ``x ~ N(0, Sigma_WO)``) is solved as a perfect measurement by Gauss-Newton: at
-    ``x_i``, with ``C_i = [0, -E_xy [a_i]_x]`` (``a_i = Exp(phi_i) a``),
-    ``x_{i+1} = Sigma C_i^T (C_i Sigma C_i^T)^{-1} (C_i x_i - c(x_i))``, the most probable ``x`` on the
-    linearised constraint; ``Sigma' = Sigma - Sigma C^T (C Sigma C^T)^{-1} C Sigma`` (rank 4). What is
-    left of the tilt after ``iterations`` steps (second order in the tilt) is turned away by the
-    smallest rotation about the box's centre.
+    The constraint ``c(phi) = E_xy Exp(phi) a = 0`` on the orientation error ``phi`` (``R' = Exp(phi) R``,
+    ``phi ~ N(0, Sigma_phi)``, the rotation block of ``Sigma_WO``) is solved as a perfect measurement by
+    Gauss-Newton: at ``phi_i``, with ``C_i = -E_xy [a_i]_x`` (``a_i = Exp(phi_i) a``),
+    ``phi_{i+1} = K_i (C_i phi_i - c(phi_i))``, ``K_i = Sigma_phi C_i^T (C_i Sigma_phi C_i^T)^{-1}``: the
+    most probable orientation on the linearised constraint. What is left of the tilt after ``iterations``
+    steps (second order in it) is turned away by the smallest rotation about the box's centre. The
+    covariance is that of this estimator, the position's gain being zero (Joseph's form,
+    ``Sigma' = (I - K H) Sigma (I - K H)^T`` with ``K = [0; K]``, ``H = [0, C]``): rank 4, the position's
+    three directions and the yaw.
 
     Parameters
     ----------
@@ -192,24 +196,28 @@ def rest_on_face(G_WO, Sigma_WO, iterations: int = 3) -> tuple[np.ndarray, np.nd
     if G.shape != (4, 4) or S.shape != (6, 6):
         raise ConfigError(f"rest_on_face needs G_WO (4, 4) and Sigma_WO (6, 6), got {G.shape}, {S.shape}")
     a0 = _upright(G[:3, :3])
-    x = np.zeros(6)
-    C = np.zeros((2, 6))
+    S_phi = S[3:, 3:]
+    phi = np.zeros(3)
+    K = np.zeros((3, 2))
+    C = np.zeros((2, 3))
     for _ in range(max(1, int(iterations))):
-        a = Rotation.from_rotvec(x[3:]).apply(a0)
-        C[:, 3:] = -_skew(a)[:2]  # d(E_xy Exp(phi) a0) = E_xy (dphi x a) = -E_xy [a]_x dphi
-        W = C @ S @ C.T
-        if np.linalg.cond(W) > 1e12:  # no stated tilt uncertainty: nothing to learn from it
-            x = np.zeros(6)
+        a = Rotation.from_rotvec(phi).apply(a0)
+        C = -_skew(a)[:2]  # d(E_xy Exp(phi) a0) = E_xy (dphi x a) = -E_xy [a]_x dphi
+        W = C @ S_phi @ C.T
+        if np.linalg.cond(W) > 1e12:  # no stated tilt uncertainty: nothing to learn from the tilt
+            phi, K = np.zeros(3), np.zeros((3, 2))
             break
-        x = S @ C.T @ np.linalg.solve(W, C @ x - a[:2])
-    else:
-        S = S - S @ C.T @ np.linalg.solve(W, C @ S)
-    R = Rotation.from_rotvec(x[3:]).as_matrix() @ G[:3, :3]
+        K = S_phi @ C.T @ np.linalg.inv(W)
+        phi = K @ (C @ phi - a[:2])
+    IKH = np.eye(6)
+    IKH[3:, 3:] -= K @ C
+    S = IKH @ S @ IKH.T
+    R = Rotation.from_rotvec(phi).as_matrix() @ G[:3, :3]
     a = _upright(R)
     turn = np.cross(a, [0.0, 0.0, 1.0])  # the rest of the tilt: |turn| = sin(angle)
     if np.linalg.norm(turn) > 0:
         angle = math.atan2(float(np.linalg.norm(turn)), float(a[2]))
         R = Rotation.from_rotvec(turn / np.linalg.norm(turn) * angle).as_matrix() @ R
-    out = np.eye(4)
-    out[:3, :3], out[:3, 3] = R, G[:3, 3] + x[:3]
+    out = G.copy()
+    out[:3, :3] = R
     return out, 0.5 * (S + S.T)
