@@ -28,7 +28,16 @@ Each landmark's database is trained like an object's (:mod:`lab.training.databas
 rendered alone from viewpoints in front of its face -- azimuths up to ``max_azimuth_deg`` off its
 normal, at several distances, the range the robot sees it from in the room -- and the 3D SIFT features
 on its face are moved into L with the known training pose and merged across views. Databases are
-cached by the texture's and the parameters' hash (``<cache>/landmarks/v<FORMAT>/<name>-<hash>.npz``).
+cached by the texture's and the parameters' hash (``<cache>/landmarks/v<FORMAT>/<name>-<hash>.npz``),
+each written atomically, and each trained under a lock file beside it (``<name>-<hash>.npz.lock``).
+
+The lock is there for a cold cache read by several processes at once -- two test workers
+(pytest-xdist), or two workers of ``lab eval``: without it each would train every poster (seconds
+each); with it they split the posters. A process trains the posters whose lock is free (reading the
+cache again once it holds the lock), skips those another process is training, and at the end waits
+for those and reads them from the cache. The locks are the operating system's
+(:class:`filelock.FileLock`): a crashed process's lock is freed with it, and the next process to take
+it trains that poster; a lock file left on disk holds nothing.
 """
 
 from __future__ import annotations
@@ -43,6 +52,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from filelock import FileLock, Timeout
 
 from lab.errors import AssetError, ConfigError
 from lab.geometry import Rz, se3, se3_inv, transform_points
@@ -315,23 +325,74 @@ def _path(name: str, asset_hash: str, folder: Path | None) -> Path:
     return Path(folder or cache_dir() / "landmarks") / f"v{FORMAT_VERSION}" / f"{name}-{asset_hash[:12]}.npz"
 
 
-def _cached_database(p: _Poster, params, camera, folder, progress: bool) -> FeatureDatabase:
-    want = _asset_hash(p, params, camera)
-    path = _path(p.landmark.name, want, folder)
+def _load_cached(path: Path, name: str, want: str) -> tuple[FeatureDatabase | None, str]:
+    """The database cached at ``path`` when it was trained for hash ``want``; else None and why not."""
     try:
-        db = load_database(path, p.landmark.name)
+        db = load_database(path, name)
         if db.meta.get("asset_hash") == want:
-            return db
-        reason = "its texture, pose or training parameters changed"
+            return db, ""
+        return None, "its texture, pose or training parameters changed"
     except AssetError as e:
-        reason = "it is not in the cache" if not path.is_file() else str(e)
-    if progress:
-        print(
-            f"lab: building the landmark database of {p.landmark.name} ({reason}) -> {path}", file=sys.stderr
-        )
-    db = train_landmark_database(p, params, camera)
-    save_database(db, path)
-    return db
+        return None, "it is not in the cache" if not path.is_file() else str(e)
+
+
+@dataclass(frozen=True)
+class _Job:
+    poster: _Poster
+    want: str  # the asset hash
+    path: Path  # its database in the cache
+
+
+def _build_locked(job: _Job, wait: bool, params, camera, progress: bool, train) -> FeatureDatabase | None:
+    """``job``'s database under its lock (``<path>.lock``): read once more from the cache (the lock's last
+    holder may have just saved it), else trained and saved. None when another process holds the lock
+    and not ``wait``; with ``wait``, blocks until it is free (the OS frees a dead holder's lock)."""
+    name = job.poster.landmark.name
+    job.path.parent.mkdir(parents=True, exist_ok=True)
+    lock = FileLock(job.path.with_name(f"{job.path.name}.lock"))
+    try:
+        lock.acquire(timeout=0)
+    except Timeout:
+        if not wait:
+            return None
+        if progress:
+            print(
+                f"lab: waiting for another process to build the landmark database of {name}", file=sys.stderr
+            )
+        lock.acquire(timeout=-1)
+    try:
+        db, reason = _load_cached(job.path, name, job.want)
+        if db is None:
+            if progress:
+                print(
+                    f"lab: building the landmark database of {name} ({reason}) -> {job.path}", file=sys.stderr
+                )
+            db = train(job.poster, params, camera)
+            save_database(db, job.path)
+        return db
+    finally:
+        lock.release()
+
+
+def _cached_databases(posters: list[_Poster], params, camera, folder, progress: bool, train) -> list:
+    """Each poster's database, from the cache or trained. Processes on one cold cache split the posters:
+    each trains those whose lock is free, skips those another holds, and at the end waits for them."""
+    jobs = []
+    for p in posters:
+        want = _asset_hash(p, params, camera)
+        jobs.append(_Job(p, want, _path(p.landmark.name, want, folder)))
+    dbs = [_load_cached(j.path, j.poster.landmark.name, j.want)[0] for j in jobs]
+    todo = [i for i, db in enumerate(dbs) if db is None]
+    while todo:
+        held = []
+        for i in todo:
+            dbs[i] = _build_locked(jobs[i], False, params, camera, progress, train)
+            if dbs[i] is None:
+                held.append(i)
+        if held:  # all the others are done: wait for the first held one, then try the rest again
+            dbs[held[0]] = _build_locked(jobs[held[0]], True, params, camera, progress, train)
+        todo = held[1:]
+    return dbs
 
 
 def trained_landmark_map(
@@ -340,6 +401,7 @@ def trained_landmark_map(
     camera: StereoCamera | None = None,
     folder: Path | None = None,
     progress: bool = True,
+    _train=train_landmark_database,  # tests: a stand-in trainer
 ) -> LandmarkMap:
     """The landmark map of a scene (name or Scene) or of a landmark file (``*.toml`` path other than a
     scene), each landmark with its (cached) database."""
@@ -358,7 +420,6 @@ def trained_landmark_map(
         posters = _posters_of_scene(scene)
         room = scene.room.size if scene.room is not None else (12.0, 12.0)
         where = f"scene {scene.name}"
-    lms = tuple(
-        replace(p.landmark, database=_cached_database(p, params, camera, folder, progress)) for p in posters
-    )
+    dbs = _cached_databases(posters, params, camera, folder, progress, _train)
+    lms = tuple(replace(p.landmark, database=db) for p, db in zip(posters, dbs, strict=True))
     return LandmarkMap(lms, tuple(room), where)
