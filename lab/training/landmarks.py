@@ -35,9 +35,10 @@ The lock is there for a cold cache read by several processes at once -- two test
 (pytest-xdist), or two workers of ``lab eval``: without it each would train every poster (seconds
 each); with it they split the posters. A process trains the posters whose lock is free (reading the
 cache again once it holds the lock), skips those another process is training, and at the end waits
-for those and reads them from the cache. The locks are the operating system's
-(:class:`filelock.FileLock`): a crashed process's lock is freed with it, and the next process to take
-it trains that poster; a lock file left on disk holds nothing.
+for those and reads them from the cache (:func:`lab.training.cache.load_or_build_all`, the rule of
+every training cache). The locks are the operating system's (:class:`filelock.FileLock`): a crashed
+process's lock is freed with it, and the next process to take it trains that poster; a lock file
+left on disk holds nothing.
 """
 
 from __future__ import annotations
@@ -45,14 +46,13 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import sys
 import tomllib
 from dataclasses import asdict, dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import cv2
 import numpy as np
-from filelock import FileLock, Timeout
 
 from lab.errors import AssetError, ConfigError
 from lab.geometry import Rz, se3, se3_inv, transform_points
@@ -60,6 +60,7 @@ from lab.localization import Landmark, LandmarkMap, inward_normal
 from lab.paths import cache_dir
 from lab.robot import SIM_CAMERA, StereoCamera
 from lab.scene import BodySpec, Scene, load_scene
+from lab.training.cache import Artefact, load_or_build_all
 from lab.training.databases import TrainingParams, merge_view_features
 from lab.vision.database import FORMAT_VERSION, FeatureDatabase, load_database, save_database
 from lab.vision.stereo import StereoParams, sift, stereo_features
@@ -336,63 +337,23 @@ def _load_cached(path: Path, name: str, want: str) -> tuple[FeatureDatabase | No
         return None, "it is not in the cache" if not path.is_file() else str(e)
 
 
-@dataclass(frozen=True)
-class _Job:
-    poster: _Poster
-    want: str  # the asset hash
-    path: Path  # its database in the cache
-
-
-def _build_locked(job: _Job, wait: bool, params, camera, progress: bool, train) -> FeatureDatabase | None:
-    """``job``'s database under its lock (``<path>.lock``): read once more from the cache (the lock's last
-    holder may have just saved it), else trained and saved. None when another process holds the lock
-    and not ``wait``; with ``wait``, blocks until it is free (the OS frees a dead holder's lock)."""
-    name = job.poster.landmark.name
-    job.path.parent.mkdir(parents=True, exist_ok=True)
-    lock = FileLock(job.path.with_name(f"{job.path.name}.lock"))
-    try:
-        lock.acquire(timeout=0)
-    except Timeout:
-        if not wait:
-            return None
-        if progress:
-            print(
-                f"lab: waiting for another process to build the landmark database of {name}", file=sys.stderr
-            )
-        lock.acquire(timeout=-1)
-    try:
-        db, reason = _load_cached(job.path, name, job.want)
-        if db is None:
-            if progress:
-                print(
-                    f"lab: building the landmark database of {name} ({reason}) -> {job.path}", file=sys.stderr
-                )
-            db = train(job.poster, params, camera)
-            save_database(db, job.path)
-        return db
-    finally:
-        lock.release()
-
-
 def _cached_databases(posters: list[_Poster], params, camera, folder, progress: bool, train) -> list:
-    """Each poster's database, from the cache or trained. Processes on one cold cache split the posters:
-    each trains those whose lock is free, skips those another holds, and at the end waits for them."""
-    jobs = []
+    """Each poster's database, from the cache or trained. Processes on one cold cache split the posters
+    (:func:`lab.training.cache.load_or_build_all`)."""
+    cached = []
     for p in posters:
-        want = _asset_hash(p, params, camera)
-        jobs.append(_Job(p, want, _path(p.landmark.name, want, folder)))
-    dbs = [_load_cached(j.path, j.poster.landmark.name, j.want)[0] for j in jobs]
-    todo = [i for i, db in enumerate(dbs) if db is None]
-    while todo:
-        held = []
-        for i in todo:
-            dbs[i] = _build_locked(jobs[i], False, params, camera, progress, train)
-            if dbs[i] is None:
-                held.append(i)
-        if held:  # all the others are done: wait for the first held one, then try the rest again
-            dbs[held[0]] = _build_locked(jobs[held[0]], True, params, camera, progress, train)
-        todo = held[1:]
-    return dbs
+        name, want = p.landmark.name, _asset_hash(p, params, camera)
+        path = _path(name, want, folder)
+        cached.append(
+            Artefact(
+                path,
+                f"the landmark database of {name}",
+                partial(_load_cached, path, name, want),
+                partial(train, p, params, camera),
+                save_database,
+            )
+        )
+    return load_or_build_all(cached, progress)
 
 
 def trained_landmark_map(
