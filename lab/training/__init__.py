@@ -8,14 +8,17 @@
   sees its objects from.
 
 Each ``get_*`` function returns what is in the versioned per-user cache (``~/.cache/lab`` or
-``$LAB_CACHE``), building it first when it is missing, stale or corrupt, and saying so on stderr. The
-algorithm packages never call these: a run loads what they need and hands it to them.
+``$LAB_CACHE``), building it first when it is missing, stale or corrupt, and saying so on stderr.
+:mod:`lab.training.cache` holds their one rule for building: under a lock file beside the cached file,
+so that processes on one cold cache build each file once. The algorithm packages never call these: a
+run loads what they need and hands it to them.
 """
 
 from lab.training.databases import (
     TrainingParams,
     database_path,
     get_database,
+    get_databases,
     train_database,
     trainable_objects,
 )
@@ -38,6 +41,7 @@ __all__ = [
     "build_model_tables",
     "database_path",
     "get_database",
+    "get_databases",
     "get_model_tables",
     "get_tables",
     "load_tables",

@@ -11,7 +11,9 @@ histogram (search paper, Sec. III-B), accumulated over the same views.
 
 The result is a :class:`~lab.vision.database.FeatureDatabase`. :func:`get_database` keeps them in a
 versioned cache (``<cache>/databases/v<FORMAT>/<name>.npz``), rebuilding one whose textures or
-training parameters changed, or whose file is corrupt, and saying so.
+training parameters changed, or whose file is corrupt, and saying so. Each is built under a lock file
+beside it (:mod:`lab.training.cache`): processes that find the cache cold at once (test workers, the
+workers of ``lab eval``) build each database once, and :func:`get_databases` splits a list of them.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import hashlib
 import json
 import math
 import sys
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -32,6 +35,7 @@ from lab.geometry import se3, se3_inv, transform_points
 from lab.paths import cache_dir
 from lab.robot import SIM_CAMERA, StereoCamera
 from lab.scene import BodySpec, load_scene
+from lab.training.cache import Artefact, load_or_build, load_or_build_all
 from lab.vision.colour import colour_histogram
 from lab.vision.database import FORMAT_VERSION, FeatureDatabase, load_database, save_database
 from lab.vision.stereo import StereoParams, sift, stereo_features
@@ -40,6 +44,7 @@ __all__ = [
     "TrainingParams",
     "database_path",
     "get_database",
+    "get_databases",
     "merge_view_features",
     "object_world",
     "train_database",
@@ -316,6 +321,27 @@ def database_path(name: str, folder: Path | None = None) -> Path:
     return Path(folder or cache_dir() / "databases") / f"v{FORMAT_VERSION}" / f"{name}.npz"
 
 
+def _cached(name: str, obj: _Trainable, path: Path, params: TrainingParams, progress: bool) -> Artefact:
+    """The database of ``name`` as an artefact of the cache (:mod:`lab.training.cache`)."""
+
+    def load():
+        try:
+            db = load_database(path, name)
+        except AssetError as e:
+            return None, "it is not in the cache" if not path.is_file() else str(e)
+        if db.meta.get("asset_hash") != _asset_hash(obj, params):
+            return None, "its textures or training parameters changed"
+        return db, ""
+
+    return Artefact(
+        path,
+        f"the feature database of {name}",
+        load,
+        lambda: train_database(name, params, progress),
+        save_database,
+    )
+
+
 def get_database(
     name: str,
     folder: Path | None = None,
@@ -325,24 +351,30 @@ def get_database(
 ) -> FeatureDatabase:
     """The database of ``name`` from the cache; built (and cached) first when missing, stale or corrupt.
 
-    A rebuild says so on stderr, with the reason.
+    A rebuild says so on stderr, with the reason. It is built under a lock file beside it
+    (:func:`lab.training.cache.load_or_build`): a process that finds another building it waits, then
+    reads that one's file.
     """
     params = params or TrainingParams()
     objects = trainable_objects()
     if name not in objects:
         raise ConfigError(f"unknown object {name!r}; trainable objects: {', '.join(objects)}")
     path = database_path(name, folder)
-    reason = "rebuild requested" if rebuild else None
-    if reason is None:
-        try:
-            db = load_database(path, name)
-            if db.meta.get("asset_hash") == _asset_hash(objects[name], params):
-                return db
-            reason = "its textures or training parameters changed"
-        except AssetError as e:
-            reason = "it is not in the cache" if not path.is_file() else str(e)
-    if progress:
-        print(f"lab: building the feature database of {name} ({reason}) -> {path}", file=sys.stderr)
-    db = train_database(name, params, progress=progress)
-    save_database(db, path)
-    return db
+    return load_or_build(_cached(name, objects[name], path, params, progress), progress, rebuild)
+
+
+def get_databases(
+    names: Sequence[str],
+    folder: Path | None = None,
+    params: TrainingParams | None = None,
+    progress: bool = True,
+) -> list[FeatureDatabase]:
+    """The databases of ``names``, in order, as :func:`get_database` gives each; processes that find the
+    cache cold at once split the building (:func:`lab.training.cache.load_or_build_all`)."""
+    params = params or TrainingParams()
+    objects = trainable_objects()
+    for n in names:
+        if n not in objects:
+            raise ConfigError(f"unknown object {n!r}; trainable objects: {', '.join(objects)}")
+    cached = [_cached(n, objects[n], database_path(n, folder), params, progress) for n in names]
+    return load_or_build_all(cached, progress)
