@@ -16,6 +16,9 @@ JSON metadata with the digests of the databases it was built from, the parameter
 its own arrays), written atomically, as the feature databases are (:mod:`lab.training.databases`). A file
 whose databases or parameters changed is *stale*, one whose digest does not match is *corrupt*: both
 raise :class:`~lab.errors.AssetError` from :func:`load_tables`, and :func:`get_tables` rebuilds them.
+Each file is built under a lock file beside it (:mod:`lab.training.cache`): processes that find the
+cache cold at once (the workers of ``lab eval identify``) split the true models instead of each
+building all of them.
 """
 
 from __future__ import annotations
@@ -44,7 +47,8 @@ from lab.identification.tables import (
 from lab.paths import cache_dir
 from lab.robot import SIM_CAMERA, StereoCamera
 from lab.scene import load_scene
-from lab.training.databases import get_database, object_world, trainable_objects
+from lab.training.cache import Artefact, load_or_build, load_or_build_all
+from lab.training.databases import get_databases, object_world, trainable_objects
 from lab.vision import FeatureDatabase
 from lab.vision.stereo import StereoParams, sift, stereo_features
 
@@ -279,7 +283,7 @@ def _databases(names, dbs):
         if [d.name for d in dbs] != list(names):
             raise ConfigError(f"databases {[d.name for d in dbs]} do not match the models {list(names)}")
         return dbs
-    return [get_database(n, progress=False) for n in names]
+    return get_databases(names, progress=False)
 
 
 def load_tables(
@@ -312,6 +316,27 @@ def load_tables(
     return LookupTables.from_model_tables(out, n_levels)
 
 
+def _cached(
+    true_model: str, dbs: Sequence[FeatureDatabase], folder, params: TableParams, scoring, progress: bool
+) -> Artefact:
+    """One true model's tables as an artefact of the cache (:mod:`lab.training.cache`)."""
+    path = tables_path(true_model, folder)
+    key = _key(true_model, dbs, params, scoring)
+
+    def load():
+        try:
+            t = load_model_tables(path, true_model)
+        except AssetError as e:
+            return None, "they are not in the cache" if not path.is_file() else str(e)
+        reason = _stale_reason(t, key)
+        return (t, "") if reason is None else (None, reason)
+
+    def build():
+        return build_model_tables(true_model, dbs, params, scoring, progress=progress)
+
+    return Artefact(path, f"the lookup tables of {true_model}", load, build, save_model_tables)
+
+
 def get_model_tables(
     true_model: str,
     dbs: Sequence[FeatureDatabase],
@@ -323,25 +348,12 @@ def get_model_tables(
 ) -> ModelTables:
     """One true model's tables from the cache; built (and cached) first when missing, stale or corrupt.
 
-    A rebuild says so on stderr, with the reason.
+    A rebuild says so on stderr, with the reason. It is built under a lock file beside it
+    (:func:`lab.training.cache.load_or_build`): a process that finds another building it waits, then
+    reads that one's file.
     """
     params, scoring = params or TableParams(), scoring or ScoringConfig()
-    path = tables_path(true_model, folder)
-    key = _key(true_model, dbs, params, scoring)
-    reason = "rebuild requested" if rebuild else None
-    if reason is None:
-        try:
-            t = load_model_tables(path, true_model)
-            reason = _stale_reason(t, key)
-            if reason is None:
-                return t
-        except AssetError as e:
-            reason = "they are not in the cache" if not path.is_file() else str(e)
-    if progress:
-        print(f"lab: building the lookup tables of {true_model} ({reason}) -> {path}", file=sys.stderr)
-    t = build_model_tables(true_model, dbs, params, scoring, progress=progress)
-    save_model_tables(t, path)
-    return t
+    return load_or_build(_cached(true_model, dbs, folder, params, scoring, progress), progress, rebuild)
 
 
 def get_tables(
@@ -355,9 +367,12 @@ def get_tables(
     n_levels: int = 16,
 ) -> LookupTables:
     """The tables of ``names`` (default: the box models) from the cache, building what is missing,
-    stale or corrupt (:func:`get_model_tables` for each true model), with the databases' shared
-    features under ``scoring`` (:attr:`LookupTables.shared`)."""
+    stale or corrupt (as :func:`get_model_tables` does for one true model), with the databases' shared
+    features under ``scoring`` (:attr:`LookupTables.shared`). Processes that find the cache cold at
+    once split the true models (:func:`lab.training.cache.load_or_build_all`): each table takes minutes."""
     names = tuple(names or box_model_names())
+    params, scoring = params or TableParams(), scoring or ScoringConfig()
     dbs = _databases(names, dbs)
-    out = [get_model_tables(n, dbs, folder, params, scoring, rebuild, progress) for n in names]
+    cached = [_cached(n, dbs, folder, params, scoring, progress) for n in names]
+    out = load_or_build_all(cached, progress, rebuild)
     return LookupTables.from_model_tables(out, n_levels, shared_features(dbs, scoring))
