@@ -247,7 +247,7 @@ def _cmd_hardware(args) -> int:
 def _cmd_tables(args) -> int:
     import time
 
-    from lab.training.databases import get_database
+    from lab.training.databases import get_databases
     from lab.training.tables import TableParams, box_model_names, get_model_tables, tables_path
 
     names = box_model_names()
@@ -258,7 +258,7 @@ def _cmd_tables(args) -> int:
         raise LabError(f"--repeats must be at least 1, got {args.repeats}")
     db_folder = args.cache / "databases" if args.cache else None
     folder = args.cache / "tables" if args.cache else None
-    dbs = [get_database(n, db_folder) for n in names]
+    dbs = get_databases(names, db_folder)
     params = TableParams(repeats=args.repeats)
     t0 = time.perf_counter()
     for n in args.models or names:  # one file per true model, built only when missing or stale

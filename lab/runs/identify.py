@@ -37,7 +37,7 @@ from lab.runs.robots import PlacedRobot, RobotKind, RobotSession, load_robot_con
 from lab.runs.room import RoomLandmarks, localize, robot_start, room_landmarks
 from lab.runs.tracks import TrackedRobot
 from lab.search.world_pose import larger_axes_std
-from lab.training import box_model_names, get_database, get_tables
+from lab.training import box_model_names, get_databases, get_tables
 
 __all__ = ["build_agent", "final_pose_estimate", "floor_plan", "pose_error", "run_identify"]
 
@@ -91,7 +91,7 @@ def build_agent(
             f"unknown planner {planner!r}; planners: {', '.join(p.value for p in PlannerChoice)}"
         ) from None
     names = tuple(names or box_model_names())
-    dbs = [get_database(n) for n in names]
+    dbs = get_databases(names)
     scoring = ScoringConfig().for_camera(robot.camera)  # the agent's and its evaluator's
     tables = get_tables(names, dbs=dbs) if choice is PlannerChoice.LUT else None
     evaluator = make_evaluator(choice, dbs, robot.camera, scoring, tables)
