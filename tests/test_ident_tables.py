@@ -15,7 +15,7 @@ from lab.identification import ModelTables, load_model_tables, save_model_tables
 from lab.training import (
     TableParams,
     build_model_tables,
-    get_database,
+    get_databases,
     get_model_tables,
     get_tables,
     load_tables,
@@ -30,7 +30,7 @@ PARAMS = TableParams(repeats=2)
 
 @pytest.fixture(scope="module")
 def dbs():
-    return [get_database(n, progress=False) for n in NAMES]
+    return get_databases(NAMES, progress=False)
 
 
 @pytest.fixture(scope="module")
@@ -138,8 +138,12 @@ def test_stale_tables_are_refused_and_rebuilt(small, dbs, tmp_path, monkeypatch)
     assert built == list(NAMES)
     load_tables(NAMES, folder, PARAMS, dbs=other)  # now current
     built.clear()
+    for lock in folder.rglob("*.lock"):  # left by the builds (they hold nothing)
+        lock.unlink()
     get_model_tables("M0", other, folder, PARAMS, progress=False)
+    get_tables(NAMES, folder, PARAMS, dbs=other, progress=False)
     assert built == []  # cached: nothing rebuilt
+    assert list(folder.rglob("*.lock")) == []  # and read without a lock (no write access needed)
     tables_path("M3", folder).write_bytes(b"corrupt")
     get_tables(NAMES, folder, PARAMS, dbs=other, progress=False)
     assert built == ["M3"]

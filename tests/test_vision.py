@@ -10,7 +10,7 @@ from lab.errors import AssetError, ConfigError
 from lab.geometry import Pose2D, Ry, se3, se3_inv, transform_points, translation
 from lab.robot import StereoCamera
 from lab.sim import RenderSettings, SimWorld, load_box_models, viewpoint_G_WC
-from lab.training.databases import TrainingParams, get_database, train_database
+from lab.training.databases import TrainingParams, get_database, get_databases, train_database
 from lab.vision.database import load_database, save_database
 from lab.vision.matching import Matcher, _k_smallest, _k_smallest_by_partition
 from lab.vision.rectify import StereoCalibration, StereoRectifier, load_calibration
@@ -34,7 +34,8 @@ def models():
 
 @pytest.fixture(scope="module")
 def dbs():
-    return {k: get_database(k, progress=False) for k in ("M0", "M1", "M2", "M3")}
+    names = ("M0", "M1", "M2", "M3")
+    return dict(zip(names, get_databases(names, progress=False), strict=True))
 
 
 def _bilinear(img, uv):
@@ -290,6 +291,11 @@ def test_cache_is_versioned_atomic_and_detects_corruption(tmp_path, dbs):
     params = TrainingParams(step_deg=60.0)
     got = get_database("M3", folder, params, progress=False)
     assert load_database(q).digest() == got.digest()
+    # a warm cache is read without a lock (no write access needed): no lock file beside it
+    q.with_name(f"{q.name}.lock").unlink(missing_ok=True)  # left by the build (it holds nothing)
+    assert get_database("M3", folder, params, progress=False).digest() == got.digest()
+    assert get_databases(["M3"], folder, params, progress=False)[0].digest() == got.digest()
+    assert sorted(p.name for p in q.parent.iterdir()) == ["M3.npz"]
 
 
 def _distort(ideal, K_ideal, K_raw, D, size):
