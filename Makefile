@@ -8,8 +8,9 @@ UV      ?= $(shell command -v uv 2>/dev/null || echo $(TOOLS)/bin/uv)
 RUN     := $(UV) run --locked
 # pytest-xdist on the machine's cores (make test JOBS=0: one process); --durations: the slowest tests.
 # Measured on a fresh clone, 2 shared cores: 604 tests in 1046 s with one process, 623 s with -n auto.
-# Workers share the test cache (.lab-cache-test): a database or table is written to a per-process
-# temporary file and renamed, so two workers building the same one at once waste time, never a file.
+# Workers share the test cache (.lab-cache-test): a database, table or landmark database is built under
+# a lock file beside it and written through a temporary file (lab/training/cache.py), so two workers on a
+# cold cache build each once (the second waits and reads it; a list of them they split), never half a file.
 JOBS    ?= auto
 PYTEST  := $(RUN) pytest -q -n $(JOBS) --durations=15
 
