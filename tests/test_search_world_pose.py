@@ -196,3 +196,5 @@ def test_a_find_reported_as_resting_on_a_face_is_upright_and_bad_input_is_named(
     assert up.pose_std.camera_rotation_deg == plain.pose_std.camera_rotation_deg
     with pytest.raises(ConfigError, match="Sigma_WO"):
         rest_on_face(np.eye(4), np.eye(3))
+    with pytest.raises(ConfigError, match="finite"):
+        rest_on_face(np.eye(4), np.full((6, 6), np.nan))

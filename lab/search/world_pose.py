@@ -195,6 +195,10 @@ def rest_on_face(G_WO, Sigma_WO, iterations: int = 3) -> tuple[np.ndarray, np.nd
     S = np.asarray(Sigma_WO, float)
     if G.shape != (4, 4) or S.shape != (6, 6):
         raise ConfigError(f"rest_on_face needs G_WO (4, 4) and Sigma_WO (6, 6), got {G.shape}, {S.shape}")
+    if not (np.isfinite(G).all() and np.isfinite(S).all()):
+        raise ConfigError(
+            "rest_on_face needs a finite G_WO and Sigma_WO (a diverged estimate has no pose to correct)"
+        )
     a0 = _upright(G[:3, :3])
     S_phi = S[3:, 3:]
     phi = np.zeros(3)
