@@ -61,6 +61,7 @@ __all__ = [
     "mounted_G_RC",
     "rpy_matrix",
     "save_mounts",
+    "with_head_yaw",
 ]
 
 FILE_FORMAT = "lab-mounts"
@@ -150,6 +151,16 @@ class MountedCamera(StereoCamera):
         return mounted_G_RC(
             pan, tilt, self.mount_R, self.camera_offset_P, m.head_rpy, m.camera_rpy, m.pan_zero, m.tilt_zero
         )
+
+
+def with_head_yaw(camera: StereoCamera, yaw: float) -> MountedCamera:
+    """``camera`` turned by ``yaw`` [rad] more about the pan axis (the head's yaw on the mast: a rotation
+    about R's vertical through the axes' intersection, which has x = y = 0). The localizer's estimate of
+    the camera's yaw on the base (:mod:`lab.localization.posters`) is that rotation: frames taken through
+    it place what they see where the landmarks put the camera."""
+    m = camera.mounts if isinstance(camera, MountedCamera) else HeadMounts()
+    r, p, y = m.head_rpy
+    return MountedCamera.of(camera, dataclasses.replace(m, head_rpy=(r, p, y + float(yaw))))
 
 
 class CalibratedRobot(RobotWrapper):

@@ -538,6 +538,15 @@ class Localizer:
         return (float(self.s[3]), float(self.s[4]), math.sqrt(self.P[3, 3]), math.sqrt(self.P[4, 4]))
 
     @property
+    def camera_yaw_estimate(self) -> tuple[float, float] | None:
+        """The camera's yaw on the base [rad] and its standard deviation, or None when it is not in the
+        state (``camera_yaw_sigma_rad`` 0)."""
+        if self.camera_yaw is None:
+            return None
+        b = self.camera_yaw
+        return float(self.s[b]), math.sqrt(self.P[b, b])
+
+    @property
     def n_updates(self) -> int:
         return sum(1 for r in self.history if r.accepted)
 

@@ -25,6 +25,7 @@ from lab.localization.models import odometry_increment
 from lab.localization.modes import LocalizationMode
 from lab.localization.observer import LandmarkObserver
 from lab.localization.stamps import OdometryHistory, PanTiltHistory
+from lab.mounts import with_head_yaw
 from lab.robot import PanTiltState, Robot, RobotWrapper
 
 __all__ = ["LocalizedRobot"]
@@ -223,7 +224,11 @@ class LocalizedRobot(RobotWrapper):
                     f"localization: the start pose was {100 * math.hypot(dx, dy):.0f} cm and {abs(dth):.1f} "
                     f"deg off what {obs.landmark.name} says (NIS {rec.nis:.1f}): reset from it"
                 )
-        return replace(frame, odom=self._pose(), wheel_odom=wheels)  # the wheels: frame_motion
+        frame = replace(frame, odom=self._pose(), wheel_odom=wheels)  # the wheels: frame_motion
+        yaw = self.localizer.camera_yaw_estimate
+        if yaw is not None:  # what the frame sees is placed through the camera's estimated yaw on the base
+            frame = replace(frame, camera=with_head_yaw(frame.camera, yaw[0]))
+        return frame
 
     def certain(self, sigma_m: float | None = None, sigma_rad: float | None = None, at_W=None) -> bool:
         """Whether the pose is within the thresholds ``sigma_m``, ``sigma_rad`` (position: the larger
