@@ -47,6 +47,9 @@ more state element, constant, prior :math:`N(0, \sigma_\beta^2)`, and the measur
       dh_beta/dbeta = [dR(-beta)/dbeta h_xy, -1]
 
 (the pose one sighting implies undoes it first: ``g(z_c, l)``, ``z_c = [R(beta) z_xy, z_3 + beta]``).
+The robot's frames are then taken through the camera turned by the estimate
+(:meth:`~lab.localization.LocalizedRobot.capture_stereo`, :func:`lab.mounts.with_head_yaw`), so what
+the search places in the world is placed where the landmarks put the camera.
 """
 
 from __future__ import annotations
