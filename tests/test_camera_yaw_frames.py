@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from lab.geometry import Pose2D
-from lab.localization import LocalizedRobot, LocalizerConfig
+from lab.localization import LocalizedRobot, Localizer, LocalizerConfig
 from lab.mounts import HeadMounts, MountedCamera, with_head_yaw
 from lab.robot import SIM_CAMERA, RobotWrapper
 from lab.runs.robots import make_robot
@@ -79,3 +79,49 @@ def test_a_localized_robots_frames_are_taken_through_the_estimated_yaw():
         assert robot.localizer.n_updates >= 1 and yaw != 0.0 and 0 < sd < told["config"].camera_yaw_sigma_rad
         pan, tilt = frame.pan_tilt.pan, frame.pan_tilt.tilt
         np.testing.assert_allclose(frame.G_RC, _turn(yaw) @ seen[-1].camera.G_RC(pan, tilt), atol=1e-12)
+        # standing, the sightings fix the camera's heading (the base's plus the yaw) better than either
+        base_est, cam_est = robot.pose_estimate(), robot.camera_pose_estimate()
+        assert cam_est.sigma_theta_rad < base_est.sigma_theta_rad
+        assert cam_est.pose.theta == pytest.approx(base_est.pose.theta + yaw, abs=1e-12)
+
+
+def _state_with_yaw(seed: int = 0) -> Localizer:
+    """A localizer estimating the camera's yaw, its state's covariance a random one (every term
+    correlated), as a run leaves it."""
+    loc = Localizer([1.0, 2.0, 0.3], config=LocalizerConfig(camera_yaw_sigma_rad=math.radians(0.7)))
+    n = loc.s.size
+    A = np.random.default_rng(seed).normal(size=(n, n)) * 0.05
+    loc.P = A @ A.T + 1e-4 * np.eye(n)
+    loc.s[loc.camera_yaw] = 0.02
+    return loc
+
+
+def test_the_camera_pose_is_the_base_pose_turned_by_the_yaw_with_its_covariance():
+    """``Localizer.camera_pose``: (x, y, theta + beta) and the covariance of that sum, term by term
+    (Var(theta + beta) = P_tt + 2 P_tb + P_bb; Cov(x, theta + beta) = P_xt + P_xb); without the yaw in the
+    state, the base's pose."""
+    loc = _state_with_yaw()
+    P, b = loc.P, loc.camera_yaw
+    x, C = loc.camera_pose()
+    np.testing.assert_allclose(x, [1.0, 2.0, 0.32], atol=1e-12)
+    np.testing.assert_allclose(C[:2, :2], P[:2, :2], atol=1e-15)
+    for i in (0, 1):
+        assert C[i, 2] == pytest.approx(P[i, 2] + P[i, b], abs=1e-15) and C[2, i] == C[i, 2]
+    assert C[2, 2] == pytest.approx(P[2, 2] + 2 * P[2, b] + P[b, b], abs=1e-15)
+    plain = Localizer([1.0, 2.0, 0.3])
+    x0, C0 = plain.camera_pose()
+    np.testing.assert_array_equal(x0, plain.x)
+    np.testing.assert_array_equal(C0, plain.Sigma)
+
+
+def test_the_kept_pose_of_a_detour_is_the_cameras_too():
+    """Right after ``start_clone`` the kept pose is the pose now, so the kept camera pose (built from the
+    clone's cross-covariance with the yaw) is :meth:`Localizer.camera_pose` (built from the state's
+    covariance); without ``camera`` it is the base's."""
+    loc = _state_with_yaw(1)
+    loc.start_clone()
+    x, C = loc.cloned_estimate(camera=True)
+    x_now, C_now = loc.camera_pose()
+    np.testing.assert_allclose(x, x_now, atol=1e-12)
+    np.testing.assert_allclose(C, C_now, atol=1e-15)
+    np.testing.assert_allclose(loc.cloned_estimate()[1], loc.Sigma, atol=1e-15)

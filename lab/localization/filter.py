@@ -546,6 +546,22 @@ class Localizer:
         b = self.camera_yaw
         return float(self.s[b]), math.sqrt(self.P[b, b])
 
+    def camera_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The camera's planar pose ``[x, y, theta + beta]`` and its covariance (3, 3): the base's
+        position with its heading turned by the camera's yaw on the base ``beta`` (when it is in the
+        state), ``J P J^T`` with ``J`` summing the two headings. What a frame places in the world hangs on
+        this heading (the yaw turns the camera about the pan axis, over the base's origin), so a found
+        point's deviation and the re-localization's thresholds are this pose's. The base's pose and
+        covariance (:attr:`x`, :attr:`Sigma`) when the yaw is not in the state."""
+        if self.camera_yaw is None:
+            return self.x, self.Sigma
+        b = self.camera_yaw
+        J = np.zeros((3, self.s.size))
+        J[0, 0] = J[1, 1] = J[2, 2] = J[2, b] = 1.0
+        x = self.x
+        x[2] = wrap_angle(x[2] + self.s[b])
+        return x, J @ self.P @ J.T
+
     @property
     def n_updates(self) -> int:
         return sum(1 for r in self.history if r.accepted)
@@ -698,15 +714,25 @@ class Localizer:
     def cloning(self) -> bool:
         return self._clone is not None
 
-    def cloned_estimate(self) -> tuple[np.ndarray, np.ndarray]:
-        """The kept pose ``x_c`` (3,) and its covariance (3, 3), as corrected since :meth:`start_clone`."""
+    def cloned_estimate(self, camera: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """The kept pose ``x_c`` (3,) and its covariance (3, 3), as corrected since :meth:`start_clone`;
+        with ``camera``, the camera's pose then (as :meth:`camera_pose`: its heading turned by the
+        camera's yaw on the base as estimated now, with the yaw's covariance with the kept pose)."""
         if self._clone is None:
             raise ValueError("no pose is cloned (start_clone)")
-        return self._clone.x.copy(), self._clone.Sigma.copy()
+        x, C = self._clone.x.copy(), self._clone.Sigma.copy()
+        if camera and self.camera_yaw is not None:
+            b = self.camera_yaw
+            v = self._clone.cross[b]  # Cov(beta, x_c)
+            x[2] = wrap_angle(x[2] + self.s[b])
+            C[:, 2] += v
+            C[2, :] += v
+            C[2, 2] += self.P[b, b]
+        return x, C
 
-    def end_clone(self) -> tuple[np.ndarray, np.ndarray]:
+    def end_clone(self, camera: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Drop the kept pose; returns it and its covariance (:meth:`cloned_estimate`)."""
-        out = self.cloned_estimate()
+        out = self.cloned_estimate(camera)
         self._clone = None
         return out
 

@@ -25,7 +25,7 @@ from lab.localization.models import odometry_increment
 from lab.localization.modes import LocalizationMode
 from lab.localization.observer import LandmarkObserver
 from lab.localization.stamps import OdometryHistory, PanTiltHistory
-from lab.mounts import with_head_yaw
+from lab.mounts import MAX_MOUNT_DEG, MountedCamera, with_head_yaw
 from lab.robot import PanTiltState, Robot, RobotWrapper
 
 __all__ = ["LocalizedRobot"]
@@ -132,6 +132,20 @@ class LocalizedRobot(RobotWrapper):
             self._pose(), self.localizer.Sigma.copy(), self.base.now(), self.mode, self.localizer.n_updates
         )
 
+    def camera_pose_estimate(self) -> PlanarPoseEstimate:
+        """The pose a frame is placed from now: the base's position with the camera's heading (the base's
+        turned by the camera's estimated yaw on the base, :meth:`Localizer.camera_pose`) and its
+        covariance. The same as :meth:`pose_estimate` when the yaw is not in the filter's state. Whether
+        the robot may map and report (:meth:`certain`) and how well it knows a found object are this
+        pose's; driving (:meth:`drive_guard`) is the base's."""
+        self._sync()
+        if self.mode is LocalizationMode.ODOMETRY:
+            return self.pose_estimate()
+        x, S = self.localizer.camera_pose()
+        return PlanarPoseEstimate(
+            Pose2D(*(float(v) for v in x)), S, self.base.now(), self.mode, self.localizer.n_updates
+        )
+
     def odometry(self) -> Pose2D:
         """The pose estimate (the localized pose, or the wheel odometry in ``odometry`` mode)."""
         self._sync()
@@ -227,15 +241,18 @@ class LocalizedRobot(RobotWrapper):
         frame = replace(frame, odom=self._pose(), wheel_odom=wheels)  # the wheels: frame_motion
         yaw = self.localizer.camera_yaw_estimate
         if yaw is not None:  # what the frame sees is placed through the camera's estimated yaw on the base
-            frame = replace(frame, camera=with_head_yaw(frame.camera, yaw[0]))
+            frame = replace(
+                frame, camera=with_head_yaw(frame.camera, _within_mount_limit(frame.camera, yaw[0]))
+            )
         return frame
 
     def certain(self, sigma_m: float | None = None, sigma_rad: float | None = None, at_W=None) -> bool:
         """Whether the pose is within the thresholds ``sigma_m``, ``sigma_rad`` (position: the larger
         axis of its ellipse, or of the point ``at_W`` = (x, y) placed from the robot,
         :meth:`PlanarPoseEstimate.point_sigma_m`; heading), by default the re-localization's
-        (:class:`LocalizerConfig`)."""
-        est = self.pose_estimate()
+        (:class:`LocalizerConfig`). The camera's pose (:meth:`camera_pose_estimate`): a standing robot's
+        sightings fix the camera's heading, the base's only up to the camera's yaw on the base."""
+        est = self.camera_pose_estimate()
         sm = self.config.relocalize_sigma_m if sigma_m is None else sigma_m
         sr = self.config.relocalize_sigma_rad if sigma_rad is None else sigma_rad
         s_pos = est.sigma_xy_m if at_W is None else est.point_sigma_m(at_W)
@@ -435,3 +452,12 @@ class LocalizedRobot(RobotWrapper):
         self._sync()
         if self.camera_latency_s > 0:  # the head's readings, for head_at_image (none without a latency)
             self.pan_tilt_history.add(self.base.now(), self.base.pan_tilt())
+
+
+def _within_mount_limit(camera, yaw: float) -> float:
+    """``yaw`` [rad] clipped so that the head's yaw it is added to stays within the mounts' limit
+    (:data:`lab.mounts.MAX_MOUNT_DEG`): a diverged estimate places frames at the limit rather than stop
+    the run with a ConfigError."""
+    y0 = camera.mounts.head_rpy[2] if isinstance(camera, MountedCamera) else 0.0
+    lim = math.radians(MAX_MOUNT_DEG) - 1e-9
+    return float(np.clip(y0 + yaw, -lim, lim) - y0)

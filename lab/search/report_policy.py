@@ -189,9 +189,9 @@ class ReportPolicy:
         if robot.mode is not LocalizationMode.LANDMARKS:
             return stated_pose_std(out, robot.pose_estimate().Sigma, robot.camera, self.rests_on_face), None
         p_W = out.G_WO[:2, 3].copy()
-        est0 = robot.pose_estimate()
+        est0 = robot.camera_pose_estimate()  # the camera's: the object was placed from it
         robot.relocalize_to_report(at_W=p_W)
-        est1 = robot.pose_estimate()
+        est1 = robot.camera_pose_estimate()
         G_WR, sigma, detour, Sigma_R = est1.pose.G(), est1.point_sigma_m(p_W), None, est1.Sigma
         cfg = robot.config
         wanted = sigma > max(cfg.report_sigma_m, cfg.report_detour_above_m)
@@ -255,7 +255,7 @@ class ReportPolicy:
             robot.stop()
             info["stopped"] = str(e)
         finally:
-            x_c, S_c = loc.end_clone()
+            x_c, S_c = loc.end_clone(camera=True)  # the camera's pose then: the object was placed from it
         info["updates"] = int(robot.pose_estimate().n_updates - n0)
         kept = PlanarPoseEstimate(
             Pose2D(*(float(v) for v in x_c)), S_c, robot.now(), LocalizationMode.LANDMARKS
