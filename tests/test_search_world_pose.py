@@ -48,6 +48,33 @@ def test_covariance_matches_a_monte_carlo_of_the_chain():
     assert np.sqrt(np.diag(S)) == pytest.approx(np.sqrt(np.diag(C)), rel=0.03)
 
 
+def test_a_pointing_whose_yaw_is_in_the_pose_turns_the_camera_about_horizontal_axes_only():
+    """``yaw_in_pose``: the camera's yaw on the robot is in the heading's covariance (the localizer
+    estimates it), so the stated pointing is a turn of the camera about W's two horizontal axes. Against a
+    Monte Carlo of the chain with such turns (drawn in W, each taken into C), and without the object's
+    and the robot's errors the orientation's covariance is pointing^2 diag(1, 1, 0)."""
+    rng = np.random.default_rng(5)
+    pointing, n = math.radians(0.7), 20000
+    pose = (1.2, -0.7, 0.9)
+    G_WR = planar_G(*pose)
+    S = world_pose_covariance(
+        G_WR, np.zeros((3, 3)), G_RC, pointing, G_CO, np.zeros((6, 6)), yaw_in_pose=True
+    )
+    np.testing.assert_allclose(S[3:, 3:], pointing**2 * np.diag([1.0, 1.0, 0.0]), atol=1e-15)
+    R_WC = (G_WR @ G_RC)[:3, :3]
+    d_W = np.hstack([rng.standard_normal((n, 2)) * pointing, np.zeros((n, 1))])
+    D = np.repeat(np.eye(4)[None], n, axis=0)
+    D[:, :3, :3] = Rotation.from_rotvec(d_W @ R_WC).as_matrix()  # each row R_WC^T d_W
+    G0 = G_WR @ G_RC @ G_CO
+    W = G_WR @ G_RC @ D @ G_CO
+    e = np.hstack([W[:, :3, 3] - G0[:3, 3], Rotation.from_matrix(W[:, :3, :3] @ G0[:3, :3].T).as_rotvec()])
+    C = np.cov(e.T)
+    assert np.sqrt(np.diag(S)[:5]) == pytest.approx(np.sqrt(np.diag(C)[:5]), rel=0.03)
+    assert np.sqrt(C[5, 5]) < 1e-3 * pointing
+    full = world_pose_covariance(G_WR, np.zeros((3, 3)), G_RC, pointing, G_CO, np.zeros((6, 6)))
+    assert full[5, 5] == pytest.approx(pointing**2) and np.all(np.diag(S) <= np.diag(full) + 1e-18)
+
+
 def test_heading_error_moves_a_far_object_sideways_by_its_range():
     """Only the robot's heading uncertain (sigma): an object 2 m straight ahead of the robot's centre
     is off sideways by 2 sigma and turned by sigma about z (hand-derived)."""

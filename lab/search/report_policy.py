@@ -208,7 +208,9 @@ class ReportPolicy:
             "shift_m": round(float(np.linalg.norm(G_WO[:3, 3] - out.G_WO[:3, 3])), 4),
             "detour": detour,
         }
-        return stated_pose_std(replace(out, G_WO=G_WO), Sigma_R, robot.camera, self.rests_on_face), info
+        yaw_in_pose = robot.localizer.camera_yaw is not None  # Sigma_R is the camera's pose (est1, kept)
+        out = stated_pose_std(replace(out, G_WO=G_WO), Sigma_R, robot.camera, self.rests_on_face, yaw_in_pose)
+        return out, info
 
     def detour(self) -> tuple[PlanarPoseEstimate | None, dict | None]:
         """Keep the robot's pose in the filter (:meth:`Localizer.start_clone`), drive to the nearest place
@@ -263,7 +265,9 @@ class ReportPolicy:
         return kept, info
 
 
-def stated_pose_std(out: AgentResult, Sigma_R, camera, rests_on_face: bool = False) -> AgentResult:
+def stated_pose_std(
+    out: AgentResult, Sigma_R, camera, rests_on_face: bool = False, yaw_in_pose: bool = False
+) -> AgentResult:
     """``out`` with its ``pose_std``: how well the robot knows the found ``G_WO`` in the world
     (:func:`lab.search.world_pose.world_pose_covariance`) from the local search's estimate in the camera,
     the camera's stated pointing accuracy on the robot (``camera.pointing_std_deg``: the pan-tilt's zero
@@ -271,14 +275,16 @@ def stated_pose_std(out: AgentResult, Sigma_R, camera, rests_on_face: bool = Fal
 
     With ``rests_on_face`` the pose and the covariance are conditioned on the box resting on one of its
     faces (:func:`lab.search.world_pose.rest_on_face`): ``G_WO`` is the upright pose, ``pose_std`` the
-    conditioned deviation."""
+    conditioned deviation. ``yaw_in_pose``: ``Sigma_R`` is the camera's pose, its heading carrying the
+    camera's yaw on the robot (:meth:`LocalizedRobot.camera_pose_estimate`), so the stated pointing's
+    part about the vertical is not added again."""
     loc = out.local
     if out.G_WO is None or loc is None or loc.estimate is None or loc.frame is None:
         return out
     G_RC, G_CO, Sigma_o = loc.frame.G_RC, loc.estimate.G_CO, loc.estimate.Sigma_rv
     G_WR = out.G_WO @ se3_inv(G_RC @ G_CO)  # the robot pose the reported G_WO rests on
     pointing = math.radians(camera.pointing_std_deg)
-    S = world_pose_covariance(G_WR, Sigma_R, G_RC, pointing, G_CO, Sigma_o)
+    S = world_pose_covariance(G_WR, Sigma_R, G_RC, pointing, G_CO, Sigma_o, yaw_in_pose)
     G_WO = out.G_WO
     if rests_on_face:
         G_WO, S = rest_on_face(G_WO, S)

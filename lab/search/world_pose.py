@@ -65,8 +65,15 @@ def _skew(v) -> np.ndarray:
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
-def world_pose_covariance(G_WR, Sigma_R, G_RC, pointing_std_rad: float, G_CO, Sigma_CO_rv) -> np.ndarray:
+def world_pose_covariance(
+    G_WR, Sigma_R, G_RC, pointing_std_rad: float, G_CO, Sigma_CO_rv, yaw_in_pose: bool = False
+) -> np.ndarray:
     """``Sigma_WO`` (6, 6) over ``[dp, phi_W]`` [m, rad] in W (the module docstring's first-order model).
+
+    ``yaw_in_pose``: the camera's yaw on the robot (about the vertical) is in ``Sigma_R``'s heading, as
+    when the localizer estimates it (``LocalizerConfig.camera_yaw_sigma_rad``: the heading is then the
+    camera's, ``theta + beta``), so the pointing's part about the vertical is left out of ``Sigma_d``
+    (``pointing_std^2 (I - u u^T)``, ``u`` the vertical in C) rather than counted twice.
 
     Parameters
     ----------
@@ -103,7 +110,11 @@ def world_pose_covariance(G_WR, Sigma_R, G_RC, pointing_std_rad: float, G_CO, Si
     J_o = np.zeros((6, 6))
     J_o[:3, :3] = R_WC
     J_o[3:, 3:] = R_WC
-    S = J_R @ Sigma_R @ J_R.T + pointing_std_rad**2 * (J_d @ J_d.T) + J_o @ Sigma_o @ J_o.T
+    Sigma_d = np.eye(3)
+    if yaw_in_pose:
+        u = R_WC.T @ np.array([0.0, 0.0, 1.0])  # W's vertical in C
+        Sigma_d -= np.outer(u, u)
+    S = J_R @ Sigma_R @ J_R.T + pointing_std_rad**2 * (J_d @ Sigma_d @ J_d.T) + J_o @ Sigma_o @ J_o.T
     return 0.5 * (S + S.T)
 
 
