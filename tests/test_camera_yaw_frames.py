@@ -3,6 +3,7 @@ above 0), reaches what the robot sees: every frame a :class:`~lab.localization.L
 taken through the camera turned by the estimate about the pan axis (:func:`lab.mounts.with_head_yaw`)."""
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -67,9 +68,11 @@ def test_a_localized_robots_frames_are_taken_through_the_estimated_yaw():
     ):
         base = run.robot
         base.enable()
-        told = sim_localizer_told(base)
-        assert "config" not in told  # held exact by default (docs/tuning/localizer-camera-yaw.md)
-        told["config"] = LocalizerConfig(camera_yaw_sigma_rad=math.radians(base.camera.pointing_std_deg))
+        told = sim_localizer_told(base)  # the mounts stated uncertain: the yaw in the state by default
+        assert told["config"].camera_yaw_sigma_rad == pytest.approx(
+            math.radians(base.camera.pointing_std_deg)
+        )
+        assert told["config"].camera_yaw_sigma_rad > 0
         seen = []
         surveyed = surveyed_map(landmarks, base.sensing, 3)
         robot = LocalizedRobot(_Recording(base, seen), "landmarks", surveyed, log=lambda m: None, **told)
@@ -83,6 +86,22 @@ def test_a_localized_robots_frames_are_taken_through_the_estimated_yaw():
         base_est, cam_est = robot.pose_estimate(), robot.camera_pose_estimate()
         assert cam_est.sigma_theta_rad < base_est.sigma_theta_rad
         assert cam_est.pose.theta == pytest.approx(base_est.pose.theta + yaw, abs=1e-12)
+
+
+def test_the_yaw_is_held_exact_when_the_profile_states_the_mounts_exact():
+    """A profile without mount errors (the survey-and-start condition's) keeps the localizer's default
+    config: the camera's yaw on the base is not in the state."""
+    room = SimpleNamespace(
+        camera_mount_deg=0.0,
+        head_mount_deg=0.0,
+        latency_s=0.0,
+        start_m=0.05,
+        start_deg=3.0,
+        start_sigma=(0.1, math.radians(5.0)),
+    )
+    robot = SimpleNamespace(sensing=SimpleNamespace(room=room), camera=SIM_CAMERA.camera())
+    told = sim_localizer_told(robot)
+    assert "config" not in told and told["start_measured_by_hand"]
 
 
 def _state_with_yaw(seed: int = 0) -> Localizer:

@@ -114,7 +114,10 @@ def run_localization_drive(
     supersample: int = 1,
     world: str = "lab_room",
 ) -> DriveResult:
-    """Drive about ``length_m`` around the seeded loop in the simulator and score the localization."""
+    """Drive about ``length_m`` around the seeded loop in the simulator and score the localization.
+
+    ``config`` None: the localizer as a search's (:func:`lab.runs.room.sim_localizer_told`: under the
+    room's mount errors it estimates the camera's yaw on the base); a config given is used as it is."""
     from lab.runs.robots import make_robot
     from lab.scene import load_scene
     from lab.sim import RenderSettings, SimWorld
@@ -132,7 +135,9 @@ def run_localization_drive(
         base.enable()
         if landmarks is not None and not base.sensing.room.is_none:  # the room's errors: a surveyed map
             landmarks = surveyed_map(landmarks, base.sensing, seed)
-        told = sim_localizer_told(base)  # the stated start sigma and camera latency
+        told = sim_localizer_told(base)  # the stated start sigma, camera latency and camera yaw's state
+        told_config = told.pop("config", None)
+        config = config if config is not None else told_config  # the caller's config wins
         robot = LocalizedRobot(
             base, mode, landmarks, config, rng=np.random.default_rng([seed, 21]), log=lambda m: None, **told
         )

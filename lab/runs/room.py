@@ -33,7 +33,7 @@ import numpy as np
 from lab.errors import ConfigError, LabError
 from lab.geometry import Pose2D
 from lab.hardware.config import HardwareConfig, RoomConfig
-from lab.localization import LandmarkMap, LocalizationMode, LocalizedRobot
+from lab.localization import LandmarkMap, LocalizationMode, LocalizedRobot, LocalizerConfig
 from lab.robot import Robot
 from lab.runs.robots import PlacedRobot, RobotKind
 
@@ -184,14 +184,19 @@ def surveyed_map(landmarks: LandmarkMap, profile, seed: int) -> LandmarkMap:
 def sim_localizer_told(robot) -> dict:
     """What the localizer is told in the simulator, as :class:`~lab.localization.LocalizedRobot`'s keyword
     arguments: the stated start sigma with the first sighting allowed to correct it
-    (:func:`sim_start_sigma`), and the camera's stated latency (its frames are stamped at arrival); empty
-    for a profile without the room's errors. The camera's yaw on the base is not in the filter's state
-    (``LocalizerConfig.camera_yaw_sigma_rad`` 0): why, docs/tuning/localizer-camera-yaw.md."""
+    (:func:`sim_start_sigma`), the camera's stated latency (its frames are stamped at arrival), and with
+    the mounts stated uncertain the camera's yaw on the base in the filter's state, its prior the
+    camera's stated pointing (``LocalizerConfig.camera_yaw_sigma_rad``). The pan zero and the mounts turn
+    every sighting by one angle that a standing robot takes into its heading, and the odometry then
+    drives along that wrong heading; a state of its own keeps the heading the base's
+    (docs/tuning/localizer-camera-yaw.md). Empty for a profile without the room's errors."""
     Sigma0 = sim_start_sigma(robot)
     told = {} if Sigma0 is None else {"Sigma0": Sigma0, "start_measured_by_hand": True}
     room = getattr(getattr(robot, "sensing", None), "room", None)
     if room is not None and room.latency_s > 0:
         told["camera_latency_s"] = room.latency_s
+    if room is not None and (room.camera_mount_deg > 0 or room.head_mount_deg > 0):
+        told["config"] = LocalizerConfig(camera_yaw_sigma_rad=math.radians(robot.camera.pointing_std_deg))
     return told
 
 
