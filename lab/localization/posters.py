@@ -49,7 +49,10 @@ more state element, constant, prior :math:`N(0, \sigma_\beta^2)`, and the measur
 (the pose one sighting implies undoes it first: ``g(z_c, l)``, ``z_c = [R(beta) z_xy, z_3 + beta]``).
 The robot's frames are then taken through the camera turned by the estimate
 (:meth:`~lab.localization.LocalizedRobot.capture_stereo`, :func:`lab.mounts.with_head_yaw`), so what
-the search places in the world is placed where the landmarks put the camera.
+the search places in the world is placed where the landmarks put the camera; and what a standing
+robot's sightings fix, the camera's heading ``theta + beta``, is what its re-localization and reports
+are judged on (:meth:`~lab.localization.Localizer.camera_pose`). In the simulator the state is on when
+the profile states the mounts uncertain (:func:`lab.runs.room.sim_localizer_told`).
 """
 
 from __future__ import annotations
