@@ -492,13 +492,18 @@ def test_a_fit_of_a_poster_mostly_outside_the_image_is_dropped():
 
 @pytest.mark.slow
 def test_closed_loop_drive_localizes_against_the_truth():
-    """A short seeded drive under realistic sensing: the localizer ends nearer the truth than odometry,
-    within 5 cm, and was updated; odometry mode reports the wheel odometry unchanged."""
+    """A short seeded drive under realistic sensing: the localizer was updated and ends nearer the truth
+    than odometry, within 8 cm and within three of its stated deviations times the profile's mismatch
+    (the world draws its errors at that factor of what the filters are told); odometry mode reports the
+    wheel odometry unchanged. (All 40 tuning drives of docs/tuning/localizer-camera-yaw.md hold this; the
+    end's error there is 2.2 cm at the median, 6.9 cm at worst.)"""
     from lab.runs.localization import run_localization_drive
+    from lab.sim.sensing import sensing_profile
 
+    mismatch = sensing_profile("realistic").mismatch
     loc = run_localization_drive(3, "landmarks", length_m=6.0)
     assert loc.n_updates >= 5
-    assert loc.localization_error_m < 0.05
+    assert loc.localization_error_m < min(3 * mismatch * loc.sigma_xy_m, 0.08)
     assert loc.localization_error_m < loc.odometry_error_m
     odo = run_localization_drive(3, "odometry", length_m=3.0)
     assert odo.localization_error_m == odo.odometry_error_m and odo.n_updates == 0
