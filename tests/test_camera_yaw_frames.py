@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from lab.errors import ConfigError
 from lab.geometry import Pose2D
 from lab.localization import LocalizedRobot, Localizer, LocalizerConfig
 from lab.mounts import HeadMounts, MountedCamera, with_head_yaw
@@ -144,3 +145,20 @@ def test_the_kept_pose_of_a_detour_is_the_cameras_too():
     np.testing.assert_allclose(x, x_now, atol=1e-12)
     np.testing.assert_allclose(C, C_now, atol=1e-15)
     np.testing.assert_allclose(loc.cloned_estimate()[1], loc.Sigma, atol=1e-15)
+
+
+def test_a_diverged_yaw_estimate_turns_the_camera_to_the_mounts_limit_not_past_it():
+    """The estimate put into the head's yaw is clipped to the mounts' limit (``MAX_MOUNT_DEG``), so a
+    frame is still made (``HeadMounts`` refuses more); a yaw within the limit passes unchanged."""
+    from lab.localization.robot import _within_mount_limit
+    from lab.mounts import MAX_MOUNT_DEG
+
+    camera = MountedCamera.of(SIM_CAMERA.camera(), HeadMounts(head_rpy=(0.0, 0.0, math.radians(9.0))))
+    small = math.radians(0.5)
+    assert _within_mount_limit(camera, small) == pytest.approx(small, abs=1e-15)
+    big = _within_mount_limit(camera, math.radians(3.0))
+    assert math.degrees(big) == pytest.approx(MAX_MOUNT_DEG - 9.0, abs=1e-6)
+    turned = with_head_yaw(camera, big)  # no ConfigError
+    assert math.degrees(turned.mounts.head_rpy[2]) == pytest.approx(MAX_MOUNT_DEG, abs=1e-6)
+    with pytest.raises(ConfigError, match="beyond"):
+        with_head_yaw(camera, math.radians(3.0))
