@@ -24,10 +24,9 @@ import math
 import numpy as np
 
 from lab.localization.survey_limit import posters_in_view, survey_frame_error
-from lab.scene import load_scene
 from lab.sim.room_errors import survey_error
 from lab.sim.sensing import sensing_profile
-from lab.training.landmarks import trained_landmark_map
+from lab.training.landmarks import landmark_map_from_scene
 
 
 def floor_points(room_size, step_m: float = 0.5, margin_m: float = 0.6) -> np.ndarray:
@@ -48,7 +47,7 @@ def main(argv=None) -> None:
     room = profile.room
     if room is None or room.survey_m <= 0 or room.survey_deg <= 0:
         raise SystemExit(f"the profile {args.sensing!r} has no survey error: nothing to bound")
-    landmarks = trained_landmark_map(load_scene("lab_room"), progress=False)
+    landmarks = landmark_map_from_scene("lab_room")  # the posters' true poses (no databases needed)
     sm, sr = room.survey_sigma
     pts = floor_points(landmarks.room_size)
     views = [posters_in_view(landmarks, p) for p in pts]

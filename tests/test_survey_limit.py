@@ -3,6 +3,9 @@ exact cases, an independent nonlinear fit (SciPy's least_squares on the rigid tu
 and a Monte Carlo of the covariance."""
 
 import math
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -104,3 +107,34 @@ def test_posters_in_view_are_the_ones_in_range_and_facing_best_first():
     assert posters_in_view(m, (0.0, 0.0)) == ["east", "west_near", "west_far"]
     # a robot beside the east poster sees it edge-on: not in view
     assert posters_in_view(m, (2.4, 2.0)) == ["west_far", "west_near"]  # now the nearer, more head-on
+
+
+def test_the_benchmark_tabulates_a_floor_that_falls_with_the_posters_seen():
+    """``benchmarks/survey_limit.py`` on the lab room: one row per number of posters seen, its median
+    falling as more are seen; a profile without a survey is refused by name."""
+    root = Path(__file__).resolve().parents[1]
+    script = root / "benchmarks" / "survey_limit.py"
+    out = subprocess.run(
+        [
+            sys.executable,
+            str(script),
+            "--sensing",
+            "benchmarks/sensing/survey_and_start.toml",
+            "--draws",
+            "20",
+        ],
+        cwd=root,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    rows = [line for line in out.splitlines() if line.startswith("| best") or line.startswith("| all")]
+    medians = [float(r.split("|")[2].split()[0]) for r in rows]
+    assert len(medians) == 6 and all(a > b for a, b in zip(medians, medians[1:], strict=False))
+    bad = subprocess.run(
+        [sys.executable, str(script), "--sensing", "ideal", "--draws", "1"],
+        cwd=root,
+        capture_output=True,
+        text=True,
+    )
+    assert bad.returncode != 0 and "has no survey error" in bad.stderr
