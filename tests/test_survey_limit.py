@@ -121,7 +121,7 @@ def test_the_benchmark_tabulates_a_floor_that_falls_with_the_posters_seen():
             "--sensing",
             "benchmarks/sensing/survey_and_start.toml",
             "--draws",
-            "20",
+            "6",
         ],
         cwd=root,
         capture_output=True,
