@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from lab.localization import Landmark, LandmarkMap, inward_normal
+from lab.localization import Landmark, LandmarkMap, LocalizerConfig, inward_normal
 from lab.localization.survey_limit import posters_in_view, survey_frame_covariance, survey_frame_error
 
 XY = np.array([[-2.9, -2.6], [-2.9, 0.5], [0.0, 3.9], [2.9, 1.6], [0.9, -3.9]])
@@ -105,6 +105,8 @@ def test_posters_in_view_are_the_ones_in_range_and_facing_best_first():
         (6.0, 8.0),
     )
     assert posters_in_view(m, (0.0, 0.0)) == ["east", "west_near", "west_far"]
+    # the localizer's own range: a robot that looks only 3 m out does not count the 4.2 m poster
+    assert posters_in_view(m, (0.0, 0.0), LocalizerConfig(max_range_m=3.0)) == ["east", "west_near"]
     # a robot beside the east poster sees it edge-on: not in view
     assert posters_in_view(m, (2.4, 2.0)) == ["west_far", "west_near"]  # now the nearer, more head-on
 

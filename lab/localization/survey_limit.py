@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lab.localization.filter import LocalizerConfig
 from lab.localization.landmarks import LandmarkMap
 
 __all__ = ["posters_in_view", "survey_frame_covariance", "survey_frame_error"]
@@ -84,18 +85,17 @@ def survey_frame_error(posters_xy, errors, at, sigma_m: float, sigma_rad: float)
     return np.linalg.solve(A.T @ (w[:, None] * A), A.T @ (w * e))
 
 
-def posters_in_view(
-    landmarks: LandmarkMap, at, max_range_m: float = 6.5, min_facing: float = 0.35
-) -> list[str]:
-    """The landmarks a robot at ``at`` = (x, y) can sight, best first: within ``max_range_m`` and at most
-    ``acos(min_facing)`` off their face's normal (the localizer's ``max_range_m``, ``min_facing``),
+def posters_in_view(landmarks: LandmarkMap, at, config: LocalizerConfig | None = None) -> list[str]:
+    """The landmarks a robot at ``at`` = (x, y) can sight, best first: within ``config.max_range_m`` and
+    at most ``acos(config.min_facing)`` off their face's normal (default: the localizer's defaults),
     ordered by facing x width / range as :meth:`~lab.localization.LocalizedRobot.landmark_views` orders
     its views (the pan range is left out: a robot can turn to any of them)."""
+    c = config or LocalizerConfig()
     p = np.asarray(at, float)[:2]
     scored = []
     for lm in landmarks:
         r = float(np.hypot(*(np.asarray(lm.centre_W[:2]) - p)))
         facing = lm.facing(p)
-        if r <= max_range_m and facing >= min_facing:
+        if r <= c.max_range_m and facing >= c.min_facing:
             scored.append((-facing * lm.width_m / max(r, 0.5), lm.name))
     return [name for _, name in sorted(scored)]
