@@ -196,6 +196,7 @@ def _cmd_search(args) -> int:
         moving=_moving(args),
         mounts=args.mounts,
         level=args.level,
+        survey_tour=args.survey_tour,
     )
     data = res.to_json()
     if args.view3d is not None:

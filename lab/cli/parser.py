@@ -344,6 +344,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     se.add_argument("--level", action=argparse.BooleanOptionalAction, help=HELP_LEVEL)
     se.add_argument(
+        "--survey-tour",
+        action="store_true",
+        help="before the search, drive a survey tour: stand at a few places, each in view of several "
+        "posters, and look at every poster in view, so that a surveyed map's posters are tied together "
+        "(outside the time budget; the JSON's survey_tour)",
+    )
+    se.add_argument(
         "--truth",
         type=lambda s: _floats(s, 4, "--truth"),
         metavar="X,Y,Z,YAW_DEG",
@@ -561,6 +568,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--error-scale",
         help="comma-separated scales of every error of the sensing profile, e.g. 1,2,3 (default 1): the "
         "report's robustness curve, success against scale with Wilson intervals (report.md, robustness.png)",
+    )
+    es.add_argument(
+        "--survey-tour",
+        action="store_true",
+        default=None,
+        help="before each search, a survey tour that ties the surveyed map's posters together (`lab search "
+        "--survey-tour`); its jobs are keyed apart (_tour)",
     )
     _sweep_run_arguments(es)
     sp = evs.add_parser(

@@ -89,6 +89,7 @@ def search_sweep(args):
         pause=float(spec.get("pause", 5.0)),
         maps=_names(spec.get("maps", "predict,static")),
         error_scale=parse_error_scales(spec.get("error_scale", "1")),
+        survey_tour=bool(spec.get("survey_tour", False)),
     )
     sw.check()
     return sw

@@ -60,6 +60,7 @@ SEARCH_FIELDS = (
     "pause",
     "maps",
     "error_scale",
+    "survey_tour",
 )
 
 MOVING_KINDS = ("random", "evasive")
@@ -112,6 +113,7 @@ class SearchSweep:
     pause: float = 5.0
     maps: tuple[str, ...] = MAPS
     error_scale: tuple[float, ...] = (1.0,)
+    survey_tour: bool = False
 
     def check(self) -> None:
         from lab.eval.robustness import parse_error_scales
@@ -194,6 +196,8 @@ class SearchSweep:
                                     label = sensing_label(sensing)
                                     key = search_key(strategy, ob, label, name, surface, seed, loc)
                                     key += scale_suffix(k)
+                                    if self.survey_tour:  # its own jobs: a resume never mixes the two
+                                        kw["survey_tour"], key = True, f"{key}_tour"
                                     out.extend(self._moving_jobs(key, kw))
         return out
 
@@ -259,10 +263,12 @@ def search_job(
     pause: float = 5.0,
     map: str = "static",
     error_scale: float = 1.0,
+    survey_tour: bool = False,
 ) -> dict:
     """One search trial in this worker process (its own PyBullet client): the ``lab search --json``
     result without its map snapshots, with ``shortest_path_m``; the profile's errors times
-    ``error_scale``."""
+    ``error_scale``; with ``survey_tour``, a survey tour before the search
+    (:func:`lab.runs.room.survey_the_room`)."""
     import numpy as np
 
     from lab.runs.moving import MovingOptions
@@ -288,6 +294,7 @@ def search_job(
         moving=None
         if moving is None
         else MovingOptions(moving, object_speed, pause, predict=map == "predict", surface=surface),
+        survey_tour=survey_tour,
     )
     d = r.to_json()
     d["n_snapshots"] = len(d.pop("map_snapshots", []))

@@ -47,6 +47,7 @@ __all__ = [
     "room_landmarks",
     "sim_localizer_told",
     "sim_start_sigma",
+    "survey_the_room",
     "surveyed_map",
 ]
 
@@ -381,3 +382,38 @@ def localization_in_words(data: dict) -> str:
     if err is not None:
         parts.append(f"{100.0 * err:.1f} cm from the true pose at the end")
     return "; ".join(parts)
+
+
+def survey_the_room(robot: LocalizedRobot, spec, log=None) -> dict:
+    """Tie the room's posters together before the work starts (:mod:`lab.localization.survey_tour`): look
+    round where the robot stands (its first sighting corrects a start measured by hand), scan the floor
+    for the navigator, choose the stands on its planning grid and drive the tour. Returns the JSON's
+    record of it: the stands, whether each was reached, the sightings at each, and the robot's and the
+    wall's time it took. ``spec`` is the floor the navigator may drive over (the search's map grid)."""
+    from lab.localization.survey_tour import survey_stands, survey_tour
+    from lab.search.navigate import NavigatorAdapter
+
+    wall0, t0 = time.perf_counter(), robot.now()
+    robot.enable()
+    robot.relocalize()
+    drive = NavigatorAdapter(robot, spec)
+    drive.navigator.scan()
+    drive.scanned = True
+    grid = drive.navigator.planning_grid()
+
+    def free(x, y):
+        return grid.spec.contains_xy(x, y) and math.isfinite(grid.cost_at(x, y))
+
+    x = robot.localizer.x
+    stands = survey_stands(robot.observer.map, free, start_xy=x[:2], config=robot.config)
+    (log or robot.log)(f"localization: a survey tour of {len(stands)} stands ties the posters together")
+    tour = survey_tour(robot, drive, stands)
+    robot.stop()
+    return {
+        "stands": [[round(float(v), 3) for v in xy] for xy in tour.stands],
+        "arrived": [bool(a) for a in tour.arrived],
+        "sightings": [dict(sorted(s.items())) for s in tour.sightings],
+        "n_sightings": tour.n_sightings,
+        "sim_time_s": round(float(robot.now() - t0), 3),
+        "wall_time_s": round(time.perf_counter() - wall0, 3),
+    }

@@ -60,7 +60,7 @@ from lab.runs.moving import (
 )
 from lab.runs.placement import check_placement, path_obstacles, random_placement, searchable_objects, supports
 from lab.runs.robots import RobotKind, levelled, load_robot_config, make_robot, mounts_stated, robot_kind
-from lab.runs.room import localize, robot_start, room_landmarks
+from lab.runs.room import localize, robot_start, room_landmarks, survey_the_room
 from lab.runs.search_result import (
     SUCCESS_ORIENTATION_DEG,
     SUCCESS_POSITION_M,
@@ -178,6 +178,9 @@ class TrialOptions:
         0.2-0.3 deg and would only add that), not on a robot (calibrated once with ``lab hardware
         calibrate``; its rehearsal's levelling is not yet checked, docs/tuning/camera-level.md); True: on
         a robot too; False: the nominal kinematics.
+    survey_tour : bool
+        Before the search, drive a survey tour that ties the posters of a surveyed map together
+        (:func:`lab.runs.room.survey_the_room`; outside the search's budgets; the JSON's ``survey_tour``).
     """
 
     place: tuple | None = None
@@ -202,6 +205,7 @@ class TrialOptions:
     view3d: object = None
     mounts: object = None
     level: bool | None = None
+    survey_tour: bool = False
 
 
 def run_search(
@@ -230,6 +234,7 @@ def run_search(
     view3d=None,
     mounts=None,
     level: bool | None = None,
+    survey_tour: bool = False,
 ) -> SearchResult:
     """Run one search trial (in the simulator, a rehearsal or on the robot) and score it.
 
@@ -261,6 +266,7 @@ def run_search(
         view3d=view3d,
         mounts=mounts,
         level=level,
+        survey_tour=survey_tour,
     )
     return run_trial(object, seed, options)
 
@@ -303,6 +309,9 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
         base, level = levelled(run.robot) if to_level else (run.robot, None)
         # on a robot its odometry starts at (0, 0, 0): placed at the start in the room (lab/runs/room.py)
         robot = localize(base, kind, room, start_pose, seed)
+        tour = (
+            survey_the_room(robot, spec) if opts.survey_tour and mode is LocalizationMode.LANDMARKS else None
+        )
         t0 = robot.now()  # the search's start: after the levelling (the simulator's clock is 0 without it)
         hook = _with_progress(opts.attach, t0) if opts.progress else opts.attach
         if viewer is not None:  # the world's bodies and the tables' and shelves' tops: display only
@@ -331,6 +340,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
         odometry_calibration=robot.odometry_calibration(),
         report_relocalization=report_reloc,
         camera_level=level,
+        survey_tour=tour,
         path_length_m=budget.path_length_m,
         global_searches=out.global_searches,
         local_searches=out.local_searches,

@@ -127,6 +127,9 @@ class SearchResult:
         :mod:`lab.navigation.level`): the views, the floor's tilt before and after, the mounts' angles
         found and the time it took; ``levelled`` False with the reason when too few views showed the
         floor; None when not levelled (``level=False``, or a calibration file was used).
+    survey_tour : dict or None
+        The survey tour before the search (:func:`lab.runs.room.survey_the_room`: its stands, the
+        sightings at each, its time); None without one.
     events : tuple of SearchEvent
     trace : SearchTrace
     recording : str or None
@@ -179,6 +182,7 @@ class SearchResult:
     odometry_calibration: dict | None = None
     report_relocalization: dict | None = None
     camera_level: dict | None = None
+    survey_tour: dict | None = None
     events: tuple[SearchEvent, ...] = field(default=(), repr=False)
     trace: SearchTrace | None = field(default=None, repr=False, compare=False)
     recording: str | None = None
@@ -228,6 +232,7 @@ class SearchResult:
             "odometry_calibration": self.odometry_calibration,
             "report_relocalization": self.report_relocalization,
             "camera_level": self.camera_level,
+            "survey_tour": self.survey_tour,
             "events": [{**e.as_dict(), "t": round(e.t - t0, 3)} for e in self.events],
             "recording": self.recording,
             "sensing": self.sensing,
