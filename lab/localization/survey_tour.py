@@ -34,10 +34,14 @@ from lab.localization.filter import LocalizerConfig
 from lab.localization.landmarks import LandmarkMap
 from lab.localization.survey_limit import posters_in_view
 
-__all__ = ["SurveyTour", "survey_stands", "survey_tour"]
+__all__ = ["SurveyTour", "posters_seen_well", "survey_stands", "survey_tour"]
 
 
-def _seen_well(landmarks: LandmarkMap, xy, range_m, min_facing: float) -> set[str]:
+def posters_seen_well(
+    landmarks: LandmarkMap, xy, range_m: tuple[float, float] = (1.0, 3.0), min_facing: float = 0.7
+) -> set[str]:
+    """The names of the posters seen well from ``xy``: ``range_m`` [m] away and at most
+    ``acos(min_facing)`` off their face's normal."""
     out = set()
     for lm in landmarks:
         d = math.hypot(lm.centre_W[0] - xy[0], lm.centre_W[1] - xy[1])
@@ -72,7 +76,7 @@ def survey_stands(
         for y in ys:
             if free(float(x), float(y)):
                 xy = (float(x), float(y))
-                well = _seen_well(landmarks, xy, range_m, min_facing)
+                well = posters_seen_well(landmarks, xy, range_m, min_facing)
                 cands.append((xy, well, len(posters_in_view(landmarks, xy, config))))
     wanted = set().union(*(c[1] for c in cands)) if cands else set()
     chosen, at = [], tuple(float(v) for v in start_xy)

@@ -387,10 +387,12 @@ def localization_in_words(data: dict) -> str:
 def survey_the_room(robot: LocalizedRobot, spec, log=None) -> dict:
     """Tie the room's posters together before the work starts (:mod:`lab.localization.survey_tour`): look
     round where the robot stands (its first sighting corrects a start measured by hand), scan the floor
-    for the navigator, choose the stands on its planning grid and drive the tour. Returns the JSON's
-    record of it: the stands, whether each was reached, the sightings at each, and the robot's and the
-    wall's time it took. ``spec`` is the floor the navigator may drive over (the search's map grid)."""
+    for the navigator, choose the stands on its planning grid, drive the tour and come back to the start
+    (so the work starts where it would have). Returns the JSON's record of it: the stands, whether each
+    was reached, the sightings at each, whether the robot got back, and the robot's and the wall's time
+    it took. ``spec`` is the floor the navigator may drive over (the search's map grid)."""
     from lab.localization.survey_tour import survey_stands, survey_tour
+    from lab.navigation.drive_loop import NavOutcome
     from lab.search.navigate import NavigatorAdapter
 
     wall0, t0 = time.perf_counter(), robot.now()
@@ -408,12 +410,14 @@ def survey_the_room(robot: LocalizedRobot, spec, log=None) -> dict:
     stands = survey_stands(robot.observer.map, free, start_xy=x[:2], config=robot.config)
     (log or robot.log)(f"localization: a survey tour of {len(stands)} stands ties the posters together")
     tour = survey_tour(robot, drive, stands)
+    back = drive.navigator.go_to((float(x[0]), float(x[1])), float(x[2])).outcome is NavOutcome.ARRIVED
     robot.stop()
     return {
         "stands": [[round(float(v), 3) for v in xy] for xy in tour.stands],
         "arrived": [bool(a) for a in tour.arrived],
         "sightings": [dict(sorted(s.items())) for s in tour.sightings],
         "n_sightings": tour.n_sightings,
+        "returned": back,
         "sim_time_s": round(float(robot.now() - t0), 3),
         "wall_time_s": round(time.perf_counter() - wall0, 3),
     }
