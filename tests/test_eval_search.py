@@ -225,3 +225,21 @@ def test_half_runs_every_placement_once_with_the_boxes_on_every_other_one():
     assert set(Counter(j.kwargs["object"] for j in on).values()) == {3}
     assert set(Counter(j.kwargs["surface"] for j in on).values()) == {3}
     assert {j.key for j in half} <= {j.key for j in both}  # the same jobs as `both` runs: --resume finds them
+
+
+def test_survey_tour_jobs_are_the_same_trials_keyed_apart_and_the_flag_reaches_them():
+    """``--survey-tour`` (flag or sweep file) runs the same placements with the tour before each search;
+    their keys end in ``_tour``, so a resume in the same --out never takes one for the other; without it
+    the jobs are unchanged (no ``survey_tour`` argument)."""
+    from lab.cli.parser import build_parser
+    from lab.eval.cli import search_sweep
+
+    plain = SearchSweep(seeds=(5,), strategies=("paper",)).jobs()
+    toured = SearchSweep(seeds=(5,), strategies=("paper",), survey_tour=True).jobs()
+    assert [j.key + "_tour" for j in plain] == [j.key for j in toured]
+    assert all("survey_tour" not in j.kwargs for j in plain)
+    assert all(j.kwargs["survey_tour"] is True for j in toured)
+    argv = ["eval", "search", "--seeds", "5", "--strategies", "paper", "--out", "x"]
+    assert search_sweep(build_parser().parse_args([*argv, "--survey-tour"])).survey_tour is True
+    assert search_sweep(build_parser().parse_args(argv)).survey_tour is False
+    assert build_parser().parse_args(["search", "--object", "book", "--survey-tour"]).survey_tour is True
