@@ -284,11 +284,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     strategy = Strategy.parse(opts.strategy)
     scene = opts.world if isinstance(opts.world, Scene) else load_scene(opts.world)
     recorder = _check_trial(scene, object, opts.navigate, opts.max_time, opts.record)
-    viewer = None
-    if opts.view3d is not None:  # a missing viewer library: one line before anything starts
-        from lab.viz.view3d import View3D
-
-        viewer = View3D(opts.view3d)
+    viewer = _viewer(opts.view3d)  # a missing viewer library: one line before anything starts
     hw = load_robot_config(opts.robot_config)  # a bad robot config is one clear line before anything starts
     if opts.mounts is not None and not isinstance(opts.mounts, HeadMounts):  # so is a bad calibration file
         opts = replace(opts, mounts=load_mounts(opts.mounts))
@@ -361,6 +357,15 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
         t0=t0,
         moving=None if opts.moving is None else moving_record(opts.moving, truth_of.mover, truth_end.time_s),
     )
+
+
+def _viewer(view3d):
+    """The 3D view a trial records (``TrialOptions.view3d``), or None."""
+    if view3d is None:
+        return None
+    from lab.viz.view3d import View3D
+
+    return View3D(view3d)
 
 
 def _trial_world(kind: RobotKind, scene: Scene, object: str, opts: TrialOptions, rng: np.random.Generator):
