@@ -140,6 +140,11 @@ def test_localization_in_words_says_the_mode_the_updates_and_what_the_odometry_l
     assert localization_in_words({**run, "odometry_calibration": None, "landmark_updates": 1}) == (
         "1 landmark update"
     )
+    tour = {"stands": [[0, 0]] * 4, "sightings": [{"a": 2, "b": 1}, {"b": 3, "c": 1}], "n_sightings": 7}
+    toured = {**run, "odometry_calibration": None, "survey_tour": {**tour, "sim_time_s": 207.6}}
+    assert localization_in_words(toured) == (
+        "a survey tour of 4 stands first (7 sightings of 3 posters, 208 s); 54 landmark updates"
+    )
     fallback = {
         **run,
         "landmark_updates": 0,
