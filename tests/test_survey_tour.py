@@ -63,6 +63,12 @@ def test_the_stands_see_every_poster_well_from_the_free_floor_in_the_order_drive
         left.remove(p)
         at = p
     assert survey_stands(ROOM, lambda x, y: False) == []
+    with pytest.raises(ValueError, match="spacing_m"):
+        survey_stands(ROOM, free, spacing_m=0.0)
+    with pytest.raises(ValueError, match="range_m"):
+        survey_stands(ROOM, free, range_m=(3.0, 1.0))
+    with pytest.raises(ValueError, match="passes"):
+        survey_tour(None, None, [], passes=0)
 
 
 class _TourBase(KinematicRobot):

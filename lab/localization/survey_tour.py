@@ -68,6 +68,10 @@ def survey_stands(
     most posters not yet seen well, then the most in view (:func:`posters_in_view` with ``config``, the
     localizer's range and facing), then the nearest the last.
     """
+    if not (math.isfinite(spacing_m) and spacing_m > 0):
+        raise ValueError(f"spacing_m must be a finite number of metres > 0, got {spacing_m!r}")
+    if not 0 <= range_m[0] < range_m[1]:
+        raise ValueError(f"range_m must be (near, far) with 0 <= near < far [m], got {range_m!r}")
     sx, sy = (float(v) / 2.0 for v in landmarks.room_size)
     xs = np.arange(-sx + spacing_m, sx - spacing_m / 2, spacing_m)
     ys = np.arange(-sy + spacing_m, sy - spacing_m / 2, spacing_m)
@@ -123,6 +127,10 @@ def survey_tour(robot, navigate, stands, passes: int = 2, tolerance_m: float = 0
     ``relocalize`` and ``localizer`` through) to each of ``stands`` with ``navigate(target_xy,
     min_distance, max_distance)`` (the search's), and at each look at every poster in view ``passes``
     times round. A stand the robot cannot reach is skipped."""
+    if not (isinstance(passes, int) and passes >= 1):
+        raise ValueError(
+            f"passes must be a whole number >= 1 (times round the posters in view), got {passes!r}"
+        )
     arrived, sightings = [], []
     loc = robot.localizer
     for xy in stands:
