@@ -101,11 +101,13 @@ def test_the_simulators_drawn_mounts_are_levelled_out():
     camera's vertical, which the nominal kinematics have 0.5-1 deg off, is within 0.3 deg of the true one
     after levelling (0.2 at the median), at pans and tilts the levelling never looked at (the stereo
     floor's normal carries a few hundredths of a degree of its own, which the split between the head's
-    pitch and the tilt's zero amplifies)."""
+    pitch and the tilt's zero amplifies). The images are 0.1 s old when they arrive (error scale 2's
+    latency): each view waits for the head to have stood still longer than that."""
     from lab.sim import RenderSettings, SimRobot, SimWorld
     from lab.sim.sensing import sensing_profile
 
-    sensing = sensing_profile({"profile": "ideal", "room": {"camera_mount_deg": 0.5, "head_mount_deg": 0.5}})
+    room = {"camera_mount_deg": 0.5, "head_mount_deg": 0.5, "latency_s": 0.1}
+    sensing = sensing_profile({"profile": "ideal", "room": room})
     with SimWorld("lab_room", RenderSettings(supersample=2)) as w:
         robot = SimRobot(w, CAMERA, start=Pose2D(0.0, -3.0, math.pi / 2), seed=3, sensing=sensing)
         robot.enable()

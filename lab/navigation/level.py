@@ -89,6 +89,12 @@ class LevelConfig:
         the others are within 0.15 deg).
     min_views : int
         Fewer views with a floor than this: no levelling (:class:`NotLevelled`).
+    settle_s : float [s]
+        How long after the head stops each view is taken. A camera's image is older than its frame's
+        stamp (a USB camera's 30-100 ms, ``[sensing.room] latency_s``), so a frame taken as the head
+        arrives may show it still turning, paired with the arrived angles. The head moves at 60 deg/s,
+        so 0.1 s is several degrees of pan or tilt, and the floor's normal tilts with it. The wait covers
+        three times the longest such latency and costs a few seconds over the pattern.
     """
 
     pans_deg: tuple[float, ...] = (-150.0, -100.0, -50.0, 0.0, 50.0, 100.0, 150.0)
@@ -99,6 +105,7 @@ class LevelConfig:
     prior_deg: float = 1.0
     gate_deg: float = 0.4
     min_views: int = 6
+    settle_s: float = 0.3
 
 
 class NotLevelled(LabError, RuntimeError):
@@ -235,8 +242,9 @@ def solve_level(views: Sequence[FloorView], camera, config: LevelConfig | None =
 
 
 def level_camera(robot, config: LevelConfig | None = None) -> Level:
-    """Turn the standing robot's head through the pattern, fit the floor in every view and solve
-    (:func:`solve_level`); the head is put back where it was. The robot must be enabled; it does not
+    """Turn the standing robot's head through the pattern, fit the floor in every view (taken
+    ``config.settle_s`` after the head stopped) and solve (:func:`solve_level`); the head is put back
+    where it was. The robot must be enabled; it does not
     drive.
 
     Raises
@@ -257,7 +265,7 @@ def level_camera(robot, config: LevelConfig | None = None) -> Level:
                 continue
             robot.command_pan_tilt(p, t)
             robot.wait_pan_tilt(timeout=timeout)
-            v = floor_normal(robot.capture_stereo(), cfg)
+            v = floor_normal(robot.capture_stereo(after=robot.now() + cfg.settle_s), cfg)
             if v is not None:
                 views.append(v)
     robot.command_pan_tilt(start.pan, start.tilt)
