@@ -44,7 +44,7 @@ def _in_room(x, y, margin=0.6):
 def test_the_stands_see_every_poster_well_from_the_free_floor_in_the_order_driven():
     """With a table's worth of floor blocked: every stand is free, every poster that some free point sees
     well is seen well from a stand, each stand adds one the stands before it did not see well, and
-    each next stand is the nearest of those left."""
+    each next stand is the nearest of those left. Asked to, the stands see each poster well twice."""
 
     def free(x, y):
         return _in_room(x, y) and not (-1.0 <= x <= 1.0 and -0.5 <= y <= 0.5)
@@ -63,6 +63,14 @@ def test_the_stands_see_every_poster_well_from_the_free_floor_in_the_order_drive
         left.remove(p)
         at = p
     assert survey_stands(ROOM, lambda x, y: False) == []
+    # cover=2: every poster seen well from two stands, or from every free point that sees it well
+    two = survey_stands(ROOM, free, start_xy=start, cover=2)
+    assert len(set(two)) == len(two) and all(free(*p) for p in two) and len(two) > len(stands)
+    for lm in ROOM:
+        can = sum(lm.name in posters_seen_well(ROOM, p) for p in grid)
+        assert sum(lm.name in posters_seen_well(ROOM, p) for p in two) >= min(2, can)
+    with pytest.raises(ValueError, match="cover"):
+        survey_stands(ROOM, free, cover=0)
     with pytest.raises(ValueError, match="spacing_m"):
         survey_stands(ROOM, free, spacing_m=0.0)
     with pytest.raises(ValueError, match="range_m"):

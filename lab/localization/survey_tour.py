@@ -58,6 +58,7 @@ def survey_stands(
     range_m: tuple[float, float] = (1.0, 3.0),
     min_facing: float = 0.7,
     config: LocalizerConfig | None = None,
+    cover: int = 1,
 ) -> list[tuple[float, float]]:
     """The tour's stands: points on a ``spacing_m`` grid over the room where ``free(x, y)``, chosen
     greedily until every poster that any of them sees well is seen well from one, in the order a robot
@@ -65,9 +66,15 @@ def survey_stands(
 
     A poster is seen well from a point ``range_m`` [m] away and at most ``acos(min_facing)`` off its face:
     the fit's range error grows as the square of the distance. The next stand is the one that sees the
-    most posters not yet seen well, then the most in view (:func:`posters_in_view` with ``config``, the
-    localizer's range and facing), then the nearest the last.
+    most posters not yet seen well often enough, then the most in view (:func:`posters_in_view` with
+    ``config``, the localizer's range and facing), then the nearest the last. With ``cover`` above 1 every
+    poster is seen well from that many stands (or from every point that sees it well, when fewer do): a
+    poster sighted from two places is placed by two bearings, not by one bearing and a stereo range.
     """
+    if not (isinstance(cover, int) and cover >= 1):
+        raise ValueError(
+            f"cover must be a whole number >= 1 (stands that see each poster well), got {cover!r}"
+        )
     if not (math.isfinite(spacing_m) and spacing_m > 0):
         raise ValueError(f"spacing_m must be a finite number of metres > 0, got {spacing_m!r}")
     if not 0 <= range_m[0] < range_m[1]:
@@ -82,12 +89,16 @@ def survey_stands(
                 xy = (float(x), float(y))
                 well = posters_seen_well(landmarks, xy, range_m, min_facing)
                 cands.append((xy, well, len(posters_in_view(landmarks, xy, config))))
-    wanted = set().union(*(c[1] for c in cands)) if cands else set()
+    wanted = {n: cover for c in cands for n in c[1]}  # poster -> stands still to see it well
     chosen, at = [], tuple(float(v) for v in start_xy)
-    while wanted:
-        best = max(cands, key=lambda c: (len(c[1] & wanted), c[2], -math.dist(c[0], at)))
+    while cands and any(wanted.values()):
+        best = max(cands, key=lambda c: (sum(wanted[n] > 0 for n in c[1]), c[2], -math.dist(c[0], at)))
+        if not any(wanted[n] > 0 for n in best[1]):
+            break  # the posters left are seen well from fewer points than ``cover``
+        cands.remove(best)
         chosen.append(best[0])
-        wanted -= best[1]
+        for n in best[1]:
+            wanted[n] = max(wanted[n] - 1, 0)
         at = best[0]
     tour, at = [], tuple(float(v) for v in start_xy)
     while chosen:
