@@ -5,6 +5,9 @@ clearings recorded, then re-analysed offline (docs/tuning/revalidation.md, issue
     nice .venv/bin/python benchmarks/replay_localizer.py replay --out out/reval-search
     nice .venv/bin/python benchmarks/replay_localizer.py pose-checks --out out/reval-search
     nice .venv/bin/python benchmarks/replay_localizer.py search-figures --out out/reval-search
+    nice .venv/bin/python benchmarks/replay_localizer.py record --seeds 5 --error-scale 2 \
+        --only paper_obst_realistic_landmarks_cereal_box_floor --out out/x2-trial
+    nice .venv/bin/python benchmarks/replay_localizer.py sightings --out out/x2-trial
 
 ``record`` runs the ``lab eval search`` trials of the paper strategy (every object, surface and obstacle
 setting of ``--seeds``, realistic sensing, landmarks, 600 s) one after the other in this process, a
@@ -30,7 +33,10 @@ same observations, not where the robot would then have gone.
 5 cm and 10 degrees) and checks its frame again at the pose turned about the vertical (wrong poses),
 for several thresholds; it also lists the navigator's clearings. ``search-figures`` prints the find
 times against budgets and the revisits from another side (of a cell searched itself, or only of a
-neighbour).
+neighbour). ``sightings`` prints each trial's landmark sightings against the truth by poster, the
+surveyed map's floor for the posters it sighted and the localizer's error, at its last pose.
+``record --error-scale K`` scales the profile's errors, ``--survey-tour`` drives a tour before each
+search, ``--only TEXT`` keeps the jobs whose key contains TEXT.
 """
 
 from __future__ import annotations
@@ -167,8 +173,10 @@ class Recorder:
         return wrapper
 
 
-def record(out: Path, seeds) -> None:
-    """Run the trials in this process with the localizer recorded (see the module docstring)."""
+def record(out: Path, seeds, error_scale: float = 1.0, survey_tour: bool = False, only: str = "") -> None:
+    """Run the trials in this process with the localizer recorded (see the module docstring): the
+    profile's errors times ``error_scale``, a survey tour first with ``survey_tour``, and only the jobs
+    whose key contains ``only``."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from lab.eval.search import SearchSweep
     from lab.io import write_json_atomic
@@ -176,7 +184,10 @@ def record(out: Path, seeds) -> None:
     rec = Recorder()
     rec.install()
     (out / "replay").mkdir(parents=True, exist_ok=True)
-    jobs = SearchSweep(seeds=tuple(seeds), strategies=("paper",)).jobs()
+    sweep = SearchSweep(
+        seeds=tuple(seeds), strategies=("paper",), error_scale=(error_scale,), survey_tour=survey_tour
+    )
+    jobs = [j for j in sweep.jobs() if only in j.key]
     for job in sorted(jobs, key=lambda j: j.kwargs["seed"]):  # a seed's every surface first
         done = out / "jobs" / f"{job.key}.json"
         if done.exists():
@@ -255,6 +266,71 @@ def replay(out: Path) -> None:
             f"{np.mean(np.concatenate([r['z2'] for r in runs])):.2f} | "
             f"{changed} of {len(runs)} |"
         )
+
+
+def sightings(out: Path) -> None:
+    """Each recorded trial's landmark sightings against the truth, by poster: the bearing's turn and the
+    range's share off (both what a shared calibration error would leave), the poster's yaw off, and how
+    many; then the surveyed map's floor at the robot's last pose for the posters it sighted (their
+    surveys fitted together, :func:`lab.localization.survey_limit.survey_frame_error`) and the
+    localizer's own error there."""
+    from lab.geometry import wrap_angle
+    from lab.localization import Localizer, measurement_model
+    from lab.localization.survey_limit import survey_frame_error
+    from lab.training.landmarks import landmark_map_from_scene
+
+    true = {lm.name: lm for lm in landmark_map_from_scene("lab_room")}
+    for p in sorted(q for q in (out / "replay").glob("*.pkl") if q.name.count(".") == 1):
+        logs = [g for g in pickle.loads(p.read_bytes()) if any(c[2] is not None for c in g["calls"])]
+        for g in logs:
+            by, mapped, last = {}, {}, None
+            for name, blob, truth in g["calls"]:
+                if name != "update" or truth is None:
+                    continue
+                (z, _Q, lm, *_), _kw = pickle.loads(blob)
+                t = true[lm.name]
+                zt = measurement_model(truth, [t.centre_W[0], t.centre_W[1], t.yaw])
+                r = math.hypot(zt[0], zt[1])
+                u = zt[:2] / r
+                dz = np.asarray(z[:2], float) - zt[:2]
+                across = float(dz @ np.array([-u[1], u[0]]))
+                by.setdefault(lm.name, []).append(
+                    (
+                        math.degrees(across / r),
+                        100 * float(dz @ u) / r,
+                        math.degrees(wrap_angle(z[2] - zt[2])),
+                    )
+                )
+                mapped[lm.name], last = lm, truth
+            if last is None:
+                continue
+            print(f"{p.stem}: sightings against the truth, medians (bearing deg / range % / yaw deg, n)")
+            for n, v in sorted(by.items()):
+                b, rr, y = np.median(np.array(v), axis=0)
+                print(f"  {n:18s} {b:+6.2f} {rr:+6.2f} {y:+6.2f}  n {len(v)}")
+            names = sorted(mapped)
+            xy = [true[n].centre_W[:2] for n in names]
+            E = [
+                (
+                    mapped[n].centre_W[0] - true[n].centre_W[0],
+                    mapped[n].centre_W[1] - true[n].centre_W[1],
+                    wrap_angle(mapped[n].yaw - true[n].yaw),
+                )
+                for n in names
+            ]
+            sm, sr = mapped[names[0]].survey_sigma_m, mapped[names[0]].survey_sigma_rad
+            if sm > 0 and sr > 0:
+                fe = survey_frame_error(xy, E, last[:2], sm, sr)
+                floor = 100 * math.hypot(fe[0], fe[1])
+                print(f"  the survey's floor at the last pose, these posters: {floor:.1f} cm")
+            loc = Localizer(g["x0"], g["Sigma0"], g["config"], g["first_sighting"])
+            for name, blob, _truth in g["calls"]:
+                args, kw = pickle.loads(blob)
+                try:
+                    getattr(loc, name)(*args, **kw)
+                except ValueError:
+                    continue
+            print(f"  the localizer at the last pose: {100 * math.hypot(*(loc.x[:2] - last[:2])):.1f} cm")
 
 
 THRESHOLDS = [(3, 0.03), (2, 0.02), (4, 0.03), (5, 0.04), (6, 0.04), (3, 0.05), (8, 0.06)]
@@ -380,15 +456,20 @@ def turned_checks(out: Path, turns_deg=(20.0, -20.0, 40.0, -40.0, 180.0)) -> Non
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("record", "replay", "pose-checks", "search-figures"))
+    ap.add_argument("what", choices=("record", "replay", "pose-checks", "search-figures", "sightings"))
     ap.add_argument("--seeds", default="1-2", help="tuning seeds, e.g. 1-2 (record)")
+    ap.add_argument("--error-scale", type=float, default=1.0, help="the profile's errors times this (record)")
+    ap.add_argument("--survey-tour", action="store_true", help="a survey tour before each search (record)")
+    ap.add_argument("--only", default="", help="only the jobs whose key contains this (record)")
     ap.add_argument("--out", type=Path, required=True)
     a = ap.parse_args()
     if a.what == "record":
         seeds = parse_seeds(a.seeds)
         if any(s >= 1000 for s in seeds):
             raise SystemExit("replay_localizer: tuning seeds only (< 1000)")
-        record(a.out, seeds)
+        record(a.out, seeds, a.error_scale, a.survey_tour, a.only)
+    elif a.what == "sightings":
+        sightings(a.out)
     elif a.what == "replay":
         replay(a.out)
     elif a.what == "pose-checks":
