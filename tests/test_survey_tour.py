@@ -50,8 +50,9 @@ def test_the_stands_see_every_poster_well_from_the_free_floor_in_the_order_drive
     for lm in ROOM:
         can = sum(lm.name in posters_seen_well(ROOM, p) for p in grid)
         assert sum(lm.name in posters_seen_well(ROOM, p) for p in two) >= min(2, can)
-    with pytest.raises(ValueError, match="cover"):
-        survey_stands(ROOM, free, cover=0)
+    for bad in (0, 1.5, True):
+        with pytest.raises(ValueError, match="cover must be a whole number"):
+            survey_stands(ROOM, free, cover=bad)
     with pytest.raises(ValueError, match="spacing_m"):
         survey_stands(ROOM, free, spacing_m=0.0)
     with pytest.raises(ValueError, match="range_m"):

@@ -71,7 +71,7 @@ def survey_stands(
     poster is seen well from that many stands (or from every point that sees it well, when fewer do): a
     poster sighted from two places is placed by two bearings, not by one bearing and a stereo range.
     """
-    if not (isinstance(cover, int) and cover >= 1):
+    if isinstance(cover, bool) or not (isinstance(cover, int) and cover >= 1):
         raise ValueError(
             f"cover must be a whole number >= 1 (stands that see each poster well), got {cover!r}"
         )

@@ -244,8 +244,7 @@ def solve_level(views: Sequence[FloorView], camera, config: LevelConfig | None =
 def level_camera(robot, config: LevelConfig | None = None) -> Level:
     """Turn the standing robot's head through the pattern, fit the floor in every view (taken
     ``config.settle_s`` after the head stopped) and solve (:func:`solve_level`); the head is put back
-    where it was. The robot must be enabled; it does not
-    drive.
+    where it was. The robot must be enabled; it does not drive.
 
     Raises
     ------
