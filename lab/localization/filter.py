@@ -172,6 +172,10 @@ class LocalizerConfig:
     camera_yaw_sigma_rad : float [rad]
         Estimate the camera's yaw on the base (the pan zero and the mounts' yaw) in the state, from this
         prior (:mod:`lab.localization.posters`); 0: assumed exact (not in the state).
+    range_scale_sigma : float [-]
+        Estimate the stereo's range scale (the calibration's focal length and baseline errors, which
+        stretch every sighting's range by the same factor) in the state, from this prior
+        (:mod:`lab.localization.posters`); 0: assumed exact (not in the state).
     odometry_calibration : bool
         Estimate the odometry's turn scale ``k`` and curvature bias ``c`` in the state
         (:func:`calibrated_motion_model`); False: the pose alone, with the systematic errors left to the
@@ -229,6 +233,7 @@ class LocalizerConfig:
     calibrated_heading_rad_per_sqrt_m: float = 0.02
     calibrated_heading_rad_per_sqrt_rad: float = 0.03
     camera_yaw_sigma_rad: float = 0.0
+    range_scale_sigma: float = 0.0
     ransac: RansacConfig = field(default_factory=lambda: RansacConfig(min_matches=6, dist_max_m=0.25))
 
     def __post_init__(self):
@@ -252,6 +257,7 @@ class LocalizerConfig:
             "calibrated_heading_rad_per_sqrt_m",
             "calibrated_heading_rad_per_sqrt_rad",
             "camera_yaw_sigma_rad",
+            "range_scale_sigma",
         ):
             v = getattr(self, k)
             if not (math.isfinite(v) and v >= 0):
@@ -498,7 +504,14 @@ class Localizer:
             self.P[3, 3], self.P[4, 4] = c.turn_scale_sigma**2, c.curvature_sigma_rad_per_m**2
         self.camera_yaw = None  # its index in the state, when estimated (camera_yaw_sigma_rad)
         if c.camera_yaw_sigma_rad > 0:
-            self.s, self.P, self.camera_yaw = self.posters.augment_yaw(self.s, self.P, c.camera_yaw_sigma_rad)
+            self.s, self.P, self.camera_yaw = self.posters.augment_camera(
+                self.s, self.P, c.camera_yaw_sigma_rad, "camera's yaw"
+            )
+        self.range_scale = None  # its index in the state, when estimated (range_scale_sigma)
+        if c.range_scale_sigma > 0:
+            self.s, self.P, self.range_scale = self.posters.augment_camera(
+                self.s, self.P, c.range_scale_sigma, "range scale"
+            )
         self.history: list[UpdateRecord] = []
         self.rejected_in_a_row = 0
         self.n_inflations = 0
@@ -545,6 +558,15 @@ class Localizer:
             return None
         b = self.camera_yaw
         return float(self.s[b]), math.sqrt(self.P[b, b])
+
+    @property
+    def range_scale_estimate(self) -> tuple[float, float] | None:
+        """The stereo's range scale error (a sighting's range is ``1 +`` this times the true one) and its
+        standard deviation, or None when it is not in the state (``range_scale_sigma`` 0)."""
+        if self.range_scale is None:
+            return None
+        g = self.range_scale
+        return float(self.s[g]), math.sqrt(self.P[g, g])
 
     def camera_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The camera's planar pose ``[x, y, theta + beta]`` and its covariance (3, 3): the base's
@@ -606,7 +628,7 @@ class Localizer:
         x_bar, Sigma_bar = self.x, self.Sigma
         s_bar, P_bar = self.s.copy(), self.P.copy()
         n, angles = len(s_bar), self.posters.angles()
-        h, H = observe(s_bar, landmark, j, self.camera_yaw)
+        h, H = observe(s_bar, landmark, j, self.camera_yaw, self.range_scale)
         nu = z - h  # innovation
         nu[2] = wrap_angle(nu[2])
         S = H @ P_bar @ H.T + Q  # innovation covariance
@@ -617,7 +639,7 @@ class Localizer:
             # and S), relinearise at each new mean until it stops moving
             s_i = s_bar.copy()
             for i in range(self.config.update_iterations):
-                h, H_i = observe(s_i, landmark, j, self.camera_yaw)
+                h, H_i = observe(s_i, landmark, j, self.camera_yaw, self.range_scale)
                 if i > 0:
                     H = H_i
                     S = H @ P_bar @ H.T + Q
@@ -766,7 +788,9 @@ class Localizer:
         x_bar, Sigma_bar = self.x, self.Sigma
         P_bar = self.P.copy()
         n = len(self.s)
-        x_z, Sigma_z, Jl = sighting_pose(self.s, z, Q, landmark, j, self.camera_yaw)  # Sigma_z = J_z Q J_z^T
+        x_z, Sigma_z, Jl = sighting_pose(
+            self.s, z, Q, landmark, j, self.camera_yaw, self.range_scale
+        )  # Sigma_z = J_z Q J_z^T
         d = x_z - x_bar
         d[2] = wrap_angle(d[2])
         Hf = -Jl  # d = x - x_z(l): H = [I, 0, -J_l] (no poster: [I, 0])

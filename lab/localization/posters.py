@@ -104,12 +104,15 @@ def pose_jacobian_in_landmark(z, l) -> np.ndarray:
     return np.array([[1.0, 0.0, s * z[0] + c * z[1]], [0.0, 1.0, -c * z[0] + s * z[1]], [0.0, 0.0, 1.0]])
 
 
-def observe(s, landmark: Landmark, j: int | None, b: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+def observe(
+    s, landmark: Landmark, j: int | None, b: int | None = None, g: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """``h(s)`` (3,) and ``H = dh/ds`` (3, n) of a landmark observation on the state ``s`` (n,).
 
     The robot's pose is ``s[:3]``; the landmark's planar pose is the state's block ``s[j:j + 3]`` when it
     is in the state (``j``), else its map pose (held fixed: ``H`` is zero there); ``s[b]`` the camera's
-    yaw on the base when it is estimated (``b``; see the module docstring)."""
+    yaw on the base and ``s[g]`` the stereo's range scale when they are estimated (``b``, ``g``; see the
+    module docstring)."""
     s = np.asarray(s, float)
     l = landmark.planar if j is None else s[j : j + 3]
     H = np.zeros((3, len(s)))
@@ -117,40 +120,51 @@ def observe(s, landmark: Landmark, j: int | None, b: int | None = None) -> tuple
     if j is not None:
         H[:, j : j + 3] = landmark_jacobian(s[:3], l)
     h = measurement_model(s[:3], l)
-    if b is None:
+    if b is None and g is None:
         return h, H
-    c, sn = math.cos(s[b]), math.sin(s[b])
+    beta = 0.0 if b is None else float(s[b])
+    k = 1.0 if g is None else 1.0 + float(s[g])
+    c, sn = math.cos(beta), math.sin(beta)
     R = np.array([[c, sn], [-sn, c]])  # R(-beta)
-    H[:2] = R @ H[:2]
-    H[:2, b] = np.array([[-sn, c], [-c, -sn]]) @ h[:2]  # dR(-beta)/dbeta h_xy
-    H[2, b] = -1.0
-    return np.array([*(R @ h[:2]), wrap_angle(h[2] - s[b])]), H
+    turned = R @ h[:2]
+    H[:2] = k * (R @ H[:2])
+    if b is not None:
+        H[:2, b] = k * (np.array([[-sn, c], [-c, -sn]]) @ h[:2])  # k dR(-beta)/dbeta h_xy
+        H[2, b] = -1.0
+    if g is not None:
+        H[:2, g] = turned
+    return np.array([*(k * turned), wrap_angle(h[2] - beta)]), H
 
 
 def sighting_pose(
-    s, z, Q, landmark: Landmark, j: int | None, b: int | None = None
+    s, z, Q, landmark: Landmark, j: int | None, b: int | None = None, g: int | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The robot pose ``x_z`` one observation ``z`` (covariance ``Q``) implies
     (:func:`~lab.localization.models.pose_from_observation`), its covariance ``J_z Q J_z^T`` through the
     observation, and ``J_l = dx_z/ds`` (3, n) through the state: the poster's block at ``j`` (zero when
-    the landmark is held fixed, ``j`` None) and the camera's yaw ``s[b]`` (when estimated)."""
+    the landmark is held fixed, ``j`` None), the camera's yaw ``s[b]`` and the range scale ``s[g]`` (when
+    estimated)."""
     s = np.asarray(s, float)
     z = np.asarray(z, float)
     l = landmark.planar if j is None else s[j : j + 3]
-    Rb = np.eye(3)
-    if b is not None:  # undo the camera's yaw: z_c = [R(beta) z_xy, z_3 + beta]
-        c, sn = math.cos(s[b]), math.sin(s[b])
-        Rb[:2, :2] = [[c, -sn], [sn, c]]
-        dz_db = np.array([-sn * z[0] - c * z[1], c * z[0] - sn * z[1], 1.0])
-        z = Rb @ z + [0.0, 0.0, s[b]]
+    M = np.eye(3)  # dz_c/dz
+    if b is not None or g is not None:  # undo them: z_c = [R(beta) z_xy / k, z_3 + beta]
+        beta = 0.0 if b is None else float(s[b])
+        k = 1.0 if g is None else 1.0 + float(s[g])
+        c, sn = math.cos(beta), math.sin(beta)
+        M[:2, :2] = np.array([[c, -sn], [sn, c]]) / k
+        dz_db = np.array([(-sn * z[0] - c * z[1]) / k, (c * z[0] - sn * z[1]) / k, 1.0])
+        z = M @ z + [0.0, 0.0, beta]
+        dz_dg = np.array([-z[0] / k, -z[1] / k, 0.0])
     x_z, J = pose_from_observation(z, l)
     Jl = np.zeros((3, len(s)))
     if j is not None:
         Jl[:, j : j + 3] = pose_jacobian_in_landmark(z, l)
     if b is not None:
         Jl[:, b] = J @ dz_db
-        J = J @ Rb
-    return x_z, J @ Q @ J.T, Jl
+    if g is not None:
+        Jl[:, g] = J @ dz_dg
+    return x_z, J @ M @ Q @ M.T @ J.T, Jl
 
 
 class PosterStates:
@@ -186,17 +200,19 @@ class PosterStates:
         self.index[landmark.name] = n
         return np.concatenate([s, l]), P_new, n
 
-    def augment_yaw(
-        self, s: np.ndarray, P: np.ndarray, sigma_rad: float
+    def augment_camera(
+        self, s: np.ndarray, P: np.ndarray, sigma: float, what: str
     ) -> tuple[np.ndarray, np.ndarray, int]:
-        """The state and covariance with the camera's yaw on the base appended (prior ``N(0, sigma^2)``,
-        independent of the rest), and its index; before any poster (call it first)."""
+        """The state and covariance with one of the camera's constants appended (the yaw on the base
+        [rad], the range scale [-]: prior ``N(0, sigma^2)``, independent of the rest), and its index;
+        before any poster (call it first)."""
         if self.index:
-            raise ValueError("the camera's yaw joins the state before any poster")
+            raise ValueError(f"the {what} joins the state before any poster")
         n = len(s)
         P_new = np.zeros((n + 1, n + 1))
         P_new[:n, :n] = P
-        P_new[n, n] = float(sigma_rad) ** 2
+        P_new[n, n] = float(sigma) ** 2
+        self.first = n + 1
         return np.concatenate([s, [0.0]]), P_new, n
 
     def angles(self) -> list[int]:

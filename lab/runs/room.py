@@ -185,19 +185,35 @@ def surveyed_map(landmarks: LandmarkMap, profile, seed: int) -> LandmarkMap:
 def sim_localizer_told(robot) -> dict:
     """What the localizer is told in the simulator, as :class:`~lab.localization.LocalizedRobot`'s keyword
     arguments: the stated start sigma with the first sighting allowed to correct it
-    (:func:`sim_start_sigma`), the camera's stated latency (its frames are stamped at arrival), and with
-    the mounts stated uncertain the camera's yaw on the base in the filter's state, its prior the
-    camera's stated pointing (``LocalizerConfig.camera_yaw_sigma_rad``). The pan zero and the mounts turn
-    every sighting by one angle that a standing robot takes into its heading, and the odometry then
-    drives along that wrong heading; a state of its own keeps the heading the base's
-    (docs/tuning/localizer-camera-yaw.md). Empty for a profile without the room's errors."""
+    (:func:`sim_start_sigma`), the camera's stated latency (its frames are stamped at arrival), and the
+    camera's constants that every sighting shares in the filter's state:
+
+    * with the mounts stated uncertain, the camera's yaw on the base, its prior the camera's stated
+      pointing (``LocalizerConfig.camera_yaw_sigma_rad``). The pan zero and the mounts turn every
+      sighting by one angle that a standing robot takes into its heading, and the odometry then drives
+      along that wrong heading; a state of its own keeps the heading the base's
+      (docs/tuning/localizer-camera-yaw.md);
+    * with the calibration stated uncertain, the stereo's range scale, its prior the camera's stated
+      depth scale (``LocalizerConfig.range_scale_sigma``): the focal lengths' and baseline's errors
+      stretch every range alike, which sightings from many places do not average out; held exact, it
+      bends the posters' refined shape and the robot's position towards the posters it sees
+      (docs/tuning/localizer-range-scale.md).
+
+    Empty for a profile without the room's errors."""
     Sigma0 = sim_start_sigma(robot)
     told = {} if Sigma0 is None else {"Sigma0": Sigma0, "start_measured_by_hand": True}
     room = getattr(getattr(robot, "sensing", None), "room", None)
-    if room is not None and room.latency_s > 0:
+    if room is None:
+        return told
+    if room.latency_s > 0:
         told["camera_latency_s"] = room.latency_s
-    if room is not None and (room.camera_mount_deg > 0 or room.head_mount_deg > 0):
-        told["config"] = LocalizerConfig(camera_yaw_sigma_rad=math.radians(robot.camera.pointing_std_deg))
+    config = {}
+    if room.camera_mount_deg > 0 or room.head_mount_deg > 0:
+        config["camera_yaw_sigma_rad"] = math.radians(robot.camera.pointing_std_deg)
+    if robot.camera.depth_scale_std > 0:
+        config["range_scale_sigma"] = robot.camera.depth_scale_std
+    if config:
+        told["config"] = LocalizerConfig(**config)
     return told
 
 
