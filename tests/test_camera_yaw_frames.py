@@ -3,6 +3,7 @@ above 0), reaches what the robot sees: every frame a :class:`~lab.localization.L
 taken through the camera turned by the estimate about the pan axis (:func:`lab.mounts.with_head_yaw`)."""
 
 import math
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -87,11 +88,18 @@ def test_a_localized_robots_frames_are_taken_through_the_estimated_yaw():
         base_est, cam_est = robot.pose_estimate(), robot.camera_pose_estimate()
         assert cam_est.sigma_theta_rad < base_est.sigma_theta_rad
         assert cam_est.pose.theta == pytest.approx(base_est.pose.theta + yaw, abs=1e-12)
+        # the calibration stated uncertain: the range scale in the state, and the frame's ranges corrected
+        assert told["config"].range_scale_sigma == base.camera.depth_scale_std > 0
+        scale, sd_scale = robot.localizer.range_scale_estimate
+        assert scale != 0.0 and 0 < sd_scale < told["config"].range_scale_sigma
+        assert frame.camera.baseline == pytest.approx(seen[-1].camera.baseline / (1 + scale), rel=1e-12)
 
 
-def test_the_yaw_is_held_exact_when_the_profile_states_the_mounts_exact():
-    """A profile without mount errors (the survey-and-start condition's) keeps the localizer's default
-    config: the camera's yaw on the base is not in the state."""
+@pytest.mark.parametrize("depth_scale_std", [0.0, 0.007])
+def test_the_yaw_is_held_exact_when_the_profile_states_the_mounts_exact(depth_scale_std):
+    """A profile without mount errors (the survey-and-start condition's): the camera's yaw on the base is
+    not in the state; the range scale is when the camera's calibration is stated uncertain, and with
+    neither the localizer keeps its default config."""
     room = SimpleNamespace(
         camera_mount_deg=0.0,
         head_mount_deg=0.0,
@@ -100,9 +108,16 @@ def test_the_yaw_is_held_exact_when_the_profile_states_the_mounts_exact():
         start_deg=3.0,
         start_sigma=(0.1, math.radians(5.0)),
     )
-    robot = SimpleNamespace(sensing=SimpleNamespace(room=room), camera=SIM_CAMERA.camera())
+    camera = replace(SIM_CAMERA.camera(), depth_scale_std=depth_scale_std)
+    robot = SimpleNamespace(sensing=SimpleNamespace(room=room), camera=camera)
     told = sim_localizer_told(robot)
-    assert "config" not in told and told["start_measured_by_hand"]
+    assert told["start_measured_by_hand"]
+    if depth_scale_std == 0:
+        assert "config" not in told
+    else:
+        assert (
+            told["config"].camera_yaw_sigma_rad == 0 and told["config"].range_scale_sigma == depth_scale_std
+        )
 
 
 def _state_with_yaw(seed: int = 0) -> Localizer:

@@ -244,6 +244,9 @@ class LocalizedRobot(RobotWrapper):
             frame = replace(
                 frame, camera=with_head_yaw(frame.camera, _within_mount_limit(frame.camera, yaw[0]))
             )
+        scale = self.localizer.range_scale_estimate
+        if scale is not None:  # and at the ranges the estimated range scale corrects
+            frame = replace(frame, camera=_rescaled(frame.camera, scale[0], self.config.range_scale_sigma))
         return frame
 
     def certain(self, sigma_m: float | None = None, sigma_rad: float | None = None, at_W=None) -> bool:
@@ -461,3 +464,13 @@ def _within_mount_limit(camera, yaw: float) -> float:
     y0 = camera.mounts.head_rpy[2] if isinstance(camera, MountedCamera) else 0.0
     lim = math.radians(MAX_MOUNT_DEG) - 1e-9
     return float(np.clip(y0 + yaw, -lim, lim) - y0)
+
+
+def _rescaled(camera, scale: float, sigma: float):
+    """``camera`` whose triangulated points are the stereo's divided by ``1 + scale`` (the localizer's
+    range scale, :mod:`lab.localization.posters`): its baseline divided by it, so ``Z = f_x B / d`` and
+    the rays' lateral offsets shrink alike. Ranges are stretched mostly along the line of sight, and the
+    objects the search measures lie near the image's centre, where the two are one. The scale is clipped
+    to three of its prior deviations (``sigma``): a diverged estimate does not rescale the world."""
+    s = float(np.clip(scale, -3.0 * sigma, 3.0 * sigma))
+    return replace(camera, baseline=camera.baseline / (1.0 + s))
