@@ -140,6 +140,12 @@ def test_localization_in_words_says_the_mode_the_updates_and_what_the_odometry_l
     assert localization_in_words({**run, "odometry_calibration": None, "landmark_updates": 1}) == (
         "1 landmark update"
     )
+    # what it learned of the camera: its yaw on the base and its ranges' scale
+    cam = {"yaw_deg": -0.412, "yaw_sd_deg": 0.081, "range_scale": -0.00476, "range_scale_sd": 0.0011}
+    assert localization_in_words({**run, "odometry_calibration": None, "camera_estimate": cam}) == (
+        "54 landmark updates; the camera sits -0.41 +- 0.08 deg turned on the base; the stereo's ranges "
+        "come out 0.48 +- 0.11 % short"
+    )
     tour = {"stands": [[0, 0]] * 4, "sightings": [{"a": 2, "b": 1}, {"b": 3, "c": 1}], "n_sightings": 7}
     toured = {**run, "odometry_calibration": None, "survey_tour": {**tour, "sim_time_s": 207.6}}
     assert localization_in_words(toured) == (

@@ -167,6 +167,22 @@ class LocalizedRobot(RobotWrapper):
             "curvature_sd_rad_per_m": round(sc, 5),
         }
 
+    def camera_estimate(self) -> dict | None:
+        """What the filter learned of the camera's constants that every sighting shares, for a run's JSON
+        and the operator: its yaw on the base (``yaw_deg``, ``yaw_sd_deg``: the pan zero and the mounts'
+        yaw) and the stereo's range scale (``range_scale``, ``range_scale_sd``: 0.005 means every range
+        came out 0.5 % long), each when it is in the state. None with ``mode=odometry`` or when neither
+        is (:class:`LocalizerConfig`'s ``camera_yaw_sigma_rad`` and ``range_scale_sigma``)."""
+        yaw, scale = self.localizer.camera_yaw_estimate, self.localizer.range_scale_estimate
+        if self.mode is LocalizationMode.ODOMETRY or (yaw is None and scale is None):
+            return None
+        out = {}
+        if yaw is not None:
+            out.update(yaw_deg=round(math.degrees(yaw[0]), 4), yaw_sd_deg=round(math.degrees(yaw[1]), 4))
+        if scale is not None:
+            out.update(range_scale=round(scale[0], 6), range_scale_sd=round(scale[1], 6))
+        return out
+
     def refined_landmarks(self) -> dict[str, dict]:
         """What the filter learned of a surveyed map (:meth:`Localizer.landmark_estimates`), for a run's
         JSON and the operator, by poster: its refined ``x_m``, ``y_m``, ``yaw_deg``, their standard

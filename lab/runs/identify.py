@@ -342,6 +342,7 @@ def _localization_fields(robot: LocalizedRobot, session: RobotSession, note) -> 
         "landmark_updates": est.n_updates,
         "localization_note": note,
         "odometry_calibration": robot.odometry_calibration(),
+        "camera_estimate": robot.camera_estimate(),
     }
 
 

@@ -373,8 +373,8 @@ def localization_in_words(data: dict) -> str:
     """How a run (the JSON fields of ``lab search`` or ``lab identify``) knew where the robot was, in one
     line for the console: odometry alone, or how many landmark updates, what the filter learned of the
     odometry (``odometry_calibration``: ``turn_scale`` is the true turn per reported turn, so the wheels
-    over-count turns by ``1 / turn_scale - 1``) and, in the simulator, how far the estimate ended from
-    the truth.
+    over-count turns by ``1 / turn_scale - 1``), what it learned of the camera (``camera_estimate``) and,
+    in the simulator, how far the estimate ended from the truth.
 
     For example ``54 landmark updates; the wheels over-count turns by 4.2 % (turn scale 0.960 +- 0.006)
     and drift 0.012 +- 0.004 rad per metre; 0.7 cm from the true pose at the end``; after a survey tour
@@ -403,6 +403,16 @@ def localization_in_words(data: dict) -> str:
         parts.append(
             f"the wheels {verb} (turn scale {k:.3f} +- {sk:.3f}) and drift "
             f"{cal['curvature_rad_per_m']:.3f} +- {cal['curvature_sd_rad_per_m']:.3f} rad per metre"
+        )
+    cam = data.get("camera_estimate") or {}
+    if "yaw_deg" in cam:
+        parts.append(
+            f"the camera sits {cam['yaw_deg']:+.2f} +- {cam['yaw_sd_deg']:.2f} deg turned on the base"
+        )
+    if "range_scale" in cam:
+        s, sd = 100.0 * cam["range_scale"], 100.0 * cam["range_scale_sd"]
+        parts.append(
+            f"the stereo's ranges come out {abs(s):.2f} +- {sd:.2f} % {'long' if s >= 0 else 'short'}"
         )
     err = data.get("localization_error_m")
     if err is not None:

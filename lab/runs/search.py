@@ -334,6 +334,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
         landmark_updates=estimate.n_updates,
         localization_note=note,
         odometry_calibration=robot.odometry_calibration(),
+        camera_estimate=robot.camera_estimate(),
         report_relocalization=report_reloc,
         camera_level=level,
         survey_tour=tour,

@@ -122,6 +122,9 @@ class SearchResult:
     odometry_calibration : dict or None
         The odometry's turn scale and curvature bias the localizer learned
         (:meth:`~lab.localization.LocalizedRobot.odometry_calibration`).
+    camera_estimate : dict or None
+        The camera's yaw on the base and the stereo's range scale the localizer learned, when it
+        estimates them (:meth:`~lab.localization.LocalizedRobot.camera_estimate`).
     camera_level : dict or None
         The camera levelled against the floor before the search (``lab.runs.search._levelled``,
         :mod:`lab.navigation.level`): the views, the floor's tilt before and after, the mounts' angles
@@ -180,6 +183,7 @@ class SearchResult:
     landmark_updates: int = 0
     localization_note: str | None = None
     odometry_calibration: dict | None = None
+    camera_estimate: dict | None = None
     report_relocalization: dict | None = None
     camera_level: dict | None = None
     survey_tour: dict | None = None
@@ -230,6 +234,7 @@ class SearchResult:
             "landmark_updates": int(self.landmark_updates),
             "localization_note": self.localization_note,
             "odometry_calibration": self.odometry_calibration,
+            "camera_estimate": self.camera_estimate,
             "report_relocalization": self.report_relocalization,
             "camera_level": self.camera_level,
             "survey_tour": self.survey_tour,
