@@ -35,8 +35,9 @@ for several thresholds; it also lists the navigator's clearings. ``search-figure
 times against budgets and the revisits from another side (of a cell searched itself, or only of a
 neighbour). ``sightings`` prints each trial's landmark sightings against the truth by poster, the
 surveyed map's floor for the posters it sighted and the localizer's error, at its last pose.
-``record --error-scale K`` scales the profile's errors, ``--survey-tour`` drives a tour before each
-search, ``--only TEXT`` keeps the jobs whose key contains TEXT.
+``record --sensing PROFILE|FILE`` records under another profile than realistic, ``--error-scale K`` scales
+its errors, ``--survey-tour`` drives a tour before each search, ``--only TEXT`` keeps the jobs whose key
+contains TEXT; ``sightings`` then also prints the ranges' median error and the localizer's range scale.
 """
 
 from __future__ import annotations
@@ -173,10 +174,17 @@ class Recorder:
         return wrapper
 
 
-def record(out: Path, seeds, error_scale: float = 1.0, survey_tour: bool = False, only: str = "") -> None:
+def record(
+    out: Path,
+    seeds,
+    error_scale: float = 1.0,
+    survey_tour: bool = False,
+    only: str = "",
+    sensing: str = "realistic",
+) -> None:
     """Run the trials in this process with the localizer recorded (see the module docstring): the
-    profile's errors times ``error_scale``, a survey tour first with ``survey_tour``, and only the jobs
-    whose key contains ``only``."""
+    ``sensing`` profile (a name or a sensing file) with its errors times ``error_scale``, a survey tour
+    first with ``survey_tour``, and only the jobs whose key contains ``only``."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from lab.eval.search import SearchSweep
     from lab.io import write_json_atomic
@@ -185,7 +193,11 @@ def record(out: Path, seeds, error_scale: float = 1.0, survey_tour: bool = False
     rec.install()
     (out / "replay").mkdir(parents=True, exist_ok=True)
     sweep = SearchSweep(
-        seeds=tuple(seeds), strategies=("paper",), error_scale=(error_scale,), survey_tour=survey_tour
+        seeds=tuple(seeds),
+        strategies=("paper",),
+        error_scale=(error_scale,),
+        survey_tour=survey_tour,
+        sensing=(sensing,),
     )
     jobs = [j for j in sweep.jobs() if only in j.key]
     for job in sorted(jobs, key=lambda j: j.kwargs["seed"]):  # a seed's every surface first
@@ -331,6 +343,13 @@ def sightings(out: Path) -> None:
                 except ValueError:
                     continue
             print(f"  the localizer at the last pose: {100 * math.hypot(*(loc.x[:2] - last[:2])):.1f} cm")
+            ranges = np.concatenate([np.array(v)[:, 1] for v in by.values()])
+            scale = loc.range_scale_estimate
+            est = "not estimated" if scale is None else f"{100 * scale[0]:+.2f} +- {100 * scale[1]:.2f} %"
+            print(
+                f"  ranges off, median of every sighting: {np.median(ranges):+.2f} %; "
+                f"the localizer's scale {est}"
+            )
 
 
 THRESHOLDS = [(3, 0.03), (2, 0.02), (4, 0.03), (5, 0.04), (6, 0.04), (3, 0.05), (8, 0.06)]
@@ -461,13 +480,14 @@ def main() -> None:
     ap.add_argument("--error-scale", type=float, default=1.0, help="the profile's errors times this (record)")
     ap.add_argument("--survey-tour", action="store_true", help="a survey tour before each search (record)")
     ap.add_argument("--only", default="", help="only the jobs whose key contains this (record)")
+    ap.add_argument("--sensing", default="realistic", help="a profile or sensing file (record)")
     ap.add_argument("--out", type=Path, required=True)
     a = ap.parse_args()
     if a.what == "record":
         seeds = parse_seeds(a.seeds)
         if any(s >= 1000 for s in seeds):
             raise SystemExit("replay_localizer: tuning seeds only (< 1000)")
-        record(a.out, seeds, a.error_scale, a.survey_tour, a.only)
+        record(a.out, seeds, a.error_scale, a.survey_tour, a.only, a.sensing)
     elif a.what == "sightings":
         sightings(a.out)
     elif a.what == "replay":

@@ -92,7 +92,8 @@ def test_a_localized_robots_frames_are_taken_through_the_estimated_yaw():
         assert told["config"].range_scale_sigma == base.camera.depth_scale_std > 0
         scale, sd_scale = robot.localizer.range_scale_estimate
         assert scale != 0.0 and 0 < sd_scale < told["config"].range_scale_sigma
-        assert frame.camera.baseline == pytest.approx(seen[-1].camera.baseline / (1 + scale), rel=1e-12)
+        assert frame.camera.fx == pytest.approx(seen[-1].camera.fx / (1 + scale), rel=1e-12)
+        assert frame.camera.baseline == seen[-1].camera.baseline
 
 
 @pytest.mark.parametrize("depth_scale_std", [0.0, 0.007])

@@ -55,18 +55,19 @@ are judged on (:meth:`~lab.localization.Localizer.camera_pose`). In the simulato
 the profile states the mounts uncertain (:func:`lab.runs.room.sim_localizer_told`).
 
 **The stereo's range scale** (``LocalizerConfig.range_scale_sigma`` above 0): a calibration's focal
-length and baseline errors stretch every triangulated range by the same factor :math:`1 + \rho` (a
-baseline's alike in every direction, a focal length's along the line of sight, where the posters are
-seen). Sightings from many places do not average it out: held exact, it bends the posters' refined
-shape and pulls the robot towards or away from the posters it sees. It is one more constant state
-element after the yaw, prior :math:`N(0, \sigma_\rho^2)`, and the measurement becomes::
+length and baseline errors stretch every sighting's range by the same factor :math:`1 + \rho`. A
+poster's fit reads its range more from its apparent size than from the disparity (the 3D points are
+precise across the line of sight and not along it), so the focal lengths' error, which scales that
+size, is most of it. Sightings from many places do not average it out: held exact, it bends the
+posters' refined shape and pulls the robot towards or away from the posters it sees. It is one more
+constant state element after the yaw, prior :math:`N(0, \sigma_\rho^2)`, and the measurement becomes::
 
       h_rho = [(1 + rho) R(-beta) h_xy, h_3 - beta],   dh_rho/drho = [R(-beta) h_xy, 0]
 
 (the rows of ``H`` for the position times ``1 + rho``; the pose one sighting implies undoes it first:
 ``z_c = [R(beta) z_xy / (1 + rho), z_3 + beta]``). Posters seen at different ranges and in different
 directions, each known to its survey, tell the scale from the robot's position. The robot's frames are
-then triangulated through the camera with its baseline divided by ``1 + rho``
+then taken through the camera with its focal lengths divided by ``1 + rho``
 (:class:`~lab.localization.LocalizedRobot`), so what the search measures is corrected too.
 """
 

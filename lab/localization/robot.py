@@ -483,10 +483,10 @@ def _within_mount_limit(camera, yaw: float) -> float:
 
 
 def _rescaled(camera, scale: float, sigma: float):
-    """``camera`` whose triangulated points are the stereo's divided by ``1 + scale`` (the localizer's
-    range scale, :mod:`lab.localization.posters`): its baseline divided by it, so ``Z = f_x B / d`` and
-    the rays' lateral offsets shrink alike. Ranges are stretched mostly along the line of sight, and the
-    objects the search measures lie near the image's centre, where the two are one. The scale is clipped
-    to three of its prior deviations (``sigma``): a diverged estimate does not rescale the world."""
+    """``camera`` with its focal lengths divided by ``1 + scale`` (the localizer's range scale,
+    :mod:`lab.localization.posters`), which takes out a range scale whichever way a fit reads the
+    range: from the apparent size of what it sees (the focal lengths' error) or from the disparity
+    (``Z = f_x B / d``). The principal point and the baseline are kept. The scale is clipped to three of
+    its prior deviations (``sigma``): a diverged estimate does not rescale the world."""
     s = float(np.clip(scale, -3.0 * sigma, 3.0 * sigma))
-    return replace(camera, baseline=camera.baseline / (1.0 + s))
+    return replace(camera, fx=camera.fx / (1.0 + s), fy=camera.fy / (1.0 + s))
