@@ -325,11 +325,10 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     if note is not None:
         print(f"lab: localization: {note}", file=sys.stderr)
     rp = truth_end.robot_pose
+    loc_error = None if rp is None else math.hypot(estimate.pose.x - rp.x, estimate.pose.y - rp.y)
     return SearchResult(
         **scored(object, out, truth_end, odom),
-        localization_error_m=None
-        if rp is None
-        else math.hypot(estimate.pose.x - rp.x, estimate.pose.y - rp.y),
+        localization_error_m=loc_error,
         localization=mode.value,
         landmark_updates=estimate.n_updates,
         localization_note=note,
