@@ -20,11 +20,9 @@ object pose"): a RANSAC start with at least ``min_inliers`` inliers, then over t
 ``confirm_updates`` EKF updates that each kept ``confirm_matches`` matches through the gate, a healthy
 (not diverged) filter, and a small pose covariance: the largest position standard deviation at most
 ``max_position_std_m`` and the largest rotation standard deviation (over a small rotation vector) at
-most ``max_rotation_std_deg``, given the camera's calibration (the papers' filter has no calibration
-error; ours considers the one every frame shares, which the found pose's stated deviation keeps:
-:func:`lab.search.tracking.calibration_share`); ours besides: the pose in the world rests on one of
-the box's faces within ``max_rest_tilt_deg`` and explains the frame (:mod:`lab.search.pose_check`).
-Otherwise the next view is tried.
+most ``max_rotation_std_deg``; ours besides: the pose in the world rests on one of the box's faces
+within ``max_rest_tilt_deg`` and explains the frame (:mod:`lab.search.pose_check`). Otherwise the next
+view is tried.
 
 The object's world pose is the odometry pose composed with the camera on the head and the estimate,
 
@@ -170,9 +168,7 @@ class LocalSearchConfig:
         Head offset between refinement frames (see :func:`lab.search.tracking.refine_track`).
     max_position_std_m : float [m]
     max_rotation_std_deg : float [deg]
-        "Small covariance": bounds on the largest position and rotation standard deviations of the
-        pose given the calibration (without the share the calibration error every frame shares
-        explains): whether the track converged, not how well the camera is calibrated.
+        "Small covariance": bounds on the largest position and rotation standard deviations.
     roi_margin_px : int [px]
         Margin around the projected object's bounding box for the ROI.
     detection : DetectionModel

@@ -12,8 +12,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from lab.estimation import PoseEKF, PoseEstimate
-from lab.estimation.models import euler_to_rv_jacobian
-from lab.estimation.uncertainty import calibration_columns
 from lab.geometry import transform_points
 from lab.robot import StereoCamera, StereoFrame, frame_motion
 from lab.search.pose_check import check_pose, rest_tilt_deg
@@ -23,7 +21,7 @@ from lab.vision.stereo import stereo_features, upsampled_pair
 if TYPE_CHECKING:
     from lab.search.local_search import LocalSearchConfig
 
-__all__ = ["Track", "aim_at", "calibration_share", "pose_stds", "refine_track", "region_features"]
+__all__ = ["Track", "aim_at", "pose_stds", "refine_track", "region_features"]
 
 
 def aim_at(p_R: np.ndarray, camera: StereoCamera, limits=None) -> tuple[float, float]:
@@ -37,35 +35,13 @@ def aim_at(p_R: np.ndarray, camera: StereoCamera, limits=None) -> tuple[float, f
     return pan, tilt
 
 
-def pose_stds(ekf: PoseEKF, calibration: bool = True) -> tuple[float, float]:
+def pose_stds(ekf: PoseEKF) -> tuple[float, float]:
     """The largest position [m] and rotation [deg] standard deviations of the object's pose, the
-    database's own error included; with ``calibration=False`` given the camera's calibration, i.e.
-    without the part of the covariance that the calibration error every frame shares explains
-    (:func:`calibration_share`): what more frames would still reduce."""
+    database's own error included."""
     S = ekf.object_estimate.Sigma_rv  # with the database's own error: where the object is
-    if not calibration:
-        S = S - calibration_share(ekf)
     pos = math.sqrt(max(0.0, float(np.linalg.eigvalsh(S[:3, :3])[-1])))
     rot = math.degrees(math.sqrt(max(0.0, float(np.linalg.eigvalsh(S[3:, 3:])[-1]))))
     return pos, rot
-
-
-def calibration_share(ekf: PoseEKF) -> np.ndarray:
-    """The part (6, 6) of the pose's covariance over ``[x_r, phi]`` that the calibration error explains,
-    ``P_xc Sigma_c^-1 P_xc^T``: the filter considers the error ``c`` without learning it
-    (:class:`lab.estimation.CalibrationUncertainty`), so its pose error is a part linear in ``c`` plus
-    a part from the features' noise, and ``Sigma_rv`` minus this share is the covariance given ``c``,
-    the Schur complement of the joint covariance of ``[x, c]``. The share is the camera's calibration
-    speaking (it shrinks only as far as the object's known size tells the scale), the rest the track's
-    own: what the local search's convergence test asks about. Zeros for a filter without a calibration
-    error (the papers')."""
-    cols = calibration_columns(ekf.config.calibration)
-    if not cols or ekf.P is None:
-        return np.zeros((6, 6))
-    Sigma_c = ekf.config.calibration.covariance()[np.ix_(cols, cols)]
-    B = ekf.P_xc if not ekf.euler_chart else euler_to_rv_jacobian(ekf.mu) @ ekf.P_xc
-    share = B @ np.linalg.solve(Sigma_c, B.T)
-    return 0.5 * (share + share.T)
 
 
 def region_features(frame: StereoFrame, roi, upsample: int, detector):
@@ -116,7 +92,6 @@ def refine_track(
             confirmed += 1
         prev = cur
     pos_std, rot_std = pose_stds(ekf)
-    fit_pos, fit_rot = pose_stds(ekf, calibration=False)  # converged: what more frames would reduce
     G_WO = prev.odom.G() @ prev.G_RC @ ekf.estimate.G_CO
     base = {
         "estimate": ekf.object_estimate,
@@ -135,13 +110,8 @@ def refine_track(
             f"{cfg.confirm_matches} matches (need {cfg.confirm_updates})",
             **base,
         )
-    if fit_pos > cfg.max_position_std_m or fit_rot > cfg.max_rotation_std_deg:
-        return Track(
-            False,
-            f"pose too uncertain: std {fit_pos * 100:.1f} cm, {fit_rot:.1f} deg given the calibration "
-            f"({pos_std * 100:.1f} cm, {rot_std:.1f} deg with it)",
-            **base,
-        )
+    if pos_std > cfg.max_position_std_m or rot_std > cfg.max_rotation_std_deg:
+        return Track(False, f"pose too uncertain: std {pos_std * 100:.1f} cm, {rot_std:.1f} deg", **base)
     tilt = rest_tilt_deg(G_WO[:3, :3])
     if cfg.max_rest_tilt_deg is not None and tilt > cfg.max_rest_tilt_deg:
         return Track(
