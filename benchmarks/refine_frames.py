@@ -93,6 +93,8 @@ def matches(path: Path, variants: list[str]) -> None:
     from lab.search.tracking import region_features
     from lab.vision.stereo import sift
 
+    if not path.is_file():
+        raise SystemExit(f"refine_frames: no kept refinement at {path}: make one with `grab --out {path}`")
     d = pickle.loads(path.read_bytes())
     matcher = make_matcher(d["db"])
     print(f"{path}: {len(d['frames'])} frames; the track ended: {d['reason']}")
