@@ -11,7 +11,9 @@ database and the reason the track ended; tuning seeds only. ``matches`` prints, 
 variant, SIFT's stereo features over the whole image and the matcher's database candidates, as captured
 and enlarged twice (``f<k>u<upsample>: features / matches / spread``, the spread the matched database
 points' second singular value per point [cm]: near 0, the points lie on a line and an update is
-skipped as degenerate). Variants: ``as is``; ``sharpA`` an unsharp mask, ``(1 + A) I - A G_1px * I``.
+skipped as degenerate). Variants: ``as is``; ``sharpA`` an unsharp mask, ``(1 + A) I - A G_1px * I``;
+``deblurS`` the camera's blur stated as S px, which :func:`lab.vision.stereo.stereo_features` sharpens
+by (``2 I - G_S * I``).
 """
 
 from __future__ import annotations
@@ -75,16 +77,28 @@ def grab(out: Path, sensing: str, error_scale: float, seed: int, object: str, su
     print("the trial ended without a refinement")
 
 
-def _variant(img: np.ndarray, name: str) -> np.ndarray:
+def _variant(frame, name: str):
+    """The frame as the variant ``name`` gives it to SIFT (its camera's stated blur 0 unless ``deblurS``)."""
     import cv2
 
+    frame = dataclasses.replace(frame, camera=dataclasses.replace(frame.camera, blur_sigma_px=0.0))
     if name == "as is":
-        return img
+        return frame
+    if name.startswith("deblur"):
+        s = float(name[6:])
+        return dataclasses.replace(frame, camera=dataclasses.replace(frame.camera, blur_sigma_px=s))
     if name.startswith("sharp"):
         a = float(name[5:])
-        g = cv2.GaussianBlur(img.astype(np.float32), (0, 0), 1.0)
-        return np.clip(img.astype(np.float32) * (1.0 + a) - a * g, 0, 255).astype(img.dtype)
-    raise SystemExit(f"unknown variant {name!r}: 'as is' or sharpA (A a number, e.g. sharp1.0)")
+
+        def sharp(img):
+            g = cv2.GaussianBlur(img.astype(np.float32), (0, 0), 1.0)
+            return np.clip(img.astype(np.float32) * (1.0 + a) - a * g, 0, 255).astype(img.dtype)
+
+        return dataclasses.replace(frame, left=sharp(frame.left), right=sharp(frame.right))
+    raise SystemExit(
+        f"unknown variant {name!r}: 'as is', sharpA (A a number, e.g. sharp1.0) or deblurS (S the "
+        "camera's blur [px] that stereo_features sharpens by, e.g. deblur1.0)"
+    )
 
 
 def matches(path: Path, variants: list[str]) -> None:
@@ -101,7 +115,7 @@ def matches(path: Path, variants: list[str]) -> None:
     for v in variants:
         row = []
         for k, fr in enumerate(d["frames"]):
-            fr2 = dataclasses.replace(fr, left=_variant(fr.left, v), right=_variant(fr.right, v))
+            fr2 = _variant(fr, v)
             for up in (1, 2):
                 f, _, _ = region_features(fr2, None, up, sift())
                 _, b_O, _ = matcher.match(f).pairs(f, d["db"])

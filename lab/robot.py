@@ -123,6 +123,11 @@ class StereoCamera:
         (0.005 for a checkerboard calibration); the baseline's is the rest,
         ``sqrt(depth_scale_std**2 - focal_std**2)``. A focal length's error stretches depth and rows
         against the columns, which one scale cannot say; 0: all of the depth's error is a common scale.
+    blur_sigma_px : float [px]
+        The images' blur (lens, focus, demosaicing) as a Gaussian's standard deviation in these pixels,
+        as measured on the camera (a slanted-edge target gives it to about 0.1 px). The stereo features
+        sharpen by it before SIFT (:func:`lab.vision.stereo.deblurred`): a blur of 1 px takes the fine
+        features SIFT matches a small object by. 0: sharp, or not measured; the images are used as they are.
     """
 
     width: int
@@ -137,9 +142,10 @@ class StereoCamera:
     depth_scale_std: float = 0.0
     pointing_std_deg: float = 0.0
     focal_std: float = 0.0
+    blur_sigma_px: float = 0.0
 
     def __post_init__(self):
-        for name in ("depth_scale_std", "pointing_std_deg", "focal_std"):
+        for name in ("depth_scale_std", "pointing_std_deg", "focal_std", "blur_sigma_px"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ConfigError(f"camera {name} must be a finite number >= 0, got {v!r}")

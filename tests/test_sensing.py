@@ -76,15 +76,10 @@ def test_realistic_reports_the_nominal_camera_and_angles():
         r = SimRobot(w, seed=0, sensing={"profile": "realistic", "room": NO_ROOM})
         f = _drive_and_look(r)
         d = w.truth.sensing.camera
-        # the nominal calibration, with its stated accuracy (not the episode's draw)
-        assert (
-            f.camera
-            == r.camera
-            == dataclasses.replace(
-                nominal, depth_scale_std=math.hypot(0.005, 0.005), pointing_std_deg=0.05, focal_std=0.005
-            )
-        )
-        assert nominal.depth_scale_std == nominal.pointing_std_deg == 0.0  # ideal: exact
+        # the nominal calibration, with its stated accuracy and blur (not the episode's draw)
+        stated = {"depth_scale_std": math.hypot(0.005, 0.005), "pointing_std_deg": 0.05, "focal_std": 0.005}
+        assert f.camera == r.camera == dataclasses.replace(nominal, **stated, blur_sigma_px=0.5)
+        assert nominal.depth_scale_std == nominal.pointing_std_deg == nominal.blur_sigma_px == 0.0  # ideal
         assert (d.render_camera.fx, d.render_camera.baseline) != (nominal.fx, nominal.baseline)
         assert (f.pan_tilt.pan, f.pan_tilt.tilt) == (0.3, -0.2)  # what was commanded
         # the true camera differs from the reported angles' by the zero offsets and the backlash

@@ -37,6 +37,7 @@ from lab.vision.roi import RegionOfInterest
 __all__ = [
     "ROI_PAD_PX",
     "Features3D",
+    "deblurred",
     "StereoParams",
     "stereo_features",
     "triangulate",
@@ -168,6 +169,21 @@ def _grey(img: np.ndarray) -> np.ndarray:
     if img.ndim == 2:
         return img
     return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+
+
+def deblurred(grey: np.ndarray, sigma_px: float) -> np.ndarray:
+    """``grey`` (uint8) sharpened by a Gaussian blur of ``sigma_px`` [px]: ``2 I - G_sigma * I``.
+
+    A Gaussian blur adds ``(sigma^2 / 2) Laplacian(I)`` to an image to first order, and subtracting the
+    image's own blur, ``G_sigma * I - I``, takes that back: the unsharp mask of the blur's own size
+    is the first-order inverse of the blur. It brings back the fine scales SIFT describes a small object
+    by, and doubles the pixel noise's high frequencies with them (a blur of 1 px with 4 grey levels of
+    noise: twice the database matches; docs/tuning/search-error-scale-2.md). ``sigma_px`` 0: ``grey``
+    itself. Saturates at 0 and 255.
+    """
+    if sigma_px <= 0:
+        return grey
+    return cv2.addWeighted(grey, 2.0, cv2.GaussianBlur(grey, (0, 0), sigma_px), -1.0, 0.0)
 
 
 def triangulate(uv_left: np.ndarray, uv_right: np.ndarray, camera) -> np.ndarray:
@@ -344,7 +360,7 @@ def stereo_features(
     params = params or StereoParams()
     _check_pair(left, right, camera)
     det = detector or sift(params.n_features, params.contrast_threshold)
-    gl, gr = _grey(left), _grey(right)
+    gl, gr = deblurred(_grey(left), camera.blur_sigma_px), deblurred(_grey(right), camera.blur_sigma_px)
     rects = (None, None) if roi is None else _roi_rects(roi, camera, params)
     if rects is None:  # the region lies outside the image
         return Features3D.empty(t)
@@ -411,6 +427,7 @@ def upsampled_pair(
         fy=camera.fy * k,
         cx=k * (camera.cx + 0.5) - 0.5,
         cy=k * (camera.cy + 0.5) - 0.5,
+        blur_sigma_px=camera.blur_sigma_px * k,
     )
     par = replace(
         params,
