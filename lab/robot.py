@@ -126,8 +126,9 @@ class StereoCamera:
     blur_sigma_px : float [px]
         The images' blur (lens, focus, demosaicing) as a Gaussian's standard deviation in these pixels,
         as measured on the camera (a slanted-edge target gives it to about 0.1 px). The stereo features
-        sharpen by it before SIFT (:func:`lab.vision.stereo.deblurred`): a blur of 1 px takes the fine
-        features SIFT matches a small object by. 0: sharp, or not measured; the images are used as they are.
+        sharpen by its excess over the 0.5 px SIFT assumes
+        (:attr:`lab.vision.stereo.StereoParams.sift_blur_px`): a blur of 1 px takes the fine features
+        SIFT matches a small object by. 0: sharp, or not measured.
     """
 
     width: int

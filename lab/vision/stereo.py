@@ -86,6 +86,11 @@ class StereoParams:
     roi_pad_px : int [px]
         With a region of interest, SIFT runs on each rectangle grown by this many pixels (clipped to
         the image) and keeps the keypoints inside the rectangle (:data:`ROI_PAD_PX`).
+    sift_blur_px : float [px]
+        The blur SIFT assumes its input already has: 0.5 px, the least that avoids aliasing (Lowe
+        2004, section 3.3; OpenCV's ``SIFT_INIT_SIGMA``). A camera's blur beyond it
+        (:attr:`lab.robot.StereoCamera.blur_sigma_px`) is sharpened away before SIFT (:func:`deblurred`,
+        by ``sqrt(blur^2 - sift_blur_px^2)``); a camera within it is used as it is.
     """
 
     ratio: float = 0.8
@@ -98,6 +103,7 @@ class StereoParams:
     contrast_threshold: float = 0.02
     parallel: bool = True
     roi_pad_px: int = ROI_PAD_PX
+    sift_blur_px: float = 0.5
 
     def __post_init__(self):
         if not 0 < self.ratio <= 1:
@@ -110,6 +116,8 @@ class StereoParams:
             raise ConfigError("max_dy must be >= 0 and sigma_px, sigma_disparity > 0")
         if int(self.roi_pad_px) != self.roi_pad_px or self.roi_pad_px < 0:
             raise ConfigError(f"roi_pad_px must be an integer >= 0 px, got {self.roi_pad_px}")
+        if not self.sift_blur_px >= 0:
+            raise ConfigError(f"sift_blur_px must be >= 0 px, got {self.sift_blur_px}")
 
 
 @dataclass(frozen=True)
@@ -177,9 +185,9 @@ def deblurred(grey: np.ndarray, sigma_px: float) -> np.ndarray:
     A Gaussian blur adds ``(sigma^2 / 2) Laplacian(I)`` to an image to first order, and subtracting the
     image's own blur, ``G_sigma * I - I``, takes that back: the unsharp mask of the blur's own size
     is the first-order inverse of the blur. It brings back the fine scales SIFT describes a small object
-    by, and doubles the pixel noise's high frequencies with them (a blur of 1 px with 4 grey levels of
-    noise: twice the database matches; docs/tuning/search-error-scale-2.md). ``sigma_px`` 0: ``grey``
-    itself. Saturates at 0 and 255.
+    by, and amplifies the pixel noise's high frequencies with them (:func:`stereo_features` sharpens by
+    the camera's blur beyond the 0.5 px SIFT assumes, :attr:`StereoParams.sift_blur_px`; how that was
+    chosen: docs/tuning/deblur.md). ``sigma_px`` 0: ``grey`` itself. Saturates at 0 and 255.
     """
     if sigma_px <= 0:
         return grey
@@ -360,7 +368,8 @@ def stereo_features(
     params = params or StereoParams()
     _check_pair(left, right, camera)
     det = detector or sift(params.n_features, params.contrast_threshold)
-    gl, gr = deblurred(_grey(left), camera.blur_sigma_px), deblurred(_grey(right), camera.blur_sigma_px)
+    excess = np.sqrt(max(0.0, camera.blur_sigma_px**2 - params.sift_blur_px**2))  # blurs add in quadrature
+    gl, gr = deblurred(_grey(left), excess), deblurred(_grey(right), excess)
     rects = (None, None) if roi is None else _roi_rects(roi, camera, params)
     if rects is None:  # the region lies outside the image
         return Features3D.empty(t)
@@ -392,9 +401,10 @@ def upsampled_pair(
     .. math:: f' = k f, \\qquad c' = k (c + 1/2) - 1/2,
 
     and the disparity ``d' = k d`` gives the same depth ``Z = f' B / d'``. The pixel-noise settings
-    (``sigma_px``, ``sigma_disparity``) and the pixel ranges (``max_dy``, the disparities, the region's
-    pad ``roi_pad_px``) grow by ``k`` too: interpolation adds no information, so the features'
-    covariances stay the original image's. What the enlargement does give is SIFT's finest scales on
+    (``sigma_px``, ``sigma_disparity``), the pixel ranges (``max_dy``, the disparities, the region's
+    pad ``roi_pad_px``) and the blurs (the camera's, the one SIFT assumes) grow by ``k`` too:
+    interpolation adds no information, so the features' covariances, and the sharpening, stay the
+    original image's. What the enlargement does give is SIFT's finest scales on
     a small object (the local search's second look, :mod:`lab.search.local_search`).
 
     Parameters
@@ -437,6 +447,7 @@ def upsampled_pair(
         sigma_px=params.sigma_px * k,
         sigma_disparity=params.sigma_disparity * k,
         roi_pad_px=params.roi_pad_px * k,
+        sift_blur_px=params.sift_blur_px * k,
     )
     return big[0], big[1], cam, par
 
