@@ -101,3 +101,17 @@ def test_camera_section_disagreeing_with_the_calibration_is_one_clear_error(tmp_
     lines = []
     assert check(path, out=lines.append) == 1
     assert any(x.startswith("FAIL  calibration: ") and msg in x for x in lines)
+
+
+def test_the_stated_blur_reaches_the_robots_camera_and_a_wrong_one_is_refused(tmp_path):
+    links = tmp_path / "links"
+    path = _emulated_toml(tmp_path, links, **{"width = 320": "blur_sigma_px = 0.9\nwidth = 320"})
+    with start_emulators(links):
+        robot = HardwareRobot(path)
+        try:
+            assert robot.camera.blur_sigma_px == 0.9  # the stereo features sharpen by it
+        finally:
+            robot.close()
+    bad = _emulated_toml(tmp_path, links, **{"width = 320": "blur_sigma_px = -1.0\nwidth = 320"})
+    with pytest.raises(ConfigError, match=r"\[camera\] blur_sigma_px must be within \[0, 5\] px, got -1.0"):
+        load_config(bad)

@@ -102,6 +102,7 @@ class CameraConfig:
     mount_R: tuple = (0.0, 0.0, 0.8)
     camera_offset_P: tuple = (0.05, 0.06, 0.0)
     mounts: str = ""  # the head's mount calibration (lab/mounts.py), written by lab hardware calibrate
+    blur_sigma_px: float = 0.0  # the rectified images' blur [px] as measured (lab.robot.StereoCamera); 0: not
 
 
 @dataclass(frozen=True)
@@ -343,6 +344,10 @@ def _check_camera(cam: CameraConfig, need) -> None:
         f"[camera] width and height must be >= 16 px, got {cam.width}x{cam.height}",
     )
     need(cam.flush_grabs >= 0, f"[camera] flush_grabs must be >= 0, got {cam.flush_grabs}")
+    need(
+        math.isfinite(cam.blur_sigma_px) and 0 <= cam.blur_sigma_px <= 5,
+        f"[camera] blur_sigma_px must be within [0, 5] px, got {cam.blur_sigma_px}",
+    )
     need(
         len(cam.devices) == 2,
         f"[camera] devices must list two cameras (left, right), got {list(cam.devices)}",

@@ -32,7 +32,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -136,7 +136,9 @@ class HardwareRobot(Robot):
             )
         self.calibration = calib
         self._rectifier = StereoRectifier(calib)
-        self._camera = calib.camera_model(c.mount_R, c.camera_offset_P)
+        self._camera = replace(
+            calib.camera_model(c.mount_R, c.camera_offset_P), blur_sigma_px=c.blur_sigma_px
+        )
         self._given_source = camera_source
         self._source: StereoSource | None = None
         b = cfg.base
