@@ -487,8 +487,8 @@ def test_deblurred_takes_a_gaussian_blur_back_to_the_sharp_image():
 def test_a_camera_stating_its_blur_matches_a_blurred_box_better_and_a_sharp_one_the_same(models, dbs):
     """Boxes 1.2 m away under scale 2's camera errors (1 px of blur, 4 grey levels of noise): stating
     the blur gives at least 1.3 x the right database matches (right: the matched model point, placed by
-    the true pose, within 4 sd of the measured point). Under scale 1's (0.5 px, what SIFT assumes) the
-    stated blur changes no feature."""
+    the true pose, within 4 sd of the measured point), unless ``sharpen`` is off. Under scale 1's (0.5 px,
+    what SIFT assumes) the stated blur changes no feature."""
     from lab.sim.sensing import corrupt_stereo, sensing_profile
 
     def right(f, mt, db, G_CO):
@@ -496,6 +496,9 @@ def test_a_camera_stating_its_blur_matches_a_blurred_box_better_and_a_sharp_one_
         d_C, b_O, S = c.pairs(f, db)
         e = transform_points(G_CO, b_O) - d_C
         return len(set(c.idx_meas[np.einsum("ni,nij,nj->n", e, np.linalg.inv(S), e) < 16.0]))
+
+    def f1_camera(errors):
+        return dataclasses.replace(CAM, blur_sigma_px=errors.blur_sigma_px)
 
     for scale in (2, 1):
         errors = sensing_profile("realistic").scaled(scale).camera
@@ -511,11 +514,14 @@ def test_a_camera_stating_its_blur_matches_a_blurred_box_better_and_a_sharp_one_
                     draw = errors.draw(rng, CAM, (0.3, 0.2, 1.0))
                     pair = corrupt_stereo(*w.render_stereo(G_WC, CAM), errors, draw, rng)
                     f0 = stereo_features(*pair, CAM)
-                    f1 = stereo_features(*pair, dataclasses.replace(CAM, blur_sigma_px=errors.blur_sigma_px))
+                    f1 = stereo_features(*pair, f1_camera(errors))
                     n[0] += right(f0, mt, dbs[m.name], se3_inv(G_WC) @ G_WO)
                     n[1] += right(f1, mt, dbs[m.name], se3_inv(G_WC) @ G_WO)
                     if scale == 1:
                         np.testing.assert_array_equal(f0.points_C, f1.points_C)
+                    else:  # the identification's settings: the blur stated, nothing sharpened
+                        no = stereo_features(*pair, f1_camera(errors), StereoParams(sharpen=False))
+                        np.testing.assert_array_equal(f0.points_C, no.points_C)
         print(f"\nscale {scale}: right matches {n[0]} without the stated blur, {n[1]} with it")
         assert n[1] >= 1.3 * n[0] if scale == 2 else n[1] == n[0]
 

@@ -233,7 +233,7 @@ class IdentificationAgent:
         # per model: (log-likelihood lead, turn of its filter) of the frame that favoured it most
         self._decisive: list[tuple[float, int] | None] = [None] * len(self.dbs)
         self._direction = 0  # the last drive's direction round the ring (+1 ccw, -1 cw, 0 none yet)
-        self.stereo = StereoParams()
+        self.stereo = StereoParams(sharpen=False)  # the box is near: sharpening gained nothing
         self._extent = np.max([np.asarray(db.extent, dtype=float) for db in self.dbs], axis=0)
         self.last_roi: RegionOfInterest | None = None  # the last frame's region (None: the full frame)
 

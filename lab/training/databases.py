@@ -147,7 +147,7 @@ def _asset_hash(obj: _Trainable, params: TrainingParams) -> str:
     h.update(json.dumps(asdict(params), sort_keys=True, default=list).encode())
     stereo = asdict(StereoParams())
     del stereo["parallel"]  # how the work is spread over threads: the same features either way
-    del stereo["sift_blur_px"]  # training renders with a sharp camera (blur 0): nothing is sharpened
+    del stereo["sift_blur_px"], stereo["sharpen"]  # training renders with a sharp camera (blur 0)
     h.update(json.dumps(stereo, sort_keys=True).encode())
     h.update(str(FORMAT_VERSION).encode())
     return h.hexdigest()[:32]

@@ -244,8 +244,8 @@ def _asset_hash(p: _Poster, params: LandmarkTraining, camera: StereoCamera) -> s
     h.update(json.dumps(asdict(params), sort_keys=True, default=list).encode())
     cam, stereo = asdict(camera), asdict(StereoParams())
     del stereo["parallel"]
-    if cam["blur_sigma_px"] == 0:  # a sharp camera (the simulator's): nothing is sharpened, the hash
-        del cam["blur_sigma_px"], stereo["sift_blur_px"]  # the one it had before the blur was stated
+    if cam["blur_sigma_px"] == 0:  # a sharp camera (the simulator's): nothing is sharpened, and the
+        del cam["blur_sigma_px"], stereo["sift_blur_px"], stereo["sharpen"]  # hash is as before the blur
     h.update(json.dumps(cam, sort_keys=True, default=list).encode())
     h.update(json.dumps(stereo, sort_keys=True).encode())
     h.update(f"landmark-{FORMAT_VERSION}".encode())

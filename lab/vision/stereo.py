@@ -91,6 +91,9 @@ class StereoParams:
         2004, section 3.3; OpenCV's ``SIFT_INIT_SIGMA``). A camera's blur beyond it
         (:attr:`lab.robot.StereoCamera.blur_sigma_px`) is sharpened away before SIFT (:func:`deblurred`,
         by ``sqrt(blur^2 - sift_blur_px^2)``); a camera within it is used as it is.
+    sharpen : bool
+        Sharpen a camera's blur beyond ``sift_blur_px`` at all. The search's small, far objects need it;
+        the identification's box, near and filling its region, does not (docs/tuning/deblur.md).
     """
 
     ratio: float = 0.8
@@ -104,6 +107,7 @@ class StereoParams:
     parallel: bool = True
     roi_pad_px: int = ROI_PAD_PX
     sift_blur_px: float = 0.5
+    sharpen: bool = True
 
     def __post_init__(self):
         if not 0 < self.ratio <= 1:
@@ -369,6 +373,7 @@ def stereo_features(
     _check_pair(left, right, camera)
     det = detector or sift(params.n_features, params.contrast_threshold)
     excess = np.sqrt(max(0.0, camera.blur_sigma_px**2 - params.sift_blur_px**2))  # blurs add in quadrature
+    excess = excess if params.sharpen else 0.0
     gl, gr = deblurred(_grey(left), excess), deblurred(_grey(right), excess)
     rects = (None, None) if roi is None else _roi_rects(roi, camera, params)
     if rects is None:  # the region lies outside the image
