@@ -206,6 +206,19 @@ def test_rehearsed_search_corrects_a_start_measured_30cm_10deg_off(monkeypatch):
     assert abs(math.degrees(first.x[2]) - 90.0) < 3.0  # measured: 0.3 deg
     assert d["odometry_error_m"] > 0.15  # the told start's error, turned by the drive (measured: 0.19)
     assert d["localization_error_m"] < 0.7 * d["odometry_error_m"]  # measured: 0.03-0.09 (4 runs)
+    # as in the simulator, the robot's localizer estimates its camera's yaw on the base (the pan zero
+    # and the brackets, [camera] mount_sigma_deg 0.7 with the pan-tilt's step) and its range scale (the
+    # calibration's 0.5 % focal lengths and baseline), from the stated accuracies
+    cam = robots[0].camera
+    assert cam.pointing_std_deg == pytest.approx(math.hypot(0.05, 0.7))
+    c = robots[0].localizer.config
+    assert (c.camera_yaw_sigma_rad, c.range_scale_sigma) == (
+        math.radians(cam.pointing_std_deg),
+        cam.depth_scale_std,
+    )
+    est = d["camera_estimate"]
+    print(est)
+    assert est["yaw_sd_deg"] <= cam.pointing_std_deg and est["range_scale_sd"] <= cam.depth_scale_std
 
 
 def test_identify_on_a_robot_uses_the_map_and_needs_a_start(tmp_path, capsys):

@@ -103,6 +103,9 @@ class CameraConfig:
     camera_offset_P: tuple = (0.05, 0.06, 0.0)
     mounts: str = ""  # the head's mount calibration (lab/mounts.py), written by lab hardware calibrate
     blur_sigma_px: float = 0.0  # the rectified images' blur [px] as measured (lab.robot.StereoCamera); 0: not
+    # how far the head's and the camera's brackets may turn the camera, one sd [deg]: 0.2-1 deg for a bracket
+    # mounted by hand; 0.7 is the simulator's realistic statement (0.5 deg each, lab.sim.room_errors)
+    mount_sigma_deg: float = 0.7
 
 
 @dataclass(frozen=True)
@@ -347,6 +350,10 @@ def _check_camera(cam: CameraConfig, need) -> None:
     need(
         math.isfinite(cam.blur_sigma_px) and 0 <= cam.blur_sigma_px <= 5,
         f"[camera] blur_sigma_px must be within [0, 5] px, got {cam.blur_sigma_px}",
+    )
+    need(
+        math.isfinite(cam.mount_sigma_deg) and 0 <= cam.mount_sigma_deg <= 5,
+        f"[camera] mount_sigma_deg must be within [0, 5] deg, got {cam.mount_sigma_deg}",
     )
     need(
         len(cam.devices) == 2,

@@ -136,9 +136,9 @@ class HardwareRobot(Robot):
             )
         self.calibration = calib
         self._rectifier = StereoRectifier(calib)
-        self._camera = replace(
-            calib.camera_model(c.mount_R, c.camera_offset_P), blur_sigma_px=c.blur_sigma_px
-        )
+        cam = calib.camera_model(c.mount_R, c.camera_offset_P)  # pointing: the pan-tilt's step
+        pointing = math.hypot(cam.pointing_std_deg, c.mount_sigma_deg)  # and the brackets, as stated
+        self._camera = replace(cam, pointing_std_deg=pointing, blur_sigma_px=c.blur_sigma_px)
         self._given_source = camera_source
         self._source: StereoSource | None = None
         b = cfg.base

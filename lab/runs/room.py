@@ -40,6 +40,7 @@ from lab.runs.robots import PlacedRobot, RobotKind
 __all__ = [
     "RobotStart",
     "RoomLandmarks",
+    "camera_states_told",
     "check_room",
     "localization_in_words",
     "localize",
@@ -207,14 +208,20 @@ def sim_localizer_told(robot) -> dict:
         return told
     if room.latency_s > 0:
         told["camera_latency_s"] = room.latency_s
+    config = camera_states_told(robot.camera, room.camera_mount_deg > 0 or room.head_mount_deg > 0)
+    return told if config is None else {**told, "config": config}
+
+
+def camera_states_told(camera, mounts_uncertain: bool) -> LocalizerConfig | None:
+    """The localizer's settings for the camera's constants it estimates (:func:`sim_localizer_told` says
+    why): the camera's yaw on the base from its stated pointing when the mounts are uncertain, and the
+    stereo's range scale from its stated depth scale; None when it holds both exact."""
     config = {}
-    if room.camera_mount_deg > 0 or room.head_mount_deg > 0:
-        config["camera_yaw_sigma_rad"] = math.radians(robot.camera.pointing_std_deg)
-    if robot.camera.depth_scale_std > 0:
-        config["range_scale_sigma"] = robot.camera.depth_scale_std
-    if config:
-        told["config"] = LocalizerConfig(**config)
-    return told
+    if mounts_uncertain and camera.pointing_std_deg > 0:
+        config["camera_yaw_sigma_rad"] = math.radians(camera.pointing_std_deg)
+    if camera.depth_scale_std > 0:
+        config["range_scale_sigma"] = camera.depth_scale_std
+    return LocalizerConfig(**config) if config else None
 
 
 def sim_start_sigma(robot) -> np.ndarray | None:
@@ -344,14 +351,18 @@ def localize(
     and the first sighting allowed to correct it when the profile has the room's errors
     (:func:`sim_start_sigma`), else with its default covariance (so too a robot without a start); on a
     robot at ``start`` with ``start.Sigma0``, the first landmark sighting allowed to correct it
-    (:meth:`~lab.localization.Localizer.first_sighting`).
+    (:meth:`~lab.localization.Localizer.first_sighting`). A robot's localizer estimates its camera's
+    yaw and range scale from the camera's stated accuracy (:func:`camera_states_told`; a real head's pan
+    zero and brackets are never exact, ``[camera] mount_sigma_deg``), as the simulator's does under the
+    room's errors; its frames are stamped at exposure, so it is told no latency.
     """
     rng = np.random.default_rng([seed, 20])
     if kind is RobotKind.SIM:
         told = sim_localizer_told(robot)
         return LocalizedRobot(robot, room.mode, room.landmarks, rng=rng, log=log, **told)
+    config = camera_states_told(robot.camera, mounts_uncertain=True)
     if start is None:
-        return LocalizedRobot(robot, room.mode, room.landmarks, rng=rng, log=log)
+        return LocalizedRobot(robot, room.mode, room.landmarks, config, rng=rng, log=log)
     p = start.pose
     s_m, s_rad = math.sqrt(start.Sigma0[0, 0]), math.sqrt(start.Sigma0[2, 2])
     (log or (lambda m: print(f"lab: {m}", file=sys.stderr)))(
@@ -362,6 +373,7 @@ def localize(
         PlacedRobot(robot, start.pose),
         room.mode,
         room.landmarks,
+        config,
         rng=rng,
         log=log,
         Sigma0=start.Sigma0,
