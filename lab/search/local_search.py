@@ -159,8 +159,10 @@ class LocalSearchConfig:
         Matches a view needs before a RANSAC start is tried.
     min_inliers : int
         RANSAC inliers a start needs to become a candidate.
-    refine_frames : int
-        Frames of refinement after centring the object.
+    refine_frames, max_refine_frames : int
+        Frames of refinement after centring the object; a track confirmed and healthy whose pose is
+        still above the bounds then is refined on, up to ``max_refine_frames`` in all (more evidence
+        rather than a refusal; ``refine_frames``: never, the paper's). docs/tuning/search-refine-on.md.
     confirm_updates, confirm_matches : int
         "Found" needs at least ``confirm_updates`` refinement updates that each used at least
         ``confirm_matches`` gated matches.
@@ -209,6 +211,7 @@ class LocalSearchConfig:
     min_matches: int = 6
     min_inliers: int = 5
     refine_frames: int = 4
+    max_refine_frames: int = 8
     confirm_updates: int = 2
     confirm_matches: int = 5
     dither_deg: float = 2.0
@@ -240,8 +243,11 @@ class LocalSearchConfig:
             )
         if self.min_matches < 4 or self.min_inliers < 4:
             raise ConfigError("min_matches and min_inliers must be >= 4 (a RANSAC start needs 4)")
-        if self.refine_frames < 1:
-            raise ConfigError(f"refine_frames must be >= 1, got {self.refine_frames}")
+        if not 1 <= self.refine_frames <= self.max_refine_frames:
+            raise ConfigError(
+                f"need 1 <= refine_frames <= max_refine_frames, got {self.refine_frames}, "
+                f"{self.max_refine_frames}"
+            )
         if not (isinstance(self.refine_upsample, int) and self.refine_upsample >= 1):
             raise ConfigError(f"refine_upsample must be an integer >= 1, got {self.refine_upsample!r}")
 

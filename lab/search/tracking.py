@@ -58,7 +58,8 @@ def region_features(frame: StereoFrame, roi, upsample: int, detector):
 def refine_track(
     robot, db, matcher, detector, ekf: PoseEKF, frame: StereoFrame, cfg: LocalSearchConfig, upsample: int = 1
 ):
-    """Centre the object and track it over ``cfg.refine_frames`` frames with ROI-restricted SIFT (on
+    """Centre the object and track it over ``cfg.refine_frames`` frames with ROI-restricted SIFT, and on
+    up to ``cfg.max_refine_frames`` while it is confirmed but not yet certain enough (on
     the region enlarged ``upsample`` times for a second look, and at least ``cfg.refine_upsample``
     times).
 
@@ -72,7 +73,9 @@ def refine_track(
     confirmed, last_used = 0, 0
     dither = math.radians(cfg.dither_deg)
     offsets = [(0.0, 0.0), (dither, 0.0), (-dither, dither), (0.0, -dither), (dither, dither)]
-    for k in range(cfg.refine_frames):
+    for k in range(cfg.max_refine_frames):
+        if k >= cfg.refine_frames and not _worth_another(ekf, confirmed, cfg):
+            break
         p_R = transform_points(prev.G_RC, ekf.estimate.mu[:3])  # estimated object centre in R
         pan, tilt = aim_at(p_R, robot.camera)
         dp, dt = offsets[k % len(offsets)]
@@ -131,6 +134,15 @@ def refine_track(
         f"found: {confirmed} confirming updates, std {pos_std * 100:.2f} cm, {rot_std:.2f} deg{check}",
         **base,
     )
+
+
+def _worth_another(ekf: PoseEKF, confirmed: int, cfg: LocalSearchConfig) -> bool:
+    """Past ``cfg.refine_frames``: is the track confirmed and healthy, with its pose still above the
+    "small covariance" bounds, so that another frame may bring it under them?"""
+    if ekf.divergence is not None or confirmed < cfg.confirm_updates:
+        return False
+    pos_std, rot_std = pose_stds(ekf)
+    return pos_std > cfg.max_position_std_m or rot_std > cfg.max_rotation_std_deg
 
 
 @dataclass(frozen=True)
