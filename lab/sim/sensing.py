@@ -492,14 +492,11 @@ class SensingProfile:
         ``depth_scale_std`` the focal length and baseline errors in quadrature, ``focal_std`` the focal
         lengths' share, ``pointing_std_deg`` the pan-tilt's zero and the stated mounts in quadrature,
         ``blur_sigma_px`` the lens's blur (measured on a real camera; the world blurs by the same)."""
-        mounts = math.hypot(self.room.camera_mount_deg, self.room.head_mount_deg)
-        return dataclasses.replace(
-            camera,
-            depth_scale_std=math.hypot(self.camera.intrinsics_error, self.camera.baseline_error),
-            pointing_std_deg=math.hypot(self.pan_tilt.zero_offset_deg, mounts),
-            focal_std=self.camera.intrinsics_error,
-            blur_sigma_px=self.camera.blur_sigma_px,
-        )
+        c, mounts = self.camera, math.hypot(self.room.camera_mount_deg, self.room.head_mount_deg)
+        stated = {"focal_std": c.intrinsics_error, "blur_sigma_px": c.blur_sigma_px}
+        stated["depth_scale_std"] = math.hypot(c.intrinsics_error, c.baseline_error)
+        stated["pointing_std_deg"] = math.hypot(self.pan_tilt.zero_offset_deg, mounts)
+        return dataclasses.replace(camera, **stated)
 
 
 PROFILES: dict[str, SensingProfile] = {
