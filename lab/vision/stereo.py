@@ -6,6 +6,8 @@ stereo error model (the EKF's measurement noise ``Sigma_m`` is built from these)
 
 Pipeline for a rectified pair (rows are epipolar lines):
 
+0. Both grey images sharpened by the camera's blur beyond the 0.5 px SIFT assumes (:func:`deblurred`;
+   nothing for a camera within it).
 1. SIFT keypoints and descriptors in the left and right grey images; optionally only inside a region of
    interest of the left image (as both papers do once a track exists: :mod:`lab.vision.roi`) and the
    band of the right image that can hold its features' partners, SIFT then running on those
