@@ -12,8 +12,8 @@ variant, SIFT's stereo features over the whole image and the matcher's database 
 and enlarged twice (``f<k>u<upsample>: features / matches / spread``, the spread the matched database
 points' second singular value per point [cm]: near 0, the points lie on a line and an update is
 skipped as degenerate). Variants: ``as is``; ``sharpA`` an unsharp mask, ``(1 + A) I - A G_1px * I``;
-``deblurS`` the camera's blur stated as S px, which :func:`lab.vision.stereo.stereo_features` sharpens
-by (``2 I - G_S * I``).
+``deblurS`` the camera's blur stated as S px, whose excess over SIFT's 0.5 px
+:func:`lab.vision.stereo.stereo_features` sharpens (``2 I - G_s * I``, ``s = sqrt(S^2 - 0.5^2)``).
 """
 
 from __future__ import annotations
@@ -84,21 +84,24 @@ def _variant(frame, name: str):
     frame = dataclasses.replace(frame, camera=dataclasses.replace(frame.camera, blur_sigma_px=0.0))
     if name == "as is":
         return frame
-    if name.startswith("deblur"):
-        s = float(name[6:])
-        return dataclasses.replace(frame, camera=dataclasses.replace(frame.camera, blur_sigma_px=s))
-    if name.startswith("sharp"):
-        a = float(name[5:])
+    prefix = "deblur" if name.startswith("deblur") else "sharp"
+    try:
+        value = float(name.removeprefix(prefix)) if name.startswith(prefix) else -1.0
+    except ValueError:
+        value = -1.0
+    if not value >= 0:
+        raise SystemExit(
+            f"unknown variant {name!r}: 'as is', sharpA (A a number >= 0, e.g. sharp1.0) or deblurS (S the "
+            "camera's blur [px] as stated, e.g. deblur1.0)"
+        )
+    if prefix == "deblur":
+        return dataclasses.replace(frame, camera=dataclasses.replace(frame.camera, blur_sigma_px=value))
 
-        def sharp(img):
-            g = cv2.GaussianBlur(img.astype(np.float32), (0, 0), 1.0)
-            return np.clip(img.astype(np.float32) * (1.0 + a) - a * g, 0, 255).astype(img.dtype)
+    def sharp(img):
+        g = cv2.GaussianBlur(img.astype(np.float32), (0, 0), 1.0)
+        return np.clip(img.astype(np.float32) * (1.0 + value) - value * g, 0, 255).astype(img.dtype)
 
-        return dataclasses.replace(frame, left=sharp(frame.left), right=sharp(frame.right))
-    raise SystemExit(
-        f"unknown variant {name!r}: 'as is', sharpA (A a number, e.g. sharp1.0) or deblurS (S the "
-        "camera's blur [px] that stereo_features sharpens by, e.g. deblur1.0)"
-    )
+    return dataclasses.replace(frame, left=sharp(frame.left), right=sharp(frame.right))
 
 
 def matches(path: Path, variants: list[str]) -> None:
