@@ -197,6 +197,7 @@ def _cmd_search(args) -> int:
         mounts=args.mounts,
         level=args.level,
         survey_tour=args.survey_tour,
+        survey=args.survey,
     )
     data = res.to_json()
     if args.view3d is not None:
@@ -229,6 +230,35 @@ def _cmd_search(args) -> int:
         said = f": the result so far is in {where}" if where is not None else ""
         print(f"lab search: interrupted, motors stopped{said}", file=sys.stderr)
         return 130
+    return 0
+
+
+def _cmd_survey(args) -> int:
+    import json as _json
+
+    from lab.io import write_json_atomic
+    from lab.runs.survey import run_survey
+
+    data = run_survey(
+        args.out,
+        args.seed,
+        sensing=_sensing(args),
+        robot_config=args.robot,
+        start=args.start,
+        level=args.level,
+        progress=True,
+    )
+    if args.json is not None:
+        write_json_atomic(args.json, data)
+    tour = data["tour"]
+    after = [p["sigma_after"][0] for p in data["posters"].values()]
+    print(
+        f"lab survey: {sum(tour['arrived'])} of {len(tour['stands'])} stands, "
+        f"{tour['n_sightings']} sightings; "
+        f"the posters now stated to {min(after):.1f}-{max(after):.1f} cm; wrote {data['survey']}",
+        file=sys.stderr,
+    )
+    print(_json.dumps({k: data[k] for k in ("survey", "posters")}, indent=2))
     return 0
 
 
@@ -376,6 +406,7 @@ HANDLERS = {
     "notebooks": _cmd_notebooks,
     "render": _cmd_render,
     "search": _cmd_search,
+    "survey": _cmd_survey,
     "tables": _cmd_tables,
     "train": _cmd_train,
     "worlds": _cmd_worlds,

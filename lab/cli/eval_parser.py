@@ -130,6 +130,13 @@ def add_eval_parser(sub) -> None:
         help="before each search, a survey tour that ties the surveyed map's posters together (`lab search "
         "--survey-tour`); its jobs are keyed apart (_tour)",
     )
+    es.add_argument(
+        "--survey-once",
+        action="store_true",
+        default=None,
+        help="survey each seed's room once (`lab survey`, kept in OUT/surveys/) and start every search of "
+        "that room from it (`lab search --survey`); its jobs are keyed apart (_surveyed)",
+    )
     _sweep_run_arguments(es)
     sp = evs.add_parser(
         "spend",

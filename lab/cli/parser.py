@@ -322,6 +322,13 @@ def build_parser() -> argparse.ArgumentParser:
         "(outside the time budget; the JSON's survey_tour)",
     )
     se.add_argument(
+        "--survey",
+        type=Path,
+        metavar="FILE.json",
+        help="a room surveyed once (lab survey --out FILE.json): start from its refined posters instead of "
+        "the map's survey",
+    )
+    se.add_argument(
         "--truth",
         type=lambda s: _floats(s, 4, "--truth"),
         metavar="X,Y,Z,YAW_DEG",
@@ -331,6 +338,26 @@ def build_parser() -> argparse.ArgumentParser:
     _sensing_argument(se)
     _localization_argument(se)
     _start_argument(se)
+
+    sv = sub.add_parser(
+        "survey",
+        help="survey the room once: tie the map's posters together and keep them for later searches",
+        description="Drive a survey tour (stand at a few places, each in view of several posters, and look "
+        "at every poster in view) and write the posters as the tour refined them, with their joint "
+        "covariance, to a file that `lab search --survey FILE` starts from. A map measured with a tape is "
+        "off by 1-2 cm per poster; after the tour the posters' shape is known to millimetres.",
+    )
+    sv.add_argument("--out", type=Path, required=True, metavar="FILE.json", help="where to write the survey")
+    sv.add_argument(
+        "--seed", type=int, default=0, help="in the simulator: the episode whose room is surveyed (default 0)"
+    )
+    sv.add_argument("--json", type=Path, help="write what the tour did here")
+    sv.add_argument(
+        "--robot", type=Path, help="survey with a robot: its hardware TOML config (as lab search --robot)"
+    )
+    sv.add_argument("--level", action=argparse.BooleanOptionalAction, help=HELP_LEVEL)
+    _sensing_argument(sv)
+    _start_argument(sv)
 
     hw = sub.add_parser(
         "hardware",

@@ -90,6 +90,7 @@ def search_sweep(args):
         maps=_names(spec.get("maps", "predict,static")),
         error_scale=parse_error_scales(spec.get("error_scale", "1")),
         survey_tour=bool(spec.get("survey_tour", False)),
+        survey_once=str(Path(args.out) / "surveys") if spec.get("survey_once") else None,
     )
     sw.check()
     return sw

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import statistics
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 from lab.errors import ConfigError
 from lab.eval.executor import Job
@@ -42,6 +43,7 @@ __all__ = [
     "search_key",
     "shortest_path_m",
     "spl",
+    "stored_survey_for",
 ]
 
 #: The fields of a ``lab eval search`` sweep file (the flags' names).
@@ -61,6 +63,7 @@ SEARCH_FIELDS = (
     "maps",
     "error_scale",
     "survey_tour",
+    "survey_once",
 )
 
 MOVING_KINDS = ("random", "evasive")
@@ -114,6 +117,7 @@ class SearchSweep:
     maps: tuple[str, ...] = MAPS
     error_scale: tuple[float, ...] = (1.0,)
     survey_tour: bool = False
+    survey_once: str | None = None
 
     def check(self) -> None:
         from lab.eval.robustness import parse_error_scales
@@ -198,6 +202,8 @@ class SearchSweep:
                                     key += scale_suffix(k)
                                     if self.survey_tour:  # its own jobs: a resume never mixes the two
                                         kw["survey_tour"], key = True, f"{key}_tour"
+                                    if self.survey_once:  # the room surveyed once per seed, kept here
+                                        kw["survey_once"], key = self.survey_once, f"{key}_surveyed"
                                     out.extend(self._moving_jobs(key, kw))
         return out
 
@@ -264,11 +270,13 @@ def search_job(
     map: str = "static",
     error_scale: float = 1.0,
     survey_tour: bool = False,
+    survey_once: str | None = None,
 ) -> dict:
     """One search trial in this worker process (its own PyBullet client): the ``lab search --json``
     result without its map snapshots, with ``shortest_path_m``; the profile's errors times
     ``error_scale``; with ``survey_tour``, a survey tour before the search
-    (:func:`lab.runs.room.survey_the_room`)."""
+    (:func:`lab.runs.room.survey_the_room`); with ``survey_once`` (a folder), the room of ``seed`` surveyed
+    once (:func:`stored_survey_for`) and the search started from it."""
     import numpy as np
 
     from lab.runs.moving import MovingOptions
@@ -295,6 +303,7 @@ def search_job(
         if moving is None
         else MovingOptions(moving, object_speed, pause, predict=map == "predict", surface=surface),
         survey_tour=survey_tour,
+        survey=None if survey_once is None else stored_survey_for(survey_once, seed, sensing, error_scale),
     )
     d = r.to_json()
     d["n_snapshots"] = len(d.pop("map_snapshots", []))
@@ -307,6 +316,24 @@ def search_job(
     sp = shortest_path_m(r.trace.scene, place, lc.max_distance_m, lc.min_distance_m)
     d["shortest_path_m"] = round(sp, 4) if math.isfinite(sp) else None
     return d
+
+
+def stored_survey_for(folder: str, seed: int, sensing: str, error_scale: float) -> Path:
+    """The room of episode ``seed`` under ``sensing`` x ``error_scale`` surveyed once (``lab survey``,
+    :func:`lab.runs.survey.run_survey`), in ``folder``: made by the first job of that room to need it
+    (under a lock, so that two workers do not both drive it), read by the others."""
+    from filelock import FileLock
+
+    from lab.eval.robustness import scale_suffix
+    from lab.runs.survey import run_survey
+    from lab.sim.sensing import sensing_profile
+
+    path = Path(folder) / f"{sensing_label(sensing)}_s{seed}{scale_suffix(error_scale)}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with FileLock(f"{path}.lock"):
+        if not path.is_file():
+            run_survey(path, seed, sensing=sensing_profile(sensing).scaled(error_scale))
+    return path
 
 
 def spl(rows) -> float:

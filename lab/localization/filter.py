@@ -693,6 +693,15 @@ class Localizer:
                 self._clone.cross = np.vstack([self._clone.cross, np.zeros((3, 3))])
         return j
 
+    def seed_posters(self, landmarks) -> None:
+        """Put every poster of a room surveyed once in the state now, seeded by the map's poses and its
+        joint prior (``landmarks.joint_prior``, :mod:`lab.localization.stored_survey`), instead of each
+        poster's own survey at its first sighting. Call it before any update."""
+        names, L = landmarks.joint_prior
+        if self.history or self._clone is not None:
+            raise ValueError("the posters are seeded before the first update")
+        self.s, self.P = self.posters.augment_all(self.s, self.P, [landmarks.get(k) for k in names], L)
+
     def landmark_estimates(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """The surveyed posters in the state, as refined so far: ``[x, y, yaw]`` and covariance (3, 3)
         by name (an exact map's landmarks, held fixed, are not in it)."""

@@ -134,11 +134,17 @@ class LandmarkMap:
         The room's x and y extent, centred on the origin.
     source : str
         Where the map came from (a scene or a file), for messages.
+    joint_prior : (tuple of str, ndarray (3n, 3n)) or None
+        A room surveyed once (:mod:`lab.localization.stored_survey`): the posters' names and the joint
+        covariance of their planar poses, with which the localizer seeds them all at once
+        (:meth:`~lab.localization.Localizer.seed_posters`); None: each poster joins at its first sighting
+        with its own survey.
     """
 
     landmarks: tuple[Landmark, ...]
     room_size: tuple[float, float]
     source: str = ""
+    joint_prior: tuple | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.landmarks)

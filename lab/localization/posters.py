@@ -216,6 +216,28 @@ class PosterStates:
         self.index[landmark.name] = n
         return np.concatenate([s, l]), P_new, n
 
+    def augment_all(
+        self, s: np.ndarray, P: np.ndarray, landmarks: list[Landmark], L: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The state and covariance with every one of ``landmarks`` appended at once, seeded by their
+        planar poses and joint covariance ``L`` (3n, 3n), independent of the rest: a room surveyed once
+        (:mod:`lab.localization.stored_survey`), whose posters are correlated with each other."""
+        taken = [lm.name for lm in landmarks if lm.name in self.index]
+        if taken:
+            raise ValueError(f"landmarks {taken!r} are already in the state")
+        L = np.asarray(L, float)
+        if L.shape != (3 * len(landmarks),) * 2:
+            raise ValueError(
+                f"the joint prior must be {3 * len(landmarks)} x {3 * len(landmarks)}, got {L.shape}"
+            )
+        n = len(s)
+        P_new = np.zeros((n + len(L), n + len(L)))
+        P_new[:n, :n] = P
+        P_new[n:, n:] = L
+        for i, lm in enumerate(landmarks):
+            self.index[lm.name] = n + 3 * i
+        return np.concatenate([s, *(lm.planar for lm in landmarks)]), P_new
+
     def augment_camera(
         self, s: np.ndarray, P: np.ndarray, sigma: float, what: str
     ) -> tuple[np.ndarray, np.ndarray, int]:

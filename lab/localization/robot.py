@@ -105,6 +105,8 @@ class LocalizedRobot(RobotWrapper):
                     "localization 'landmarks' needs a trained landmark map with at least one landmark"
                 )
             self.observer = LandmarkObserver(landmarks, self.config, rng or np.random.default_rng(0))
+            if landmarks.joint_prior is not None:  # a room surveyed once: its posters, correlated
+                self.localizer.seed_posters(landmarks)
         self.log = log or (lambda msg: print(f"lab: {msg}", file=sys.stderr))
         self.frames_seen = 0
 

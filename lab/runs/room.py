@@ -50,6 +50,7 @@ __all__ = [
     "sim_start_sigma",
     "survey_the_room",
     "surveyed_map",
+    "with_stored_survey",
 ]
 
 
@@ -161,6 +162,27 @@ def room_landmarks(
                 mode, surveyed_map(landmarks, profile, seed), None, profile.room.survey_sigma
             )
     return RoomLandmarks(mode, landmarks)
+
+
+def with_stored_survey(room: RoomLandmarks, survey) -> RoomLandmarks:
+    """The run's map as a room surveyed once left it (:mod:`lab.localization.stored_survey`): ``survey``
+    is the file ``lab survey`` wrote, or a :class:`~lab.localization.stored_survey.StoredSurvey`; None
+    leaves ``room`` as it is.
+
+    Raises
+    ------
+    ConfigError
+        A bad or corrupt file, a survey of another map, or a run without a landmark map.
+    """
+    if survey is None:
+        return room
+    from lab.localization.stored_survey import StoredSurvey, load_survey
+
+    stored = survey if isinstance(survey, StoredSurvey) else load_survey(survey)
+    if room.mode is not LocalizationMode.LANDMARKS or room.landmarks is None:
+        why = f" ({room.note})" if room.note else ""
+        raise ConfigError(f"a stored survey refines the posters of a landmark map; this run has none{why}")
+    return replace(room, landmarks=stored.applied_to(room.landmarks))
 
 
 def surveyed_map(landmarks: LandmarkMap, profile, seed: int) -> LandmarkMap:
@@ -432,13 +454,14 @@ def localization_in_words(data: dict) -> str:
     return "; ".join(parts)
 
 
-def survey_the_room(robot: LocalizedRobot, spec, log=None) -> dict:
+def survey_the_room(robot: LocalizedRobot, spec, log=None, cover: int = 1) -> dict:
     """Tie the room's posters together before the work starts (:mod:`lab.localization.survey_tour`): look
     round where the robot stands (its first sighting corrects a start measured by hand), scan the floor
     for the navigator, choose the stands on its planning grid, drive the tour and come back to the start
     (so the work starts where it would have). Returns the JSON's record of it: the stands, whether each
     was reached, the sightings at each, whether the robot got back, and the robot's and the wall's time
-    it took. ``spec`` is the floor the navigator may drive over (the search's map grid)."""
+    it took. ``spec`` is the floor the navigator may drive over (the search's map grid); ``cover`` the
+    stands that see each poster well (:func:`~lab.localization.survey_tour.survey_stands`)."""
     from lab.localization.survey_tour import survey_stands, survey_tour
     from lab.navigation.drive_loop import NavOutcome
     from lab.search.navigate import NavigatorAdapter
@@ -455,7 +478,7 @@ def survey_the_room(robot: LocalizedRobot, spec, log=None) -> dict:
         return grid.spec.contains_xy(x, y) and math.isfinite(grid.cost_at(x, y))
 
     x = robot.localizer.x
-    stands = survey_stands(robot.observer.map, free, start_xy=x[:2], config=robot.config)
+    stands = survey_stands(robot.observer.map, free, start_xy=x[:2], config=robot.config, cover=cover)
     (log or robot.log)(f"localization: a survey tour of {len(stands)} stands ties the posters together")
     tour = survey_tour(robot, drive, stands)
     back = drive.navigator.go_to((float(x[0]), float(x[1])), float(x[2])).outcome is NavOutcome.ARRIVED

@@ -56,11 +56,10 @@ from lab.runs.moving import (
     found_time,
     moving_record,
     passable_of,
-    start_mover,
 )
 from lab.runs.placement import check_placement, path_obstacles, random_placement, searchable_objects, supports
-from lab.runs.robots import RobotKind, levelled, load_robot_config, make_robot, mounts_stated, robot_kind
-from lab.runs.room import localize, robot_start, room_landmarks, survey_the_room
+from lab.runs.robots import RobotKind, levelled, load_robot_config, robot_kind
+from lab.runs.room import localize, room_landmarks, survey_the_room, with_stored_survey
 from lab.runs.search_result import (
     SUCCESS_ORIENTATION_DEG,
     SUCCESS_POSITION_M,
@@ -71,6 +70,7 @@ from lab.runs.search_result import (
     pose_errors,
     scored,
 )
+from lab.runs.session import TruthOf, levels_by_default, start_of, trial_session
 from lab.runs.tracks import TrackedRobot
 from lab.scene import Scene, load_scene
 from lab.search.agent import INTERRUPTED, SearchAgent, SearchEvent, Strategy
@@ -181,6 +181,9 @@ class TrialOptions:
     survey_tour : bool
         Before the search, drive a survey tour that ties the posters of a surveyed map together
         (:func:`lab.runs.room.survey_the_room`; outside the search's budgets; the JSON's ``survey_tour``).
+    survey : str, Path, StoredSurvey or None
+        A room surveyed once (``lab survey``'s file, :mod:`lab.localization.stored_survey`): the robot
+        starts from its refined posters and their joint covariance instead of the map's survey.
     """
 
     place: tuple | None = None
@@ -206,6 +209,7 @@ class TrialOptions:
     mounts: object = None
     level: bool | None = None
     survey_tour: bool = False
+    survey: object = None
 
 
 def run_search(
@@ -235,6 +239,7 @@ def run_search(
     mounts=None,
     level: bool | None = None,
     survey_tour: bool = False,
+    survey=None,
 ) -> SearchResult:
     """Run one search trial (in the simulator, a rehearsal or on the robot) and score it.
 
@@ -267,14 +272,9 @@ def run_search(
         mounts=mounts,
         level=level,
         survey_tour=survey_tour,
+        survey=survey,
     )
     return run_trial(object, seed, options)
-
-
-def _levels_by_default(kind: RobotKind, sensing) -> bool:
-    """Whether a search levels its camera without ``--level/--no-level``: a simulated robot whose sensing
-    profile states its mounts uncertain (:func:`lab.runs.robots.mounts_stated`)."""
-    return kind is RobotKind.SIM and mounts_stated(sensing)
 
 
 def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
@@ -291,8 +291,9 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     kind = robot_kind(hw)
     # the landmark map (a bad landmark file is one line too) and where the robot's odometry starts
     room = room_landmarks(kind, hw, scene, opts.localization, opts.progress, sensing=opts.sensing, seed=seed)
+    room = with_stored_survey(room, opts.survey)  # a room surveyed once: its refined posters
     mode, note = room.mode, room.note
-    start_pose = _start_of(kind, hw, scene, room, opts.start)
+    start_pose = start_of(kind, hw, scene, room, opts.start)
     rng = np.random.default_rng(seed)
     scene, place, surface, obstacle_poses, G_WO_measured = _trial_world(kind, scene, object, opts, rng)
     db = search_database(object, progress=opts.progress)
@@ -300,8 +301,8 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     cfg = cfg if opts.moving is None else agent_config(cfg, opts.moving)
     spec = map_spec(scene)
     with contextlib.ExitStack() as stack:
-        run, truth_of = _session(stack, kind, hw, scene, object, seed, opts, G_WO_measured)
-        to_level = opts.level if opts.level is not None else _levels_by_default(kind, opts.sensing)
+        run, truth_of = trial_session(stack, kind, hw, scene, object, seed, opts, G_WO_measured)
+        to_level = opts.level if opts.level is not None else levels_by_default(kind, opts.sensing)
         base, level = levelled(run.robot) if to_level else (run.robot, None)
         # on a robot its odometry starts at (0, 0, 0): placed at the start in the room (lab/runs/room.py)
         robot = localize(base, kind, room, start_pose, seed)
@@ -389,60 +390,6 @@ def _trial_world(kind: RobotKind, scene: Scene, object: str, opts: TrialOptions,
     return scene, place, surface, obstacle_poses, None
 
 
-@dataclass(frozen=True)
-class _TruthOf:
-    """Where a trial's truth comes from (scoring only; None where there is none: the real robot)."""
-
-    G_WO: Callable  # () -> the object in W (4 x 4) or None
-    G_WC: Callable  # () -> the camera in W at the last frame or None
-    robot_pose: Callable  # () -> Pose2D of the base in W or None
-    collisions: Callable  # () -> int
-    mover: object = None  # a moving object's carrier: G_WO_at(t), the object in W at robot time t
-
-
-def _session(stack, kind, robot_config, scene, object, seed, opts: TrialOptions, G_WO):
-    """The trial's robot session (entered on ``stack``) and where its truth comes from."""
-    sensing, supersample, emulator_setup = opts.sensing, opts.supersample, opts.emulator_setup
-    mounts = opts.mounts  # read by run_trial
-    if kind is RobotKind.SIM:
-        from lab.sim import RenderSettings, SimWorld
-
-        w = stack.enter_context(SimWorld(scene, RenderSettings(supersample=supersample)))
-        run = stack.enter_context(make_robot(world=w, seed=seed, sensing=sensing, mounts=mounts))
-        t = w.truth
-        mover = None if opts.moving is None else start_mover(w, object, opts.moving, seed)
-        return run, _TruthOf(lambda: t.G_W(object), t.G_WC, t.robot_pose, lambda: int(t.collisions), mover)
-    robot = make_robot(
-        robot_config, seed=seed, scene=scene, emulator_setup=emulator_setup, sensing=sensing, mounts=mounts
-    )
-    run = stack.enter_context(robot)
-    bumps = lambda: int(run.robot.bumps)  # noqa: E731 - the bumpers' count: a robot's own collisions
-    if kind is RobotKind.REHEARSAL:
-        r = run.rehearsal
-
-        def G_WC():
-            last = r.truth()
-            return None if last is None else last.G_WC
-
-        return run, _TruthOf(lambda: run.world.truth.G_W(object), G_WC, r.source.base_pose_W, bumps)
-    none = lambda: None  # noqa: E731
-    return run, _TruthOf(lambda: G_WO, none, none, bumps)
-
-
-def _start_of(kind: RobotKind, hw, scene: Scene, room, start):
-    """Where a robot's odometry starts in the room (``start``, the config's ``[room] start``, else the
-    scene's ``[robot] start``), checked against the room's floor; None in the simulator."""
-    if kind is RobotKind.SIM:
-        if start is not None:
-            raise ConfigError(
-                "--start is where a robot stands in the room (with --robot); in the simulator the robot "
-                "starts at the scene's [robot] start"
-            )
-        return None
-    size = room.landmarks.room_size if room.landmarks is not None else scene.room.size
-    return robot_start(hw, scene.robot_start, start, size)
-
-
 def _check_real_robot_trial(scene: Scene, object: str, place, obstacles: bool, truth):
     """One clear error for what the real robot cannot do (place the object, add obstacles) or a bad
     measured truth; returns the object's measured pose G_WO (None without ``truth``)."""
@@ -483,7 +430,7 @@ def measured_pose(scene: Scene, object: str, truth) -> np.ndarray:
     return se3(Rz(body.yaw), np.array(body.centre))
 
 
-def _search(robot, truth_of: _TruthOf, db, navigate, spec, cfg, seed, recorder, attach, budgets):
+def _search(robot, truth_of: TruthOf, db, navigate, spec, cfg, seed, recorder, attach, budgets):
     """The agent's run on the enabled robot within the time budgets (sim, wall), with the truth behind
     it read once it has ended: returns the agent's result, the truth, the budgeted robot, its odometry
     at the end and the robot's track (odometry, estimate and truth: for the figures)."""
