@@ -69,12 +69,16 @@ class RoomLandmarks:
     survey_sigma : (float, float) or None [m, rad]
         The stated accuracy of each landmark's pose in ``landmarks`` (position per coordinate, yaw):
         the sensing profile's survey in the simulator; None where the map is taken as exact.
+    stored_survey : dict or None
+        The room surveyed once that the map's posters come from (:func:`with_stored_survey`), for the
+        JSON: the file, its posters, and the tour's stands and sightings.
     """
 
     mode: LocalizationMode
     landmarks: LandmarkMap | None = field(default=None, repr=False)
     note: str | None = None
     survey_sigma: tuple[float, float] | None = None
+    stored_survey: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -182,7 +186,14 @@ def with_stored_survey(room: RoomLandmarks, survey) -> RoomLandmarks:
     if room.mode is not LocalizationMode.LANDMARKS or room.landmarks is None:
         why = f" ({room.note})" if room.note else ""
         raise ConfigError(f"a stored survey refines the posters of a landmark map; this run has none{why}")
-    return replace(room, landmarks=stored.applied_to(room.landmarks))
+    tour = (stored.record or {}).get("tour") or {}
+    made = {
+        "file": str(survey) if not isinstance(survey, StoredSurvey) else stored.source,
+        "posters": len(stored.names),
+        "stands": len(tour.get("stands", [])),
+        "n_sightings": int(tour.get("n_sightings", 0)),
+    }
+    return replace(room, landmarks=stored.applied_to(room.landmarks), stored_survey=made)
 
 
 def surveyed_map(landmarks: LandmarkMap, profile, seed: int) -> LandmarkMap:

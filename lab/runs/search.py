@@ -338,6 +338,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
         report_relocalization=report_reloc,
         camera_level=level,
         survey_tour=tour,
+        stored_survey=room.stored_survey,
         path_length_m=budget.path_length_m,
         global_searches=out.global_searches,
         local_searches=out.local_searches,

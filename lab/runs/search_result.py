@@ -133,6 +133,10 @@ class SearchResult:
     survey_tour : dict or None
         The survey tour before the search (:func:`lab.runs.room.survey_the_room`: its stands, the
         sightings at each, its time); None without one.
+    stored_survey : dict or None
+        The room surveyed once that the run started from (``lab survey``'s file,
+        :mod:`lab.localization.stored_survey`): the file, its posters, and the tour that made it; None
+        without one.
     events : tuple of SearchEvent
     trace : SearchTrace
     recording : str or None
@@ -187,6 +191,7 @@ class SearchResult:
     report_relocalization: dict | None = None
     camera_level: dict | None = None
     survey_tour: dict | None = None
+    stored_survey: dict | None = None
     events: tuple[SearchEvent, ...] = field(default=(), repr=False)
     trace: SearchTrace | None = field(default=None, repr=False, compare=False)
     recording: str | None = None
@@ -238,6 +243,7 @@ class SearchResult:
             "report_relocalization": self.report_relocalization,
             "camera_level": self.camera_level,
             "survey_tour": self.survey_tour,
+            "stored_survey": self.stored_survey,
             "events": [{**e.as_dict(), "t": round(e.t - t0, 3)} for e in self.events],
             "recording": self.recording,
             "sensing": self.sensing,

@@ -84,12 +84,15 @@ def run_survey(
         tour = survey_the_room(robot, map_spec(scene), cover=cover)
         record = {"tour": tour, "camera_level": camera_level, "seed": int(seed), "robot": run.name}
         stored = survey_of(robot.localizer, room.landmarks, record)
-    posters = _posters(stored, room.landmarks, scene if kind is not RobotKind.HARDWARE else None)
-    stored = StoredSurvey(*_fields(stored), {**record, "posters": posters})
+    truth = None if kind is RobotKind.HARDWARE else _true_posters(scene)
+    posters = _posters(stored, room.landmarks, truth)
+    shape = None if truth is None else _shape(stored, truth)
+    stored = StoredSurvey(*_fields(stored), {**record, "posters": posters, "shape": shape})
     path = stored.save(out)
     return {
         "survey": str(path),
         "posters": posters,
+        "shape": shape,
         "tour": tour,
         "camera_level": camera_level,
         "wall_time_s": round(time.perf_counter() - wall0, 3),
@@ -100,14 +103,38 @@ def _fields(s: StoredSurvey) -> tuple:
     return s.names, s.poses, s.covariance, s.map_poses, s.source
 
 
-def _posters(stored: StoredSurvey, landmarks, scene) -> dict:
-    """Each poster's stated deviation before (its survey) and after (the tour), and with a rendered
-    ``scene`` its position and yaw error against the scene before and after [cm, deg]."""
-    truth = None
-    if scene is not None:
-        from lab.training.landmarks import landmark_map_from_scene
+def _true_posters(scene) -> dict:
+    """The posters' true planar poses, by name: the scene's, which the simulator and a rehearsal render."""
+    from lab.training.landmarks import landmark_map_from_scene
 
-        truth = {lm.name: lm.planar for lm in landmark_map_from_scene(scene)}
+    return {lm.name: lm.planar for lm in landmark_map_from_scene(scene)}
+
+
+def _shape(stored: StoredSurvey, truth: dict) -> dict:
+    """How far the posters are off the scene before and after, split into the turn-and-shift of them all
+    about the room's centre (the frame: what sightings cannot move, :mod:`lab.localization.survey_limit`)
+    and what is left (the shape: RMS over the posters' positions) [cm, deg]. Evaluation only."""
+    from lab.localization.survey_limit import survey_frame_error
+
+    names = [n for n in stored.names if n in truth]
+    xy = np.array([truth[n][:2] for n in names])
+    out = {}
+    for key, poses in (("before", stored.map_poses), ("after", stored.poses)):
+        E = np.array([poses[stored.names.index(n)] - truth[n] for n in names])
+        E[:, 2] = [math.remainder(float(a), 2 * math.pi) for a in E[:, 2]]
+        t = survey_frame_error(xy, E, (0.0, 0.0), 0.015, math.radians(0.7))  # the weights: a ratio only
+        fitted = np.column_stack([t[0] - t[2] * xy[:, 1], t[1] + t[2] * xy[:, 0]])
+        rms = float(np.sqrt(np.mean(np.sum((E[:, :2] - fitted) ** 2, axis=1))))
+        out[key] = {
+            "frame": [round(100 * float(t[0]), 3), round(100 * float(t[1]), 3), round(math.degrees(t[2]), 3)],
+            "shape_rms_cm": round(100 * rms, 3),
+        }
+    return out
+
+
+def _posters(stored: StoredSurvey, landmarks, truth) -> dict:
+    """Each poster's stated deviation before (its survey) and after (the tour), and with the ``truth``
+    (the posters' true planar poses) its position and yaw error before and after [cm, deg]."""
     out = {}
     for i, name in enumerate(stored.names):
         lm = landmarks.get(name)
