@@ -306,9 +306,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
         base, level = levelled(run.robot) if to_level else (run.robot, None)
         # on a robot its odometry starts at (0, 0, 0): placed at the start in the room (lab/runs/room.py)
         robot = localize(base, kind, room, start_pose, seed)
-        tour = (
-            survey_the_room(robot, spec) if opts.survey_tour and mode is LocalizationMode.LANDMARKS else None
-        )
+        tour = survey_the_room(robot, spec) if opts.survey_tour and room.landmarks is not None else None
         t0 = robot.now()  # the search's start: after the levelling (the simulator's clock is 0 without it)
         hook = _with_progress(opts.attach, t0) if opts.progress else opts.attach
         if viewer is not None:  # the world's bodies and the tables' and shelves' tops: display only
