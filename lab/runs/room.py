@@ -188,7 +188,7 @@ def with_stored_survey(room: RoomLandmarks, survey) -> RoomLandmarks:
         raise ConfigError(f"a stored survey refines the posters of a landmark map; this run has none{why}")
     tour = (stored.record or {}).get("tour") or {}
     made = {
-        "file": str(survey) if not isinstance(survey, StoredSurvey) else stored.source,
+        "file": str(survey) if not isinstance(survey, StoredSurvey) else f"(given in code: {stored.source})",
         "posters": len(stored.names),
         "stands": len(tour.get("stands", [])),
         "n_sightings": int(tour.get("n_sightings", 0)),
