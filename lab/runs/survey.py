@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -87,7 +88,7 @@ def run_survey(
     truth = None if kind is RobotKind.HARDWARE else _true_posters(scene)
     posters = _posters(stored, room.landmarks, truth)
     shape = None if truth is None else _shape(stored, truth)
-    stored = StoredSurvey(*_fields(stored), {**record, "posters": posters, "shape": shape})
+    stored = replace(stored, record={**record, "posters": posters, "shape": shape})
     path = stored.save(out)
     return {
         "survey": str(path),
@@ -97,10 +98,6 @@ def run_survey(
         "camera_level": camera_level,
         "wall_time_s": round(time.perf_counter() - wall0, 3),
     }
-
-
-def _fields(s: StoredSurvey) -> tuple:
-    return s.names, s.poses, s.covariance, s.map_poses, s.source
 
 
 def _true_posters(scene) -> dict:
