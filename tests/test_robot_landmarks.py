@@ -43,6 +43,7 @@ def _emulated_config(tmp_path, room: str = "", name: str = "robot.toml"):
         ("start_sigma = [0.0, 3.0]", "[room] start_sigma must be [sigma_m, sigma_deg] (2 numbers > 0)"),
         ("start_sigma = 0.05", "[room] start_sigma must be a list"),
         ("landmark = 'landmarks.toml'", "unknown key [room] 'landmark'"),
+        ("survey = 3", "[room] survey must be a string"),
     ],
 )
 def test_bad_room_fields_are_one_line_naming_the_file_and_field(tmp_path, room, message):

@@ -187,3 +187,40 @@ def test_lab_search_and_lab_survey_check_the_survey_against_the_runs_map(tmp_pat
     r = _lab("survey", "--out", str(tmp_path / "s.json"), "--sensing", "sensors")
     assert r.returncode == 2 and "nothing to survey" in r.stderr and "taken as exact" in r.stderr, r.stderr
     assert not (tmp_path / "s.json").exists()
+
+
+def test_a_robot_configs_room_survey_is_where_lab_survey_writes_and_later_runs_start(tmp_path):
+    """``[room] survey`` in a robot config: resolved beside the config (it need not exist yet: ``lab
+    survey`` makes it); ``lab survey`` without ``--out`` writes there, and refuses when there is neither;
+    a run on the landmarks starts from it unless ``--survey`` names another; a run on odometry ignores it;
+    a configured file that is missing is one line naming it."""
+    from dataclasses import replace
+
+    from hw_helpers import EMULATED_TOML, REPO
+
+    from lab.hardware.config import load_config
+    from lab.runs.robots import RobotKind
+    from lab.runs.room import room_landmarks, survey_to_use, with_stored_survey
+    from lab.runs.survey import run_survey
+    from lab.scene import load_scene
+
+    text = EMULATED_TOML.read_text().replace(
+        'calibration = "calibration/', f'calibration = "{REPO / "hardware" / "calibration"}/'
+    )
+    (tmp_path / "robot.toml").write_text(text + '\n[room]\nsurvey = "room/survey.json"\n')
+    hw = load_config(tmp_path / "robot.toml")
+    assert hw.room.survey == str((tmp_path / "room" / "survey.json").resolve())
+    (tmp_path / "plain.toml").write_text(text)
+    with pytest.raises(ConfigError, match="give --out FILE.json, or survey ="):
+        run_survey(None, robot_config=tmp_path / "plain.toml")
+
+    scene = load_scene("lab_room")
+    room = room_landmarks(RobotKind.SIM, None, scene, "landmarks", sensing="realistic", seed=1)
+    odometry = room_landmarks(RobotKind.SIM, None, scene, "odometry", sensing="realistic", seed=1)
+    assert survey_to_use(None, hw, room) == hw.room.survey
+    assert survey_to_use(tmp_path / "other.json", hw, room) == tmp_path / "other.json"
+    assert survey_to_use(None, hw, odometry) is None
+    assert survey_to_use(None, replace(hw, room=replace(hw.room, survey="")), room) is None
+    with pytest.raises(ConfigError) as e:
+        with_stored_survey(room, survey_to_use(None, hw, room))
+    assert "survey.json: no such survey file" in str(e.value) and "\n" not in str(e.value)

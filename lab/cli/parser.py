@@ -326,7 +326,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         metavar="FILE.json",
         help="a room surveyed once (lab survey --out FILE.json): start from its refined posters instead of "
-        "the map's survey",
+        "the map's survey (default: the robot config's [room] survey, if any)",
     )
     se.add_argument(
         "--truth",
@@ -347,7 +347,13 @@ def build_parser() -> argparse.ArgumentParser:
         "covariance, to a file that `lab search --survey FILE` starts from. A map measured with a tape is "
         "off by 1-2 cm per poster; after the tour the posters' shape is known to millimetres.",
     )
-    sv.add_argument("--out", type=Path, required=True, metavar="FILE.json", help="where to write the survey")
+    sv.add_argument(
+        "--out",
+        type=Path,
+        metavar="FILE.json",
+        help="where to write the survey (default: the robot config's [room] survey, which later runs on that "
+        "config start from)",
+    )
     sv.add_argument(
         "--seed", type=int, default=0, help="in the simulator: the episode whose room is surveyed (default 0)"
     )

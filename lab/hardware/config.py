@@ -144,11 +144,16 @@ class RoomConfig:
     start_sigma : tuple of 2 floats
         ``[sigma_m, sigma_deg]``: how well the start was measured (one standard deviation of each position
         coordinate and of the heading), the localizer's initial covariance.
+    survey : str
+        The room surveyed once (``lab survey``'s file, :mod:`lab.localization.stored_survey`), relative to
+        the config file: ``lab survey --robot CONFIG`` writes it there, and every run that localizes on
+        the landmarks starts from its refined posters, as with ``--survey``. Empty: the map's survey.
     """
 
     landmarks: str = ""
     start: tuple = ()
     start_sigma: tuple = (0.10, 5.0)
+    survey: str = ""
 
 
 @dataclass(frozen=True)
@@ -421,4 +426,8 @@ def _resolve_paths(c: HardwareConfig, root: Path) -> HardwareConfig:
                 'landmark map, e.g. landmarks = "landmarks.toml" beside this file)'
             )
         c = dataclasses.replace(c, room=dataclasses.replace(c.room, landmarks=str(p)))
+    if c.room.survey and not Path(c.room.survey).is_absolute():  # `lab survey` makes it: not checked here
+        c = dataclasses.replace(
+            c, room=dataclasses.replace(c.room, survey=str((root / c.room.survey).resolve()))
+        )
     return c

@@ -34,7 +34,14 @@ from lab.io import write_json_atomic
 from lab.localization import LocalizationMode, LocalizedRobot
 from lab.robot import Robot
 from lab.runs.robots import PlacedRobot, RobotKind, RobotSession, load_robot_config, make_robot, robot_kind
-from lab.runs.room import RoomLandmarks, localize, robot_start, room_landmarks
+from lab.runs.room import (
+    RoomLandmarks,
+    localize,
+    robot_start,
+    room_landmarks,
+    survey_to_use,
+    with_stored_survey,
+)
 from lab.runs.tracks import TrackedRobot
 from lab.search.world_pose import larger_axes_std
 from lab.training import box_model_names, get_databases, get_tables
@@ -172,6 +179,7 @@ def run_identify(
         error = _final_pose_error(agent, session, truth, true_model)
         elapsed = session.robot.now() - t0
         extra = {**_robot_fields(session), **_localization_fields(robot, session, note)}
+        extra["stored_survey"] = room.stored_survey
     wall, cpu = time.perf_counter() - t_wall, time.process_time() - t_cpu
     result = _episode_json(agent, session, true_model, identified, planner, seed, mover, t0)
     result.update(sim_time_s=elapsed, wall_time_s=wall, pose_error=error, **extra)
@@ -197,6 +205,7 @@ def _checked_setup(true_model: int, robot_config, localization, start, view3d=No
     kind = robot_kind(hw)
     # a bad map is one line, first; in the simulator the surveyed map of the profile's room errors
     room = room_landmarks(kind, hw, _scene_of(kind, hw), localization, sensing=sensing, seed=seed)
+    room = with_stored_survey(room, survey_to_use(None, hw, room))  # a robot's [room] survey
     return hw, room, _start_of(kind, hw, room, start)
 
 

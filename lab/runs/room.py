@@ -50,6 +50,7 @@ __all__ = [
     "sim_start_sigma",
     "survey_the_room",
     "surveyed_map",
+    "survey_to_use",
     "with_stored_survey",
 ]
 
@@ -194,6 +195,16 @@ def with_stored_survey(room: RoomLandmarks, survey) -> RoomLandmarks:
         "n_sightings": int(tour.get("n_sightings", 0)),
     }
     return replace(room, landmarks=stored.applied_to(room.landmarks), stored_survey=made)
+
+
+def survey_to_use(given, hw, room: RoomLandmarks):
+    """The room surveyed once that a run starts from: ``given`` (``--survey``) when there is one, else the
+    robot config's ``[room] survey`` when the run localizes on a landmark map (a run on odometry ignores
+    it), else None (the map's own survey)."""
+    if given is not None:
+        return given
+    on_landmarks = room.mode is LocalizationMode.LANDMARKS and room.landmarks is not None
+    return hw.room.survey if hw is not None and hw.room.survey and on_landmarks else None
 
 
 def surveyed_map(landmarks: LandmarkMap, profile, seed: int) -> LandmarkMap:

@@ -59,7 +59,7 @@ from lab.runs.moving import (
 )
 from lab.runs.placement import check_placement, path_obstacles, random_placement, searchable_objects, supports
 from lab.runs.robots import RobotKind, levelled, load_robot_config, robot_kind
-from lab.runs.room import localize, room_landmarks, survey_the_room, with_stored_survey
+from lab.runs.room import localize, room_landmarks, survey_the_room, survey_to_use, with_stored_survey
 from lab.runs.search_result import (
     SUCCESS_ORIENTATION_DEG,
     SUCCESS_POSITION_M,
@@ -183,7 +183,8 @@ class TrialOptions:
         (:func:`lab.runs.room.survey_the_room`; outside the search's budgets; the JSON's ``survey_tour``).
     survey : str, Path, StoredSurvey or None
         A room surveyed once (``lab survey``'s file, :mod:`lab.localization.stored_survey`): the robot
-        starts from its refined posters and their joint covariance instead of the map's survey.
+        starts from its refined posters and their joint covariance instead of the map's survey. None: a
+        robot config's ``[room] survey`` if it has one.
     """
 
     place: tuple | None = None
@@ -291,7 +292,7 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
     kind = robot_kind(hw)
     # the landmark map (a bad landmark file is one line too) and where the robot's odometry starts
     room = room_landmarks(kind, hw, scene, opts.localization, opts.progress, sensing=opts.sensing, seed=seed)
-    room = with_stored_survey(room, opts.survey)  # a room surveyed once: its refined posters
+    room = with_stored_survey(room, survey_to_use(opts.survey, hw, room))  # a room surveyed once
     mode, note = room.mode, room.note
     start_pose = start_of(kind, hw, scene, room, opts.start)
     rng = np.random.default_rng(seed)

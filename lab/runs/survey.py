@@ -39,7 +39,7 @@ SURVEY_COVER = 3
 
 
 def run_survey(
-    out: str | Path,
+    out: str | Path | None,
     seed: int = 0,
     *,
     world: str = "lab_room",
@@ -53,19 +53,27 @@ def run_survey(
     """Drive the survey tour in the room of ``world`` (episode ``seed`` in the simulator, whose surveyed
     map it refines) and write the refined posters to ``out``; returns what ``lab survey --json`` writes:
     the file, the tour and the posters' stated deviations before and after (in the simulator also their
-    errors against the scene). ``cover`` is the stands that see each poster well.
+    errors against the scene). ``cover`` is the stands that see each poster well. ``out`` None: the robot
+    config's ``[room] survey``, where its later runs look for it.
 
     Raises
     ------
     ConfigError
-        No landmark map, or a map taken as exact (nothing to refine: a profile without the room's survey
-        error, or a landmark file without survey sigmas).
+        No file to write (no ``out``, no ``[room] survey``), no landmark map, or a map taken as exact
+        (nothing to refine: a profile without the room's survey error, or a landmark file without survey
+        sigmas).
     """
     from lab.runs.search import TrialOptions, map_spec
 
     wall0 = time.perf_counter()
     scene = load_scene(world)
     hw = load_robot_config(robot_config)
+    out = out if out is not None else hw.room.survey
+    if not out:
+        raise ConfigError(
+            'where to write the survey: give --out FILE.json, or survey = "FILE.json" in the robot config\'s '
+            "[room] (then its later runs start from it)"
+        )
     kind = robot_kind(hw)
     room = room_landmarks(kind, hw, scene, "landmarks", progress, sensing=sensing, seed=seed)
     if room.mode is not LocalizationMode.LANDMARKS:
