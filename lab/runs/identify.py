@@ -178,8 +178,7 @@ def run_identify(
         identified, interrupted, loop = _run_loop(agent, robot, session, tracked)
         error = _final_pose_error(agent, session, truth, true_model)
         elapsed = session.robot.now() - t0
-        extra = {**_robot_fields(session), **_localization_fields(robot, session, note)}
-        extra["stored_survey"] = room.stored_survey
+        extra = {**_robot_fields(session), **_localization_fields(robot, session, note, room.stored_survey)}
     wall, cpu = time.perf_counter() - t_wall, time.process_time() - t_cpu
     result = _episode_json(agent, session, true_model, identified, planner, seed, mover, t0)
     result.update(sim_time_s=elapsed, wall_time_s=wall, pose_error=error, **extra)
@@ -326,9 +325,10 @@ def _truth_pose(session: RobotSession):
     return session.world.truth.robot_pose if session.kind is RobotKind.SIM else None
 
 
-def _localization_fields(robot: LocalizedRobot, session: RobotSession, note) -> dict:
+def _localization_fields(robot: LocalizedRobot, session: RobotSession, note, stored_survey=None) -> dict:
     """``localization``, ``odometry_error_m`` and ``localization_error_m`` (against the simulator's
-    truth; null without one), the landmark updates, and a note when no landmark was used."""
+    truth; null without one), the landmark updates, a note when no landmark was used, and the room
+    surveyed once that the localizer started from (``stored_survey``, from a robot's ``[room] survey``)."""
     est = robot.pose_estimate()
     if note is None and robot.mode is LocalizationMode.LANDMARKS and est.n_updates == 0:
         note = "no landmark was seen: the pose is odometry alone"
@@ -352,6 +352,7 @@ def _localization_fields(robot: LocalizedRobot, session: RobotSession, note) -> 
         "localization_note": note,
         "odometry_calibration": robot.odometry_calibration(),
         "camera_estimate": robot.camera_estimate(),
+        "stored_survey": stored_survey,
     }
 
 
