@@ -191,7 +191,8 @@ def test_lab_search_and_lab_survey_check_the_survey_against_the_runs_map(tmp_pat
 
 def test_a_robot_configs_room_survey_is_where_lab_survey_writes_and_later_runs_start(tmp_path):
     """``[room] survey`` in a robot config: resolved beside the config (it need not exist yet: ``lab
-    survey`` makes it); ``lab survey`` without ``--out`` writes there, and refuses when there is neither;
+    survey`` makes it); ``lab survey`` without ``--out`` takes it as its file (here it goes on to refuse a
+    robot with no landmark map, writing nothing), and without either refuses to start;
     a run on the landmarks starts from it unless ``--survey`` names another; a run on odometry ignores it;
     a configured file that is missing is one line naming it."""
     from dataclasses import replace
@@ -213,6 +214,9 @@ def test_a_robot_configs_room_survey_is_where_lab_survey_writes_and_later_runs_s
     (tmp_path / "plain.toml").write_text(text)
     with pytest.raises(ConfigError, match="give --out FILE.json, or survey ="):
         run_survey(None, robot_config=tmp_path / "plain.toml")
+    with pytest.raises(ConfigError, match="nothing to survey"):  # past the file: the robot has no map
+        run_survey(None, robot_config=tmp_path / "robot.toml")
+    assert not (tmp_path / "room").exists()
 
     scene = load_scene("lab_room")
     room = room_landmarks(RobotKind.SIM, None, scene, "landmarks", sensing="realistic", seed=1)
