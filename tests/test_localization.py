@@ -165,9 +165,10 @@ def test_update_iterations_must_be_a_positive_integer(bad):
 
 
 def test_gate_lockout_recovery_inflates_the_covariance():
-    """Observations rejected in a row while driving make the filter doubt itself, not the landmarks."""
+    """Observations rejected in a row while driving make the filter doubt itself, not the landmarks (the
+    re-find off: it would reset the pose from the second; tests/test_localization_refind.py)."""
     lm = Landmark("p", (0.0, 3.94, 1.5), 0.0, (1.4, 0.02, 1.0), (0.0, -1.0))
-    cfg = LocalizerConfig(max_rejected_in_a_row=3, reject_inflation=9.0)
+    cfg = LocalizerConfig(max_rejected_in_a_row=3, reject_inflation=9.0, refind=False)
     loc = Localizer([0.0, 0.0, math.pi / 2], config=cfg)
     true = np.array([0.3, 0.0, math.pi / 2])  # the robot is really 30 cm off
     Q = np.diag([1e-4, 1e-4, 1e-5])
@@ -183,8 +184,8 @@ def test_gate_lockout_recovery_inflates_the_covariance():
 def test_a_standing_robot_counts_a_landmarks_rejection_once():
     """Standing still, the same wrong fit seen frame after frame (a local search's views) is one piece of
     evidence: no inflation however often; three different landmarks rejected from one place do inflate;
-    after the robot has moved ``recount_m`` the same landmark counts again."""
-    cfg = LocalizerConfig(max_rejected_in_a_row=3, reject_inflation=9.0)
+    after the robot has moved ``recount_m`` the same landmark counts again (the re-find off, as above)."""
+    cfg = LocalizerConfig(max_rejected_in_a_row=3, reject_inflation=9.0, refind=False)
     lms = [
         Landmark(n, (x, 3.94, 1.5), 0.0, (1.4, 0.02, 1.0), (0.0, -1.0))
         for n, x in (("a", -1.5), ("b", 0.0), ("c", 1.5))

@@ -397,6 +397,7 @@ SEARCH = SweepKind(
         "odometry_error_m",
         "localization_error_m",
         "landmark_updates",
+        "landmark_refinds",
         "global_searches",
         "local_searches",
         "sim_time_s",

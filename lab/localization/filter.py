@@ -59,6 +59,7 @@ from lab.localization.models import (
 )
 from lab.localization.modes import LocalizationMode
 from lab.localization.posters import PosterStates, observe, sighting_pose
+from lab.localization.refind import Refinder, RejectedSighting
 
 __all__ = ["Localizer", "LocalizerConfig", "PlanarPoseEstimate", "UpdateRecord"]
 
@@ -165,6 +166,11 @@ class LocalizerConfig:
         A start pose measured by hand (:class:`Localizer` with ``first_sighting=True``): the first
         landmark sighting that disagrees with it beyond the gate replaces it when the pose it implies is
         within these of the start (farther: an outlier, rejected).
+    refind : bool
+        Re-find a lost robot: two rejected sightings that are independent evidence (two posters, or one
+        poster from two places) and agree with each other, within the gate, reset the pose from the newer
+        (:mod:`lab.localization.refind`). False: only the lock-out recovery above. Why:
+        docs/tuning/localizer-refind.md.
     update_iterations : int
         The landmark update's iterations (the iterated EKF: relinearise at the new mean until it stops
         moving, at most this many); 1 is the plain EKF. How it was chosen:
@@ -225,6 +231,7 @@ class LocalizerConfig:
     report_detour_above_m: float = 0.04
     first_sighting_max_offset_m: float = 1.0
     first_sighting_max_offset_rad: float = math.radians(30.0)
+    refind: bool = True
     update_iterations: int = 10
     odometry_calibration: bool = True
     turn_scale_sigma: float = 0.04
@@ -274,6 +281,8 @@ class LocalizerConfig:
                 f"LocalizerConfig.update_iterations must be an integer >= 1 (1: the plain EKF), "
                 f"got {self.update_iterations!r}"
             )
+        if not isinstance(self.refind, bool):
+            raise ConfigError(f"LocalizerConfig.refind must be True or False, got {self.refind!r}")
         if not isinstance(self.shared_floor, bool):
             raise ConfigError(
                 f"LocalizerConfig.shared_floor must be True or False, got {self.shared_floor!r}"
@@ -417,7 +426,8 @@ class UpdateRecord:
     innovation's squared Mahalanobis distance. ``kind`` is ``"update"`` (the EKF update), or for the
     first sighting of a start measured by hand (:meth:`Localizer.first_sighting`) ``"fused"`` (it agreed
     with the start: both fused), ``"reset"`` (it did not: the start replaced by the sighting's pose) or
-    ``"outlier"`` (too far from the start: rejected).
+    ``"outlier"`` (too far from the start: rejected); ``"refound"`` when a rejected sighting agreed
+    with an earlier rejected one and the pose was reset from it (:mod:`lab.localization.refind`).
     """
 
     t: float
@@ -515,6 +525,10 @@ class Localizer:
         self.history: list[UpdateRecord] = []
         self.rejected_in_a_row = 0
         self.n_inflations = 0
+        self.n_refinds = 0  # poses reset from rejected sightings that agree (config.refind)
+        self.refinder = (
+            Refinder(chi2_quantile(c.gate_prob, 3), c.drive_sigma_m, c.drive_sigma_rad) if c.refind else None
+        )
         self._rejected_here: set[str] = set()  # landmarks whose rejection counted since the last move
         self._moved = np.zeros(2)  # driven [m] and turned [rad] since then
         self._seen_here: dict[str, int] = {}  # accepted sightings per landmark since then (shared_floor)
@@ -609,11 +623,15 @@ class Localizer:
         self.s, self.P = np.concatenate([s_bar, self.s[m:]]), 0.5 * (P + P.T)
         if self._clone is not None:  # the clone stays where it was: Cov(s_bar, x_c) = F Cov(s, x_c)
             self._clone.cross[:m] = F @ self._clone.cross[:m]
+        if self.refinder is not None:  # the rejected sightings' poses, carried along
+            self.refinder.predict(u, c.motion_noise(u), c.turn_scale_walk_per_sqrt_rad if m == 5 else 0.0)
         self._moved += (math.hypot(u[0], u[1]), abs(u[2]))
         if self._moved[0] >= self.config.recount_m or self._moved[1] >= self.config.recount_rad:
             self._rejected_here.clear()  # a new place: every landmark's rejection counts again
             self._seen_here.clear()  # and its sightings bring a fresh view of the floor's error
             self._moved[:] = 0.0
+            if self.refinder is not None:
+                self.refinder.place += 1
 
     def update(self, z, Q, landmark: Landmark, t: float = 0.0, n_inliers: int = 0) -> UpdateRecord:
         """Update from one landmark observation ``z`` (3,) with covariance ``Q`` (3, 3); gated.
@@ -663,6 +681,10 @@ class Localizer:
             self.s, self.P = s_i, 0.5 * (P + P.T)
             self.rejected_in_a_row = 0
             self._seen_here[landmark.name] = self._seen_here.get(landmark.name, 0) + 1
+            if self.refinder is not None:
+                self.refinder.clear()  # the estimate is not lost
+        elif self._refind(z, Q, landmark, j):
+            return self._record(t, landmark, z, Q, x_bar, Sigma_bar, nis, True, n_inliers, "refound")
         elif landmark.name not in self._rejected_here:  # once per landmark per place (recount_m)
             self._rejected_here.add(landmark.name)
             self.rejected_in_a_row += 1
@@ -675,6 +697,35 @@ class Localizer:
                 self.n_inflations += 1
                 self._rejected_here.clear()  # the doubted estimate is tried against them all again
         return self._record(t, landmark, z, Q, x_bar, Sigma_bar, nis, bool(accepted), n_inliers)
+
+    def _refind(self, z, Q, landmark: Landmark, j: int | None) -> bool:
+        r"""Keep a rejected sighting for re-finding a lost robot; when it agrees with a kept one as
+        independent evidence, reset the pose from it and say True (:mod:`lab.localization.refind`).
+
+        The reset is :meth:`first_sighting`'s: :math:`x = x_z(l)`,
+        :math:`\mathrm{Cov}(x, y) = J_l \mathrm{Cov}(l, y)`, :math:`\mathrm{Cov}(x) = J_z Q J_z^T +
+        J_l \mathrm{Cov}(l) J_l^T`; a kept pose clone's cross-covariance with it is :math:`J_l` times its
+        cross-covariance with the state. The odometry's calibration keeps its estimate."""
+        if self.refinder is None:
+            return False
+        x_z, Sigma_z, Jl = sighting_pose(self.s, z, Q, landmark, j, self.camera_yaw, self.range_scale)
+        m = self._m
+        r, C = np.concatenate([x_z, self.s[3:m]]), np.zeros((m, m))
+        C[:3, :3], C[3:, 3:] = Sigma_z, self.P[3:m, 3:m]
+        new = RejectedSighting(landmark.name, self.refinder.place, r, C, Jl)
+        if self.refinder.add(new, self.P) is None:
+            return False
+        P_bar, row = self.P.copy(), Jl @ self.P
+        if self._clone is not None:
+            self._clone.cross[:3] = Jl @ self._clone.cross
+        self.s[:3] = x_z
+        self.P[:3, :], self.P[:, :3] = row, row.T
+        self.P[:3, :3] = Sigma_z + Jl @ P_bar @ Jl.T
+        self.P = 0.5 * (self.P + self.P.T)
+        self.refinder.clear()
+        self.rejected_in_a_row, self.n_refinds = 0, self.n_refinds + 1
+        self._rejected_here.clear()
+        return True
 
     def _sighting_covariance(self, z, Q, landmark: Landmark) -> np.ndarray:
         """An observation's covariance: the fit's own ``Q`` plus the floor, the floor shared with this

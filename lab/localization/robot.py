@@ -249,13 +249,20 @@ class LocalizedRobot(RobotWrapper):
             rec = self.localizer.update(obs.z, obs.Q, obs.landmark, frame.t, obs.n_inliers)
             if not rec.accepted:
                 self.log(f"localization: rejected {obs.landmark.name} (NIS {rec.nis:.1f}, an outlier)")
-            elif rec.kind == "reset":
+            elif rec.kind in ("reset", "refound"):
                 dx, dy = rec.x[:2] - rec.x_bar[:2]
                 dth = math.degrees(wrap_angle(rec.x[2] - rec.x_bar[2]))
-                self.log(
-                    f"localization: the start pose was {100 * math.hypot(dx, dy):.0f} cm and {abs(dth):.1f} "
-                    f"deg off what {obs.landmark.name} says (NIS {rec.nis:.1f}): reset from it"
-                )
+                off = f"{100 * math.hypot(dx, dy):.0f} cm and {abs(dth):.1f} deg"
+                if rec.kind == "reset":
+                    self.log(
+                        f"localization: the start pose was {off} off what {obs.landmark.name} says "
+                        f"(NIS {rec.nis:.1f}): reset from it"
+                    )
+                else:
+                    self.log(
+                        f"localization: lost, the estimate was {off} off what {obs.landmark.name} says "
+                        f"(NIS {rec.nis:.1f}), and an earlier rejected sighting agrees: re-found from it"
+                    )
         frame = replace(frame, odom=self._pose(), wheel_odom=wheels)  # the wheels: frame_motion
         yaw = self.localizer.camera_yaw_estimate
         if yaw is not None:  # what the frame sees is placed through the camera's estimated yaw on the base

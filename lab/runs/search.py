@@ -320,18 +320,9 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
         watchdog = None if kind is RobotKind.SIM else int(run.robot.watchdog_stops)
     if viewer is not None:
         viewer.save()
-    if note is None and mode is LocalizationMode.LANDMARKS and estimate.n_updates == 0:
-        note = "no landmark was seen: the pose is odometry alone"
-    if note is not None:
-        print(f"lab: localization: {note}", file=sys.stderr)
-    rp = truth_end.robot_pose
-    loc_error = None if rp is None else math.hypot(estimate.pose.x - rp.x, estimate.pose.y - rp.y)
     return SearchResult(
         **scored(object, out, truth_end, odom),
-        localization_error_m=loc_error,
-        localization=mode.value,
-        landmark_updates=estimate.n_updates,
-        localization_note=note,
+        **_localization_fields(robot, mode, note, estimate, truth_end.robot_pose),
         odometry_calibration=robot.odometry_calibration(),
         camera_estimate=robot.camera_estimate(),
         report_relocalization=report_reloc,
@@ -358,6 +349,26 @@ def run_trial(object: str, seed: int, opts: TrialOptions) -> SearchResult:
         t0=t0,
         moving=None if opts.moving is None else moving_record(opts.moving, truth_of.mover, truth_end.time_s),
     )
+
+
+def _localization_fields(robot, mode: LocalizationMode, note: str | None, estimate, robot_pose) -> dict:
+    """A search result's localization fields: the localizer's error against the true pose at the end
+    (None on a real robot), the landmark updates and re-finds, and the note (printed: why the pose is
+    odometry alone)."""
+    if note is None and mode is LocalizationMode.LANDMARKS and estimate.n_updates == 0:
+        note = "no landmark was seen: the pose is odometry alone"
+    if note is not None:
+        print(f"lab: localization: {note}", file=sys.stderr)
+    rp = robot_pose
+    return {
+        "localization_error_m": None
+        if rp is None
+        else math.hypot(estimate.pose.x - rp.x, estimate.pose.y - rp.y),
+        "localization": mode.value,
+        "landmark_updates": estimate.n_updates,
+        "landmark_refinds": robot.localizer.n_refinds,
+        "localization_note": note,
+    }
 
 
 def _viewer(view3d):

@@ -118,6 +118,9 @@ class SearchResult:
     landmark_updates : int
         Landmark observations the localizer used (0 with landmarks: it fell back to odometry alone,
         and ``localization_note`` says so).
+    landmark_refinds : int
+        Times the localizer was lost and re-found (:mod:`lab.localization.refind`): its estimate reset
+        from two rejected sightings that agreed with each other.
     localization_note : str or None
     odometry_calibration : dict or None
         The odometry's turn scale and curvature bias the localizer learned
@@ -185,6 +188,7 @@ class SearchResult:
     localization_error_m: float | None = 0.0
     localization: str = "landmarks"
     landmark_updates: int = 0
+    landmark_refinds: int = 0
     localization_note: str | None = None
     odometry_calibration: dict | None = None
     camera_estimate: dict | None = None
@@ -237,6 +241,7 @@ class SearchResult:
             "localization_error_m": _round(self.localization_error_m, 4),
             "localization": self.localization,
             "landmark_updates": int(self.landmark_updates),
+            "landmark_refinds": int(self.landmark_refinds),
             "localization_note": self.localization_note,
             "odometry_calibration": self.odometry_calibration,
             "camera_estimate": self.camera_estimate,
