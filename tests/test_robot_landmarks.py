@@ -130,6 +130,56 @@ def test_hardware_check_reads_the_room_map_trains_it_and_says_where_to_stand(tmp
     )
 
 
+def test_hardware_check_reads_the_configs_room_survey(tmp_path):
+    """``[room] survey`` in ``lab hardware check``'s room lines: a file not made yet, a corrupt one and one
+    made on another map are each one FAIL line with the command that makes it again; a good one says
+    what the tour that made it did."""
+    import numpy as np
+
+    from lab.localization.stored_survey import StoredSurvey
+    from lab.runs.room import check_room
+    from lab.training.landmarks import trained_landmark_map
+
+    def lines_of(cfg):
+        out = []
+        check_room(cfg, lambda ok, what, detail, fix="": out.append((ok, what, detail, fix)))
+        return {what: (ok, detail, fix) for ok, what, detail, fix in out}
+
+    (tmp_path / "landmarks.toml").write_text(
+        LANDMARKS_TOML.read_text().replace("../worlds", str(REPO / "worlds"))
+    )
+    cfg = load_config(_emulated_config(tmp_path, 'landmarks = "landmarks.toml"\nsurvey = "survey.json"'))
+    ok, detail, fix = lines_of(cfg)["room survey"]
+    assert not ok and "survey.json ([room] survey) is not made yet" in detail
+    assert f"lab survey --robot {cfg.path}" in fix
+
+    lms = list(trained_landmark_map(tmp_path / "landmarks.toml", progress=False))
+    poses = np.array([lm.planar for lm in lms])
+    C = np.kron(np.eye(len(lms)), np.diag([0.01**2, 0.01**2, math.radians(0.5) ** 2]))
+    tour = {
+        "stands": [[0.5, -2.0], [-0.5, 1.5], [1.0, 1.5]],
+        "arrived": [True, True, False],
+        "n_sightings": 40,
+    }
+    names = tuple(lm.name for lm in lms)
+    StoredSurvey(names, poses, C, poses, "landmarks.toml", {"tour": tour}).save(tmp_path / "survey.json")
+    ok, detail, _ = lines_of(cfg)["room survey"]
+    assert ok and "12 posters as a tour of 2 of 3 stands placed them (40 sightings)" in detail
+
+    text = (tmp_path / "survey.json").read_text()
+    (tmp_path / "survey.json").write_text(text.replace('"n_sightings": 40', '"n_sightings": 41'))
+    ok, detail, fix = lines_of(cfg)["room survey"]
+    assert not ok and "corrupt" in detail and "lab survey --robot" in fix
+
+    moved = poses + [0.05, 0.0, 0.0]
+    StoredSurvey(names, moved, C, moved, "landmarks.toml", {"tour": tour}).save(tmp_path / "survey.json")
+    ok, detail, fix = lines_of(cfg)["room survey"]
+    assert not ok and "was made on another map" in detail and "lab survey --robot" in fix
+    assert "room survey" not in lines_of(
+        load_config(_emulated_config(tmp_path, 'landmarks = "landmarks.toml"'))
+    )
+
+
 def test_a_map_whose_posters_are_never_seen_falls_back_and_says_so(tmp_path, capsys):
     """The real robot's path on the emulators, whose synthetic random-dot camera shows no poster: with
     the room's map the run looks for its posters, sees none, and says the pose is odometry alone; without

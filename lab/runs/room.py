@@ -27,6 +27,7 @@ import math
 import sys
 import time
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -369,6 +370,8 @@ def check_room(config: HardwareConfig, line) -> None:
                 f"{room.landmarks}: {len(trained)} posters ({names}), their databases ready "
                 f"({time.perf_counter() - t0:.0f} s)",
             )
+            if room.survey:
+                _check_survey(config, trained, line)
     scene = load_scene("lab_room")
     try:
         s = robot_start(config, scene.robot_start, None, size or scene.room.size)
@@ -383,6 +386,34 @@ def check_room(config: HardwareConfig, line) -> None:
         f"lab search assumes ({s.pose.x:g} m, {s.pose.y:g} m, {math.degrees(s.pose.theta):g} deg), from "
         f"{source}, known to {100 * sigma_m:g} cm and {sigma_deg:g} deg ([room] start_sigma): stand the "
         "robot there, or give --start",
+    )
+
+
+def _check_survey(config: HardwareConfig, landmarks: LandmarkMap, line) -> None:
+    """The bring-up's line about ``[room] survey`` (``lab hardware check``, beside the landmark map): the
+    room surveyed once that every run on the landmarks will start from. A file not made yet, corrupt, or
+    made on another map is one FAIL line with what to run, so that the class does not find out when the
+    first run stops; a good one says what it holds. Nothing moves."""
+    from lab.localization.stored_survey import load_survey
+
+    path = config.room.survey
+    redo = f"stand the robot on its mark and run: lab survey --robot {config.path}"
+    if not Path(path).is_file():
+        line(False, "room survey", f"{path} ([room] survey) is not made yet: every run would stop", redo)
+        return
+    try:
+        stored = load_survey(path)
+        stored.applied_to(landmarks)
+    except LabError as e:
+        line(False, "room survey", str(e), redo)
+        return
+    tour = (stored.record or {}).get("tour") or {}
+    arrived = sum(bool(a) for a in tour.get("arrived", []))
+    line(
+        True,
+        "room survey",
+        f"{path}: {len(stored.names)} posters as a tour of {arrived} of {len(tour.get('stands', []))} stands "
+        f"placed them ({int(tour.get('n_sightings', 0))} sightings); runs on the landmarks start from it",
     )
 
 
