@@ -156,3 +156,24 @@ def test_refind_must_be_a_bool():
         assert "refind must be True or False" in str(e)
     else:
         raise AssertionError("refind='yes' was accepted")
+
+
+def test_a_refind_keeps_a_cloned_poses_joint_covariance_valid():
+    """A pose kept in the state (stochastic cloning: the pose an object was found from) while the robot is
+    re-found: the clone keeps its own mean and covariance (the reset tells nothing new about where the
+    robot was then), and the joint covariance of the state and the clone stays symmetric positive
+    semi-definite."""
+    loc, truth = _lost()
+    loc.start_clone()
+    x_c, C_c = loc.cloned_estimate()
+    loc.predict(np.array([0.1, 0.0, 0.0]))
+    truth = truth + [0.0, 0.1, 0.0]  # heading 90 deg: ahead is +y
+    assert not loc.update(_seen(truth, NORTH), Q, NORTH).accepted
+    assert loc.update(_seen(truth, EAST), Q, EAST).kind == "refound"
+    x_after, C_after = loc.cloned_estimate()
+    np.testing.assert_allclose(x_after, x_c)
+    np.testing.assert_allclose(C_after, C_c)
+    cross = loc._clone.cross  # Cov(s, x_c) after the reset: J_l Cov(s, x_c) in the pose's rows
+    J = np.block([[loc.P, cross], [cross.T, C_after]])
+    np.testing.assert_allclose(J, J.T, atol=1e-15)
+    assert np.linalg.eigvalsh(J).min() > -1e-12

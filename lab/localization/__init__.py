@@ -15,7 +15,8 @@ filter: :class:`LocalizerConfig`, :class:`Localizer`, its records; the equations
 docstring), :mod:`~lab.localization.observer` (finding landmarks in frames),
 :mod:`~lab.localization.robot` (:class:`LocalizedRobot`), :mod:`~lab.localization.landmarks` (the
 landmark map, built by :mod:`lab.training.landmarks`), :mod:`~lab.localization.posters` (a surveyed map's
-posters in the filter's state), :mod:`~lab.localization.stamps` (the odometry at an image's stamp) and
+posters in the filter's state), :mod:`~lab.localization.refind` (re-finding a robot whose estimate the
+gate has lost), :mod:`~lab.localization.stamps` (the odometry at an image's stamp) and
 :mod:`~lab.localization.survey_limit` (the error a surveyed map leaves at best: how many posters to hang)
 and :mod:`~lab.localization.survey_tour` (a tour that ties a surveyed map's posters together).
 """
