@@ -140,6 +140,10 @@ def test_localization_in_words_says_the_mode_the_updates_and_what_the_odometry_l
     assert localization_in_words({**run, "odometry_calibration": None, "landmark_updates": 1}) == (
         "1 landmark update"
     )
+    # a robot the gate had lost, re-found by sightings that agreed (lab.localization.refind)
+    for n, said in ((1, "once"), (2, "2 times")):
+        lost = {**run, "odometry_calibration": None, "landmark_refinds": n}
+        assert localization_in_words(lost) == f"54 landmark updates (lost and re-found {said})"
     # what it learned of the camera: its yaw on the base and its ranges' scale
     cam = {"yaw_deg": -0.412, "yaw_sd_deg": 0.081, "range_scale": -0.00476, "range_scale_sd": 0.0011}
     assert localization_in_words({**run, "odometry_calibration": None, "camera_estimate": cam}) == (

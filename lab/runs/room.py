@@ -466,7 +466,8 @@ def localization_in_words(data: dict) -> str:
     For example ``54 landmark updates; the wheels over-count turns by 4.2 % (turn scale 0.960 +- 0.006)
     and drift 0.012 +- 0.004 rad per metre; 0.7 cm from the true pose at the end``; after a survey tour
     (``survey_tour``) it starts with ``a survey tour of 4 stands first (87 sightings of 12 posters, 208
-    s)``.
+    s)``; a robot the gate had lost and sightings re-found (``landmark_refinds``) says ``54 landmark
+    updates (lost and re-found once)``.
     """
     if data.get("localization_note"):  # a fallback to odometry (no landmark map, none seen) says why
         return str(data["localization_note"])
@@ -474,6 +475,9 @@ def localization_in_words(data: dict) -> str:
         return "odometry alone (--localization odometry)"
     n = int(data.get("landmark_updates") or 0)
     parts = [f"{n} landmark update{'' if n == 1 else 's'}"]
+    lost = int(data.get("landmark_refinds") or 0)  # the estimate reset by sightings that agreed
+    if lost:
+        parts[0] += f" (lost and re-found {'once' if lost == 1 else f'{lost} times'})"
     tour = data.get("survey_tour")
     if tour:  # the updates count from the search's start; the tour's sightings came before it
         posters = len(set().union(*(set(s) for s in tour["sightings"])))
