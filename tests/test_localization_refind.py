@@ -1,5 +1,6 @@
-"""Re-finding a lost robot (:mod:`lab.localization.refind`): rejected sightings that agree with one another
-reset the pose; a wrong fit, one poster seen again from one place, or sightings that disagree do not.
+"""Re-finding a lost robot (:mod:`lab.localization.refind`, ``LocalizerConfig(refind=True)``; off by
+default): rejected sightings that agree with one another reset the pose; a wrong fit, one poster seen again
+from one place, or sightings that disagree do not.
 
 Peers: the true pose the sightings were drawn from (the re-found pose's error, and its NEES against the
 covariance the reset states, within the chi-square(3) bounds), and the filter with the re-find off, which
@@ -22,6 +23,7 @@ NORTH = Landmark("north", (0.0, 3.94, 1.5), 0.0, (1.4, 0.02, 1.0), (0.0, -1.0))
 EAST = Landmark("east", (3.94, 0.5, 1.5), math.pi / 2, (0.02, 1.4, 1.0), (-1.0, 0.0))
 Q = np.diag([0.01**2, 0.01**2, math.radians(0.5) ** 2])  # a poster's fit at 3-4 m
 TIGHT = np.diag([0.01**2, 0.01**2, math.radians(0.5) ** 2])  # what a lost estimate still claims
+ON = LocalizerConfig(refind=True)
 
 
 def _seen(x_true, lm, rng=None):
@@ -41,7 +43,7 @@ OFF = np.array([0.4, -0.2, math.radians(35.0)])  # how far a lost estimate is fr
 def _lost(config=None):
     """A localizer whose estimate is :data:`OFF` the truth while claiming 1 cm / 0.5 deg, and the truth."""
     truth = np.array([0.0, 0.0, math.pi / 2])
-    return Localizer(truth + OFF, TIGHT, config=config or LocalizerConfig()), truth
+    return Localizer(truth + OFF, TIGHT, config=config or ON), truth
 
 
 def test_a_lost_robot_is_refound_by_one_poster_seen_from_two_places_and_stays_lost_without_it():
@@ -83,7 +85,9 @@ def test_the_refound_pose_is_consistent_with_the_covariance_it_states():
     for _ in range(300):
         truth = np.array([rng.uniform(-1.5, 1.5), rng.uniform(-1.5, 1.0), rng.uniform(0.3, 1.3)])
         off = np.array([*rng.uniform(-0.8, 0.8, 2), math.radians(rng.uniform(-60, 60))])
-        loc = Localizer(truth + off, TIGHT, LocalizerConfig(**NO_FLOOR))  # Q is the sightings' whole noise
+        loc = Localizer(
+            truth + off, TIGHT, LocalizerConfig(**NO_FLOOR, refind=True)
+        )  # Q is the sightings' whole noise
         first = loc.update(_seen(truth, NORTH, rng), Q, NORTH)
         rec = loc.update(_seen(truth, EAST, rng), Q, EAST)
         if first.accepted or rec.kind != "refound":
@@ -101,7 +105,7 @@ def test_a_wrong_fit_seen_again_from_one_place_never_moves_a_good_estimate():
     """A well-localized robot, one poster's fit wrong the same way frame after frame (a partly hidden
     poster): rejected every time, never a re-find, the estimate unchanged."""
     truth = np.array([0.0, 0.0, math.pi / 2])
-    loc = Localizer(truth, TIGHT)
+    loc = Localizer(truth, TIGHT, ON)
     wrong = truth + [0.3, 0.1, math.radians(8.0)]
     for _ in range(10):
         assert not loc.update(_seen(wrong, NORTH), Q, NORTH).accepted
@@ -111,7 +115,7 @@ def test_a_wrong_fit_seen_again_from_one_place_never_moves_a_good_estimate():
 def test_rejected_sightings_that_disagree_with_each_other_refind_nothing():
     """Two wrong fits of two posters that put the robot in different places: neither is believed."""
     truth = np.array([0.0, 0.0, math.pi / 2])
-    loc = Localizer(truth, TIGHT)
+    loc = Localizer(truth, TIGHT, ON)
     assert not loc.update(_seen(truth + [0.3, 0.1, 0.1], NORTH), Q, NORTH).accepted
     assert not loc.update(_seen(truth + [-0.3, 0.2, -0.2], EAST), Q, EAST).accepted
     assert loc.n_refinds == 0 and np.allclose(loc.x, truth)
@@ -122,7 +126,7 @@ def test_an_accepted_sighting_between_two_rejected_ones_drops_the_first():
     one after it."""
     truth = np.array([0.0, 0.0, math.pi / 2])
     wrong = truth + [0.4, -0.2, math.radians(35.0)]
-    loc = Localizer(truth, TIGHT)
+    loc = Localizer(truth, TIGHT, ON)
     assert not loc.update(_seen(wrong, NORTH), Q, NORTH).accepted
     assert loc.update(_seen(truth, NORTH), Q, NORTH).accepted
     rec = loc.update(_seen(wrong, EAST), Q, EAST)
@@ -135,7 +139,7 @@ def test_a_kept_sighting_is_carried_by_the_odometry_with_its_calibration():
     turn of 20 deg (the same over-count) it sees the poster again, from a new place: the kept sighting,
     carried by the odometry with the turn scale's uncertainty, still agrees, and the robot is re-found."""
     truth = np.array([0.0, 0.0, math.pi / 2])
-    loc = Localizer(truth, TIGHT)
+    loc = Localizer(truth, TIGHT, ON)
     assert loc.calibration is not None  # the turn scale is in the state
     for _ in range(24):  # 240 deg true, in 10 deg steps; the odometry says 12.5
         loc.predict(np.array([0.0, 0.0, math.radians(12.5)]))
@@ -147,6 +151,15 @@ def test_a_kept_sighting_is_carried_by_the_odometry_with_its_calibration():
     rec = loc.update(_seen(truth, NORTH), Q, NORTH)
     assert rec.kind == "refound"
     assert abs(wrap_angle(loc.x[2] - truth[2])) < 1e-6
+
+
+def test_the_refind_is_off_by_default():
+    """Off by default (docs/tuning/localizer-refind.md): the same sightings leave a default filter lost."""
+    truth = np.array([0.0, 0.0, math.pi / 2])
+    loc = Localizer(truth + OFF, TIGHT)
+    assert loc.refinder is None
+    assert not loc.update(_seen(truth, NORTH), Q, NORTH).accepted
+    assert not loc.update(_seen(truth, EAST), Q, EAST).accepted and loc.n_refinds == 0
 
 
 def test_refind_must_be_a_bool():

@@ -169,8 +169,10 @@ class LocalizerConfig:
     refind : bool
         Re-find a lost robot: two rejected sightings that are independent evidence (two posters, or one
         poster from two places) and agree with each other, within the gate, reset the pose from the newer
-        (:mod:`lab.localization.refind`). False: only the lock-out recovery above. Why:
-        docs/tuning/localizer-refind.md.
+        (:mod:`lab.localization.refind`). False (the default): only the lock-out recovery above. Off
+        because the reset drops what the estimate knew: it re-finds robots lost by 10-45 deg or metres,
+        but it also fires on a filter that is only slightly overconfident, and there it leaves the pose
+        worse. Why, and what it gained and cost: docs/tuning/localizer-refind.md.
     update_iterations : int
         The landmark update's iterations (the iterated EKF: relinearise at the new mean until it stops
         moving, at most this many); 1 is the plain EKF. How it was chosen:
@@ -231,7 +233,7 @@ class LocalizerConfig:
     report_detour_above_m: float = 0.04
     first_sighting_max_offset_m: float = 1.0
     first_sighting_max_offset_rad: float = math.radians(30.0)
-    refind: bool = True
+    refind: bool = False
     update_iterations: int = 10
     odometry_calibration: bool = True
     turn_scale_sigma: float = 0.04

@@ -30,6 +30,10 @@ from the newer one (:meth:`~lab.localization.filter.Localizer.update`, ``kind="r
 hand-measured start's first sighting does. Two frames of one poster from one place are one piece of
 evidence (its fit may be wrong the same way in both), and never re-find the robot by themselves.
 
+Off by default (``LocalizerConfig.refind``): the reset drops what the estimate knew from every earlier
+sighting, which pays for a robot that is really lost and costs a filter that is only slightly
+overconfident (docs/tuning/localizer-refind.md).
+
 A kept sighting whose carried covariance has grown past the drive's thresholds
 (``drive_sigma_m``, ``drive_sigma_rad``) no longer says where the robot is now, and is dropped; an
 accepted update drops them all (the estimate is not lost).

@@ -360,10 +360,9 @@ def _localization_fields(robot, mode: LocalizationMode, note: str | None, estima
     if note is not None:
         print(f"lab: localization: {note}", file=sys.stderr)
     rp = robot_pose
+    error = None if rp is None else math.hypot(estimate.pose.x - rp.x, estimate.pose.y - rp.y)
     return {
-        "localization_error_m": None
-        if rp is None
-        else math.hypot(estimate.pose.x - rp.x, estimate.pose.y - rp.y),
+        "localization_error_m": error,
         "localization": mode.value,
         "landmark_updates": estimate.n_updates,
         "landmark_refinds": robot.localizer.n_refinds,
