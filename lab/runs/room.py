@@ -254,6 +254,7 @@ def sim_localizer_told(robot) -> dict:
     if room.latency_s > 0:
         told["camera_latency_s"] = room.latency_s
     config = camera_states_told(robot.camera, room.camera_mount_deg > 0 or room.head_mount_deg > 0)
+    config = odometry_told(robot.sensing.odometry, robot.base_limits.wheel_base, config)
     return told if config is None else {**told, "config": config}
 
 
@@ -267,6 +268,36 @@ def camera_states_told(camera, mounts_uncertain: bool) -> LocalizerConfig | None
     if camera.depth_scale_std > 0:
         config["range_scale_sigma"] = camera.depth_scale_std
     return LocalizerConfig(**config) if config else None
+
+
+def odometry_told(odometry, wheel_base: float, config: LocalizerConfig | None) -> LocalizerConfig | None:
+    r"""``config`` (None: the defaults) with the odometry calibration's priors widened to cover what the
+    profile's stated odometry errors (:class:`lab.sim.sensing.OdometryErrors`) make of the calibrated
+    motion model's constants on a base of track ``wheel_base`` [m]; widened only, never narrowed.
+
+    * The turn scale ``k`` (:func:`lab.localization.models.calibrated_motion_model`): a spin's measured
+      heading change is ``(1 + e_s)(1 + e_b)(1 + slip)`` times the true one, with the mean radius error
+      ``e_s``, the track's ``e_b`` and the slip uniform in ``[0, 2 s]``; that over-count's RMS about 1
+      is :math:`\sqrt{\sigma_s^2 + \sigma_b^2 + 4 s^2 / 3}` to first order, and ``k``, its inverse,
+      spreads a little less, so the prior covers it.
+    * The curvature ``c``: unequal wheels curve a straight drive by ``e_d / b`` rad/m.
+    * The heading noise per metre left once they are estimated: the wheels' random errors give
+      :math:`\sqrt{2}\, \sigma_w / b` rad per square-root metre.
+
+    The defaults cover the realistic profile's odometry; a profile scaled up (``lab eval --error-scale``)
+    states a larger error than they do, and a localizer told less than the world draws holds a turn
+    scale it cannot move and loses the robot in long spins (docs/tuning/localizer-refind.md, the lost
+    robot). None when ``config`` is None and the defaults already cover the profile."""
+    base = config or LocalizerConfig()
+    stated = {
+        "turn_scale_sigma": math.sqrt(
+            odometry.wheel_radius_error**2 + odometry.track_width_error**2 + 4.0 * odometry.spin_slip**2 / 3.0
+        ),
+        "curvature_sigma_rad_per_m": odometry.wheel_ratio_error / wheel_base,
+        "calibrated_heading_rad_per_sqrt_m": math.sqrt(2.0) * odometry.wheel_noise / wheel_base,
+    }
+    wider = {k: v for k, v in stated.items() if v > getattr(base, k)}
+    return replace(base, **wider) if wider else config
 
 
 def sim_start_sigma(robot) -> np.ndarray | None:
