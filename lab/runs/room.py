@@ -243,9 +243,10 @@ def sim_localizer_told(robot) -> dict:
       depth scale (``LocalizerConfig.range_scale_sigma``): the focal lengths' and baseline's errors
       stretch every range alike, which sightings from many places do not average out; held exact, it
       bends the posters' refined shape and the robot's position towards the posters it sees
-      (docs/tuning/localizer-range-scale.md).
+      (docs/tuning/localizer-range-scale.md);
 
-    Empty for a profile without the room's errors."""
+    and the odometry's stated errors, as its calibration's priors where they are wider than the
+    defaults (:func:`odometry_told`). Empty for a profile without the room's errors."""
     Sigma0 = sim_start_sigma(robot)
     told = {} if Sigma0 is None else {"Sigma0": Sigma0, "start_measured_by_hand": True}
     room = getattr(getattr(robot, "sensing", None), "room", None)
