@@ -408,6 +408,21 @@ class Costmap:
         self._seen |= disc
         return n
 
+    def forget_disc(self, xy, radius: float) -> int:
+        """Forget what the map holds within ``radius`` [m] of ``xy`` [m] (the cells unknown again, no
+        evidence either way), so that the next views decide them afresh: one obstacle vote marks a cell
+        at once, where :meth:`clear_disc`'s full free evidence would take several. Returns how many
+        OBSTACLE cells it forgot."""
+        x, y = check_finite_xy("xy", xy)
+        if not (math.isfinite(radius) and radius >= 0):
+            raise ConfigError(f"radius must be a finite number >= 0 m, got {radius!r}")
+        X, Y = self.spec.cell_centers()
+        disc = np.hypot(X - x, Y - y) <= radius
+        n = int((disc & self.obstacle).sum())
+        self._evidence[disc] = 0.0
+        self._seen &= ~disc
+        return n
+
     # -- planning grid ---------------------------------------------------------------------------
     def inflated(
         self,

@@ -4,7 +4,9 @@
 *destination*: :class:`ToGoal` or :class:`NearTarget`); the loop that takes it there is
 :class:`DriveLoop`::
 
-    plan:      A* on the inflated costmap to the destination (none: NO_PATH at once)
+    plan:      A* on the inflated costmap to the destination (none: NO_PATH at once); a robot walled
+               in by marks, with no escape, forgets those within the escape's reach, scans all
+               round and plans again
     look:      the head turns along the path ahead, one frame, replan on what it saw
     drive:     drive_to with pure pursuit; at every control step the head follows the path ahead,
                every frame_period the pose guard (if any) is asked whether the pose is still good
@@ -76,7 +78,7 @@ class NavResult:
     replans : int
         Paths planned after the first one (the path ahead was blocked, or an escape).
     frames : int
-        Stereo frames integrated while driving.
+        Stereo frames integrated while driving (and in a walled-in robot's scan).
     distance_m : float [m]
         Path length driven (odometry).
     elapsed_s : float [s]
@@ -228,8 +230,8 @@ class DriveLoop:
         The path the follower drives (W).
     heading : float [rad] or None
         Its final heading.
-    replans, frames : int
-        Paths planned after the first one; stereo frames integrated.
+    replans, frames, rescans : int
+        Paths planned after the first one; stereo frames integrated; scans of a walled-in robot.
     """
 
     def __init__(self, nav: Navigator, destination: Destination, timeout: float):
@@ -245,6 +247,7 @@ class DriveLoop:
         self.step = 0
         self.frames = 0
         self.replans = 0
+        self.rescans = 0  # scans when walled in by marks (_sense_again_when_walled_in)
         self.outcome: NavOutcome | None = None  # set by a step that aborts the drive
         self.reason: str | None = None
         self.follower: PathFollower | None = None
@@ -254,6 +257,8 @@ class DriveLoop:
         """Plan, look, drive, face; a safety stop ends the request with SAFETY_STOP."""
         pose0 = self.pose0
         d = self._replan(pose0)
+        if d.path.status is PathStatus.START_IN_OBSTACLE:
+            d = self._sense_again_when_walled_in(d)
         if not d.path.found:
             goal, heading = self.destination.requested
             return self._finish(NavOutcome.NO_PATH, d.path.reason, pose0, goal, heading)
@@ -278,6 +283,20 @@ class DriveLoop:
         """Drive the Replanner's waypoints ``wp`` from now on (also shown as ``nav.planned_path``)."""
         self.waypoints, self.heading = self.destination.waypoints(wp), self.destination.heading(wp)
         self.nav.planned_path = self.waypoints
+
+    def _sense_again_when_walled_in(self, d: ReplanDecision) -> ReplanDecision:
+        """No way out of the grown obstacles round the robot, not even the escape's: but it drove in,
+        so some of those marks are wrong (made while the pose estimate was off, and left round the
+        robot when a correction moved it; docs/tuning/localizer-odometry-told.md). Forget the marks
+        within the escape's reach, scan all round to mark again what is really there, and plan again;
+        the look before driving then checks the way ahead as usual. ``d`` unchanged when nothing there
+        was marked."""
+        p = self.pose0
+        if self.nav.costmap.forget_disc((p.x, p.y), self.replanner.escape_radius) == 0:
+            return d
+        self.frames += len(self.nav.scan().observations)
+        self.rescans += 1
+        return self._replan(p)
 
     def _look_before_driving(self) -> str | None:
         """Look towards the path ahead, then replan on what the head saw; the reason when the path is
