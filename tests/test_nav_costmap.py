@@ -7,6 +7,7 @@ import pytest
 from nav_scenes import Box, Floor, stereo_view
 from scipy.ndimage import binary_dilation, distance_transform_edt
 
+from lab.errors import ConfigError
 from lab.geometry import Pose2D
 from lab.navigation.costmap import CellState, Costmap, CostmapConfig, grow_obstacles
 from lab.navigation.grid import GridSpec
@@ -200,6 +201,27 @@ def test_evidence_rule_conservative_yet_clears_dynamic_obstacles():
     assert n_clear == 12  # a solid obstacle needs 12 consistent free views
     c = cm.config
     assert n_clear == c.obstacle_ceiling // c.miss
+
+
+def test_a_forgotten_cell_is_unknown_and_one_view_decides_it_again():
+    """``forget_disc`` (a walled-in robot's marks): the cells within the radius lose all evidence and are
+    unknown, not free as ``clear_disc`` leaves them; the rest keep theirs; one obstacle view marks a
+    forgotten cell again."""
+    cm = Costmap(GridSpec((0.0, 0.0), 0.1, (1, 3)))
+    solid = cloud([(0.05, y, 0.5, 10) for y in (0.05, 0.15, 0.25)])
+    for _ in range(5):
+        cm.integrate(solid, PLANE)
+    assert (cm.state == CellState.OBSTACLE).all()
+    assert cm.forget_disc((0.05, 0.05), 0.12) == 2  # the two nearer cells
+    assert list(cm.state[0]) == [CellState.UNKNOWN, CellState.UNKNOWN, CellState.OBSTACLE]
+    assert cm.evidence[0, 0] == cm.evidence[0, 1] == 0 and cm.evidence[0, 2] > 0
+    cm.integrate(cloud([(0.05, 0.05, 0.5, 10)]), PLANE)
+    assert cm.state[0, 0] == CellState.OBSTACLE
+    cleared = Costmap(cm.spec)
+    cleared.clear_disc((0.05, 0.05), 0.05)
+    assert cleared.state[0, 0] == CellState.FREE
+    with pytest.raises(ConfigError, match="radius must be a finite number >= 0 m"):
+        cm.forget_disc((0.05, 0.05), math.inf)
 
 
 def test_range_limit_and_bad_points_are_ignored():

@@ -398,30 +398,29 @@ class Costmap:
         """Mark the cells whose centres lie within ``radius`` [m] of ``xy`` [m] free (full free
         evidence): where the robot stands there is no obstacle. Returns how many OBSTACLE cells this
         cleared (stale marks, or marks a pose correction moved under the robot)."""
-        x, y = check_finite_xy("xy", xy)
-        if not (math.isfinite(radius) and radius >= 0):
-            raise ConfigError(f"radius must be a finite number >= 0 m, got {radius!r}")
-        X, Y = self.spec.cell_centers()
-        disc = np.hypot(X - x, Y - y) <= radius
-        n = int((disc & self.obstacle).sum())
+        disc, n = self._disc(xy, radius)
         self._evidence[disc] = -self.config.free_floor
         self._seen |= disc
         return n
 
     def forget_disc(self, xy, radius: float) -> int:
-        """Forget what the map holds within ``radius`` [m] of ``xy`` [m] (the cells unknown again, no
-        evidence either way), so that the next views decide them afresh: one obstacle vote marks a cell
-        at once, where :meth:`clear_disc`'s full free evidence would take several. Returns how many
-        OBSTACLE cells it forgot."""
+        """Forget what the map holds within ``radius`` [m] of ``xy`` [m]: the cells are unknown again, with
+        no evidence either way, so that the next views decide them afresh. Unlike :meth:`clear_disc`, it
+        does not claim them free: the planner keeps its unknown cost there until a view has seen them.
+        Returns how many OBSTACLE cells it forgot."""
+        disc, n = self._disc(xy, radius)
+        self._evidence[disc] = 0.0
+        self._seen &= ~disc
+        return n
+
+    def _disc(self, xy, radius: float) -> tuple[np.ndarray, int]:
+        """The cells whose centres lie within ``radius`` [m] of ``xy`` [m], and how many are OBSTACLE."""
         x, y = check_finite_xy("xy", xy)
         if not (math.isfinite(radius) and radius >= 0):
             raise ConfigError(f"radius must be a finite number >= 0 m, got {radius!r}")
         X, Y = self.spec.cell_centers()
         disc = np.hypot(X - x, Y - y) <= radius
-        n = int((disc & self.obstacle).sum())
-        self._evidence[disc] = 0.0
-        self._seen &= ~disc
-        return n
+        return disc, int((disc & self.obstacle).sum())
 
     # -- planning grid ---------------------------------------------------------------------------
     def inflated(
