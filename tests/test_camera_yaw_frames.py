@@ -14,10 +14,11 @@ from lab.errors import ConfigError
 from lab.geometry import Pose2D
 from lab.localization import LocalizedRobot, Localizer, LocalizerConfig
 from lab.mounts import HeadMounts, MountedCamera, with_head_yaw
-from lab.robot import SIM_CAMERA, RobotWrapper
+from lab.robot import SIM_CAMERA, BaseLimits, RobotWrapper
 from lab.runs.robots import make_robot
 from lab.runs.room import sim_localizer_told, surveyed_map
 from lab.sim import SimWorld
+from lab.sim.sensing import OdometryErrors
 from lab.training.landmarks import trained_landmark_map
 
 
@@ -110,7 +111,8 @@ def test_the_yaw_is_held_exact_when_the_profile_states_the_mounts_exact(depth_sc
         start_sigma=(0.1, math.radians(5.0)),
     )
     camera = replace(SIM_CAMERA.camera(), depth_scale_std=depth_scale_std)
-    robot = SimpleNamespace(sensing=SimpleNamespace(room=room), camera=camera)
+    sensing = SimpleNamespace(room=room, odometry=OdometryErrors())  # realistic's: the defaults cover it
+    robot = SimpleNamespace(sensing=sensing, camera=camera, base_limits=BaseLimits())
     told = sim_localizer_told(robot)
     assert told["start_measured_by_hand"]
     if depth_scale_std == 0:
