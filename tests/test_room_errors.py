@@ -178,13 +178,22 @@ def test_the_world_draws_what_the_robot_is_told_at_the_mismatch_factor():
     assert fx.std() == pytest.approx(1.5 * told.focal_std, rel=TOL)
     assert base.std() == pytest.approx(1.5 * 0.005, rel=TOL)
     assert zero.std(axis=0) == pytest.approx([1.5 * REALISTIC.pan_tilt.zero_offset_deg] * 2, rel=TOL)
+    track = np.array([e.odometry.e_track for e in eps])
+    assert track.std() == pytest.approx(1.5 * REALISTIC.odometry.track_width_error, rel=TOL)
+    slip = np.array([e.odometry.slip for e in eps])  # uniform in [0, 2 x 1.5 x the stated mean]
+    assert slip.mean() == pytest.approx(1.5 * REALISTIC.odometry.spin_slip, rel=TOL)
     # the camera's stated pointing: the pan-tilt's zero and both mounts, per axis, in quadrature
     assert told.pointing_std_deg == pytest.approx(math.sqrt(0.05**2 + 0.5**2 + 0.5**2))
     drawn = REALISTIC.drawn()
     assert [getattr(drawn.room, k) for k in TOLD_SIGMAS] == [
         1.5 * getattr(REALISTIC.room, k) for k in TOLD_SIGMAS
     ]
-    assert drawn.odometry == REALISTIC.odometry and drawn.room.latency_s == REALISTIC.room.latency_s
+    # the odometry's errors are told too (lab.runs.room.odometry_told): all drawn at the factor
+    odo = dataclasses.fields(REALISTIC.odometry)
+    assert [getattr(drawn.odometry, f.name) for f in odo] == [
+        1.5 * getattr(REALISTIC.odometry, f.name) for f in odo
+    ]
+    assert drawn.room.latency_s == REALISTIC.room.latency_s
     assert drawn.camera.noise_grey_at_mid == REALISTIC.camera.noise_grey_at_mid  # not told: as stated
 
 

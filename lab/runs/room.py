@@ -285,7 +285,8 @@ def odometry_told(odometry, wheel_base: float, config: LocalizerConfig | None) -
     * The heading noise per metre left once they are estimated: the wheels' random errors give
       :math:`\sqrt{2}\, \sigma_w / b` rad per square-root metre.
 
-    The defaults cover the realistic profile's odometry; a profile scaled up (``lab eval --error-scale``)
+    The defaults cover the realistic profile's odometry as stated (its world draws it at the mismatch
+    factor, which the localizer is not told); a profile scaled up (``lab eval --error-scale``)
     states a larger error than they do, and a localizer told less than the world draws holds a turn
     scale it cannot move and loses the robot in long spins (docs/tuning/localizer-refind.md, the lost
     robot). None when ``config`` is None and the defaults already cover the profile."""
