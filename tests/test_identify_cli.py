@@ -194,6 +194,8 @@ def test_identify_hands_its_figures_the_robots_track(tmp_path, monkeypatch):
         "turn_scale_sd",
         "curvature_rad_per_m",
         "curvature_sd_rad_per_m",
+        "spin_slip",  # the realistic profile states a spin slip: the localizer estimates it
+        "spin_slip_sd",
     }
     assert tr.truth[0, 0] == pytest.approx(-1.2, abs=1e-6) and abs(tr.truth[0, 1]) <= 0.1  # the start
     assert (tmp_path / "fig5_pose_and_probabilities.png").is_file()

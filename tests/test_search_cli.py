@@ -132,6 +132,12 @@ def test_localization_in_words_says_the_mode_the_updates_and_what_the_odometry_l
         "54 landmark updates; the wheels over-count turns by 4.2 % (turn scale 0.960 +- 0.006) and drift "
         "0.012 +- 0.004 rad per metre; 0.7 cm from the true pose at the end"
     )
+    # with the spin's slip in the state, what a spin over-counts beyond a drive's turn
+    slip = {**run, "odometry_calibration": {**cal, "spin_slip": 0.0512, "spin_slip_sd": 0.012}}
+    assert localization_in_words(slip) == (
+        "54 landmark updates; the wheels over-count turns by 4.2 % (turn scale 0.960 +- 0.006), spins "
+        "5.1 +- 1.2 % more, and drift 0.012 +- 0.004 rad per metre"
+    )
     # on the robot there is no truth; a base that under-counts its turns says so
     under = {**run, "odometry_calibration": {**cal, "turn_scale": 1.05}, "localization_error_m": None}
     assert localization_in_words(under).startswith(

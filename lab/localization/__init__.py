@@ -33,6 +33,7 @@ from lab.localization.models import (
     observation_of,
     odometry_increment,
     pose_from_observation,
+    spin_fraction,
 )
 from lab.localization.modes import LocalizationMode
 from lab.localization.observer import LandmarkObservation, LandmarkObserver, face_share_in_image
@@ -66,4 +67,5 @@ __all__ = [
     "observation_of",
     "odometry_increment",
     "pose_from_observation",
+    "spin_fraction",
 ]

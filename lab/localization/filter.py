@@ -26,7 +26,10 @@ random walk. The state is then ``s = [x, y, theta, k, c]``: the pose, the turn s
 curvature bias ``c`` [rad/m], with ``theta' = theta + k dtheta + c dx``
 (:func:`~lab.localization.models.calibrated_motion_model`) and the same equations on the longer state
 (``H = [dh/dx, 0]``: a landmark sees the pose; a turn correlates the heading with ``k``, and the next
-update corrects both). ``x`` and ``Sigma`` stay the pose's mean and covariance.
+update corrects both). ``x`` and ``Sigma`` stay the pose's mean and covariance. With
+``spin_slip_sigma`` above 0 the state also carries the spin's slip ``sigma``, the extra over-count of a
+turn in place (``theta' = theta + (k - sigma phi) dtheta + c dx``, ``phi`` the increment's spin
+fraction), so that a spin's slip is not taken for the turn scale of a drive.
 
 **A surveyed map** (:attr:`Landmark.survey_sigma_m` above 0): each such poster's planar pose joins the
 state, seeded by the survey, and the updates refine it (landmark SLAM, :mod:`lab.localization.posters`).
@@ -195,6 +198,13 @@ class LocalizerConfig:
     turn_scale_walk_per_sqrt_rad : float [1 / sqrt(rad)]
         ``k`` is not quite a constant (the slip depends on how much of a motion is a spin): its variance
         grows by this squared per radian turned.
+    spin_slip_sigma : float [-]
+        Estimate the spin's slip ``sigma`` in the state (:func:`calibrated_motion_model`), from the prior
+        ``N(0, spin_slip_sigma^2)``; 0: not in the state, ``k`` takes a spin's slip and a drive's turn
+        alike. Needs ``odometry_calibration``.
+    track_m : float [m]
+        The base's nominal track (the odometry's wheel base), which sets an increment's spin fraction
+        (:func:`lab.localization.models.spin_fraction`): the Create 2's 0.235 m.
     calibrated_heading_rad_per_sqrt_m, calibrated_heading_rad_per_sqrt_rad : float
         With the calibration on, the heading noise per distance and per angle turned that is left once
         the systematic part is in the state: these replace ``sigma_heading_rad_per_sqrt_m`` and
@@ -239,6 +249,8 @@ class LocalizerConfig:
     turn_scale_sigma: float = 0.04
     curvature_sigma_rad_per_m: float = 0.03
     turn_scale_walk_per_sqrt_rad: float = 0.002
+    spin_slip_sigma: float = 0.0
+    track_m: float = 0.235
     calibrated_heading_rad_per_sqrt_m: float = 0.02
     calibrated_heading_rad_per_sqrt_rad: float = 0.03
     camera_yaw_sigma_rad: float = 0.0
@@ -263,6 +275,7 @@ class LocalizerConfig:
             "turn_scale_sigma",
             "curvature_sigma_rad_per_m",
             "turn_scale_walk_per_sqrt_rad",
+            "spin_slip_sigma",
             "calibrated_heading_rad_per_sqrt_m",
             "calibrated_heading_rad_per_sqrt_rad",
             "camera_yaw_sigma_rad",
@@ -294,7 +307,11 @@ class LocalizerConfig:
                 "LocalizerConfig.odometry_calibration must be True or False, "
                 f"got {self.odometry_calibration!r}"
             )
-        for k in ("relocalize_sigma_m", "report_sigma_m", "drive_sigma_m", "drive_sigma_rad"):
+        if self.spin_slip_sigma > 0 and not self.odometry_calibration:
+            raise ConfigError(
+                "LocalizerConfig.spin_slip_sigma > 0 needs odometry_calibration (the slip is part of it)"
+            )
+        for k in ("relocalize_sigma_m", "report_sigma_m", "drive_sigma_m", "drive_sigma_rad", "track_m"):
             if not getattr(self, k) > 0:
                 unit = "rad" if k.endswith("_rad") else "m"
                 raise ConfigError(f"LocalizerConfig.{k} must be > 0 {unit}, got {getattr(self, k)}")
@@ -503,7 +520,8 @@ class Localizer:
     def __init__(self, x0, Sigma0=None, config: LocalizerConfig | None = None, first_sighting: bool = False):
         self.config = c = config or LocalizerConfig()
         self.first_sighting_pending = bool(first_sighting)
-        self._m = n = 5 if c.odometry_calibration else 3  # the robot's part of the state; posters follow
+        # the robot's part of the state (the pose, the odometry's calibration); posters follow
+        self._m = n = (6 if c.spin_slip_sigma > 0 else 5) if c.odometry_calibration else 3
         self.posters = PosterStates(n)  # the surveyed posters in the state (lab.localization.posters)
         self.s = np.zeros(n)
         self.P = np.zeros((n, n))
@@ -511,9 +529,11 @@ class Localizer:
         self.Sigma = (
             np.diag([0.01**2, 0.01**2, math.radians(0.5) ** 2]) if Sigma0 is None else np.array(Sigma0, float)
         )
-        if n == 5:  # the calibration's prior: nominal odometry, give or take its sigmas
-            self.s[3:] = (1.0, 0.0)
+        if n >= 5:  # the calibration's prior: nominal odometry, give or take its sigmas
+            self.s[3:5] = (1.0, 0.0)
             self.P[3, 3], self.P[4, 4] = c.turn_scale_sigma**2, c.curvature_sigma_rad_per_m**2
+        if n == 6:
+            self.P[5, 5] = c.spin_slip_sigma**2
         self.camera_yaw = None  # its index in the state, when estimated (camera_yaw_sigma_rad)
         if c.camera_yaw_sigma_rad > 0:
             self.s, self.P, self.camera_yaw = self.posters.augment_camera(
@@ -567,6 +587,14 @@ class Localizer:
         return (float(self.s[3]), float(self.s[4]), math.sqrt(self.P[3, 3]), math.sqrt(self.P[4, 4]))
 
     @property
+    def spin_slip(self) -> tuple[float, float] | None:
+        """The spin's slip ``sigma`` (a turn in place over-counts by about this more than a drive's turn)
+        and its standard deviation, or None when it is not in the state (``spin_slip_sigma`` 0)."""
+        if self._m != 6:
+            return None
+        return float(self.s[5]), math.sqrt(self.P[5, 5])
+
+    @property
     def camera_yaw_estimate(self) -> tuple[float, float] | None:
         """The camera's yaw on the base [rad] and its standard deviation, or None when it is not in the
         state (``camera_yaw_sigma_rad`` 0)."""
@@ -613,20 +641,21 @@ class Localizer:
             F, V = motion_jacobians(self.s[:3], u)
             s_bar = motion_model(self.s[:3], u)
         else:
-            F, V = calibrated_motion_jacobians(self.s[:5], u)
-            s_bar = calibrated_motion_model(self.s[:5], u)
+            F, V = calibrated_motion_jacobians(self.s[:m], u, 0.5 * c.track_m)
+            s_bar = calibrated_motion_model(self.s[:m], u, 0.5 * c.track_m)
         # P_bar = F P F^T + V M V^T with F = blockdiag(F, I): the posters stay where they are
         P = self.P.copy()
         P[:m] = F @ P[:m]
         P[:, :m] = P[:, :m] @ F.T
         P[:m, :m] += V @ c.motion_noise(u) @ V.T
-        if m == 5:
+        if m >= 5:
             P[3, 3] += c.turn_scale_walk_per_sqrt_rad**2 * abs(float(u[2]))
         self.s, self.P = np.concatenate([s_bar, self.s[m:]]), 0.5 * (P + P.T)
         if self._clone is not None:  # the clone stays where it was: Cov(s_bar, x_c) = F Cov(s, x_c)
             self._clone.cross[:m] = F @ self._clone.cross[:m]
         if self.refinder is not None:  # the rejected sightings' poses, carried along
-            self.refinder.predict(u, c.motion_noise(u), c.turn_scale_walk_per_sqrt_rad if m == 5 else 0.0)
+            walk = c.turn_scale_walk_per_sqrt_rad if m >= 5 else 0.0
+            self.refinder.predict(u, c.motion_noise(u), walk, 0.5 * c.track_m)
         self._moved += (math.hypot(u[0], u[1]), abs(u[2]))
         if self._moved[0] >= self.config.recount_m or self._moved[1] >= self.config.recount_rad:
             self._rejected_here.clear()  # a new place: every landmark's rejection counts again

@@ -32,6 +32,7 @@ __all__ = [
     "observation_of",
     "odometry_increment",
     "pose_from_observation",
+    "spin_fraction",
 ]
 
 
@@ -73,48 +74,84 @@ def motion_jacobians(x, u) -> tuple[np.ndarray, np.ndarray]:
     return F, V
 
 
-def calibrated_motion_model(s, u) -> np.ndarray:
+def spin_fraction(u, half_track_m: float) -> float:
+    r"""The share of an increment ``u``'s wheel travel that is a spin, in ``[0, 1]``: each wheel's travel
+    from the turn over that plus the forward distance,
+
+    .. math:: \phi(u) = \frac{h\, |\Delta\theta|}{|\Delta x| + h\, |\Delta\theta|}, \quad h = b / 2
+
+    (1 for a turn in place, 0 for a straight drive; 0 for no motion). A base scrubs its wheels sideways
+    in proportion to it, so the over-count of a turn grows with it (:func:`calibrated_motion_model`)."""
+    dx, dth = float(u[0]), float(u[2])
+    turn = half_track_m * abs(dth)
+    return turn / (abs(dx) + turn) if turn > 0.0 else 0.0
+
+
+def calibrated_motion_model(s, u, half_track_m: float = 0.0) -> np.ndarray:
     r"""``f(s, u)`` of the filter that calibrates its odometry: the state ``s = [x, y, theta, k, c]``
     adds the odometry's turn scale ``k`` and curvature bias ``c`` [rad/m] to the pose, constants of
-    the base that the landmark updates estimate as they go (the augmented-state odometry calibration).
+    the base that the landmark updates estimate as they go (the augmented-state odometry calibration);
+    ``s = [x, y, theta, k, c, sigma]`` adds the spin's slip ``sigma`` too.
 
-    A real base measures its turns with a systematic error (the wheels slip in a spin, the effective
-    track is not the nominal one: ``k``) and curves a straight drive (unequal wheels: ``c``); both add
+    A real base measures its turns with a systematic error (the effective track is not the nominal one,
+    the mean wheel radius is off: ``k``) and curves a straight drive (unequal wheels: ``c``); both add
     up turn after turn and metre after metre, which a noise that grows like a random walk cannot
-    describe. The pose is :func:`motion_model`'s with the heading change corrected:
+    describe. The wheels also scrub sideways when the base spins, so they over-count a turn in place by
+    more than a turn on a drive: ``sigma`` is that extra share, scaled by the increment's
+    :func:`spin_fraction` ``phi`` on the nominal half-track ``half_track_m``. The pose is
+    :func:`motion_model`'s with the heading change corrected:
 
     .. math:: f(s, u) = [x + \Delta x \cos\theta - \Delta y \sin\theta,\;
                          y + \Delta x \sin\theta + \Delta y \cos\theta,\;
-                         \theta + k\, \Delta\theta + c\, \Delta x,\; k,\; c]^T
+                         \theta + (k - \sigma\, \phi(u))\, \Delta\theta + c\, \Delta x,\; k,\; c,\; \sigma]^T
 
     (``Delta x``, the increment's forward component, is the signed distance: a reversing base curves the
-    other way).
+    other way). With one ``k`` alone, a spin teaches it the slip and a drive's turn is then corrected by
+    it too.
     """
     s = np.asarray(s, float)
     dx, dy, dth = np.asarray(u, float)
-    x = motion_model(s[:3], (dx, dy, s[3] * dth + s[4] * dx))
-    return np.concatenate([x, s[3:5]])
+    turn = s[3] * dth + s[4] * dx
+    if s.size == 6:
+        turn -= s[5] * spin_fraction(u, half_track_m) * dth
+    x = motion_model(s[:3], (dx, dy, turn))
+    return np.concatenate([x, s[3:]])
 
 
-def calibrated_motion_jacobians(s, u) -> tuple[np.ndarray, np.ndarray]:
-    r"""``F = df/ds`` (5, 5) and ``V = df/du`` (5, 3) of :func:`calibrated_motion_model`.
+def calibrated_motion_jacobians(s, u, half_track_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    r"""``F = df/ds`` (n, n) and ``V = df/du`` (n, 3) of :func:`calibrated_motion_model`, ``n`` 5 or 6.
 
-    .. math:: F = \begin{bmatrix} 1 & 0 & -\Delta x \sin\theta - \Delta y \cos\theta & 0 & 0 \\
-                                  0 & 1 & \Delta x \cos\theta - \Delta y \sin\theta & 0 & 0 \\
-                                  0 & 0 & 1 & \Delta\theta & \Delta x \\
-                                  0 & 0 & 0 & 1 & 0 \\ 0 & 0 & 0 & 0 & 1 \end{bmatrix}, \qquad
+    .. math:: F = \begin{bmatrix} 1 & 0 & -\Delta x \sin\theta - \Delta y \cos\theta & 0 & 0 & 0 \\
+                                  0 & 1 & \Delta x \cos\theta - \Delta y \sin\theta & 0 & 0 & 0 \\
+                                  0 & 0 & 1 & \Delta\theta & \Delta x & -\phi\, \Delta\theta \\
+                                  0 & 0 & 0 & 1 & 0 & 0 \\ 0 & 0 & 0 & 0 & 1 & 0 \\
+                                  0 & 0 & 0 & 0 & 0 & 1 \end{bmatrix}, \qquad
               V = \begin{bmatrix} \cos\theta & -\sin\theta & 0 \\ \sin\theta & \cos\theta & 0 \\
-                                  c & 0 & k \\ 0 & 0 & 0 \\ 0 & 0 & 0 \end{bmatrix}
+                                  c - \sigma\, \partial(\phi \Delta\theta) / \partial \Delta x & 0 &
+                                  k - \sigma\, \partial(\phi \Delta\theta) / \partial \Delta\theta \\
+                                  0 & 0 & 0 \\ 0 & 0 & 0 \\ 0 & 0 & 0 \end{bmatrix}
+
+    with, for ``a = |dx|`` and ``q = h |dtheta|``, :math:`\partial(\phi\Delta\theta)/\partial\Delta x =
+    -q\, \Delta\theta\, \mathrm{sign}(\Delta x) / (a + q)^2` and
+    :math:`\partial(\phi\Delta\theta)/\partial\Delta\theta = q (2a + q) / (a + q)^2` (the sixth row
+    and column only with ``sigma`` in the state).
     """
     s = np.asarray(s, float)
+    n = s.size
     dx, dy, dth = np.asarray(u, float)
     F3, V3 = motion_jacobians(s[:3], u)
-    F = np.eye(5)
+    F = np.eye(n)
     F[:3, :3] = F3
     F[2, 3], F[2, 4] = dth, dx
-    V = np.zeros((5, 3))
+    V = np.zeros((n, 3))
     V[:3] = V3
     V[2] = (s[4], 0.0, s[3])
+    if n == 6:
+        a, q = abs(dx), half_track_m * abs(dth)
+        if q > 0.0:
+            F[2, 5] = -spin_fraction(u, half_track_m) * dth
+            V[2, 0] += s[5] * q * dth * math.copysign(1.0, dx) / (a + q) ** 2
+            V[2, 2] -= s[5] * q * (2.0 * a + q) / (a + q) ** 2
     return F, V
 
 

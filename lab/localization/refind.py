@@ -95,14 +95,15 @@ class Refinder:
     def clear(self) -> None:
         self.sightings.clear()
 
-    def predict(self, u, M, turn_scale_walk: float = 0.0) -> None:
+    def predict(self, u, M, turn_scale_walk: float = 0.0, half_track_m: float = 0.0) -> None:
         """Carry every kept sighting's pose by the odometry increment ``u`` with noise ``M`` (3, 3) in
-        its own frame, as :meth:`Localizer.predict` does the estimate; drop those now too uncertain."""
+        its own frame, as :meth:`Localizer.predict` does the estimate (``half_track_m`` for the spin's
+        slip, when it is in the state); drop those now too uncertain."""
         kept = []
         for k in self.sightings:
-            if k.r.size == 5:
-                F, V = calibrated_motion_jacobians(k.r, u)
-                k.r = calibrated_motion_model(k.r, u)
+            if k.r.size >= 5:
+                F, V = calibrated_motion_jacobians(k.r, u, half_track_m)
+                k.r = calibrated_motion_model(k.r, u, half_track_m)
                 k.C = F @ k.C @ F.T + V @ M @ V.T
                 k.C[3, 3] += turn_scale_walk**2 * abs(float(u[2]))
             else:

@@ -156,18 +156,24 @@ class LocalizedRobot(RobotWrapper):
     def odometry_calibration(self) -> dict | None:
         """What the filter learned of the base's odometry (:attr:`Localizer.calibration`), for a run's
         JSON and the operator: ``turn_scale`` (the true turn per turn the wheels report; 0.96 means
-        they over-count turns by about 4 %), ``curvature_rad_per_m`` and their standard deviations.
-        None with ``mode=odometry`` or without ``odometry_calibration``."""
+        they over-count turns by about 4 %), ``curvature_rad_per_m`` and their standard deviations;
+        with the spin's slip in the state, ``spin_slip`` and ``spin_slip_sd`` too (a turn in place
+        over-counts by about that much more than a drive's). None with ``mode=odometry`` or without
+        ``odometry_calibration``."""
         cal = self.localizer.calibration
         if self.mode is LocalizationMode.ODOMETRY or cal is None:
             return None
         k, c, sk, sc = cal
-        return {
+        out = {
             "turn_scale": round(k, 5),
             "turn_scale_sd": round(sk, 5),
             "curvature_rad_per_m": round(c, 5),
             "curvature_sd_rad_per_m": round(sc, 5),
         }
+        slip = self.localizer.spin_slip
+        if slip is not None:
+            out["spin_slip"], out["spin_slip_sd"] = round(slip[0], 5), round(slip[1], 5)
+        return out
 
     def camera_estimate(self) -> dict | None:
         """What the filter learned of the camera's constants that every sighting shares, for a run's JSON

@@ -274,31 +274,39 @@ def camera_states_told(camera, mounts_uncertain: bool) -> LocalizerConfig | None
 def odometry_told(odometry, wheel_base: float, config: LocalizerConfig | None) -> LocalizerConfig | None:
     r"""``config`` (None: the defaults) with the odometry calibration's priors widened to cover what the
     profile's stated odometry errors (:class:`lab.sim.sensing.OdometryErrors`) make of the calibrated
-    motion model's constants on a base of track ``wheel_base`` [m]; widened only, never narrowed.
+    motion model's constants on a base of track ``wheel_base`` [m]; widened only, never narrowed. A
+    stated spin slip puts the slip in the state (:func:`lab.localization.models.calibrated_motion_model`).
 
-    * The turn scale ``k`` (:func:`lab.localization.models.calibrated_motion_model`): a spin's measured
-      heading change is ``(1 + e_s)(1 + e_b)(1 + slip)`` times the true one, with the mean radius error
-      ``e_s``, the track's ``e_b`` and the slip uniform in ``[0, 2 s]``; that over-count's RMS about 1
-      is :math:`\sqrt{\sigma_s^2 + \sigma_b^2 + 4 s^2 / 3}` to first order, and ``k``, its inverse,
-      spreads a little less, so the prior covers it.
+    * The turn scale ``k``: a turn's measured heading change is ``(1 + e_s)(1 + e_b)`` times the true
+      one, with the mean radius error ``e_s`` and the track's ``e_b``; that over-count's RMS about 1 is
+      :math:`\sqrt{\sigma_s^2 + \sigma_b^2}` to first order, and ``k``, its inverse, spreads the same.
+    * The spin's slip ``sigma``: a spin over-counts by a further ``(1 + slip)``, the slip uniform in
+      ``[0, 2 s]``, a drive's turn by the spin's share of that (``OdometryErrors.spin_slip``). Its prior
+      is centred on no slip, with the slip's RMS about 0, :math:`2 s / \sqrt{3}`, for its sigma. With
+      one ``k`` for both, a spin teaches ``k`` the slip and a drive's turn is then corrected by it too:
+      at twice the profile's errors a robot's heading ran 13 deg off on a 1.2 m drive after a 200 deg
+      spin (docs/tuning/localizer-spin-slip.md).
     * The curvature ``c``: unequal wheels curve a straight drive by ``e_d / b`` rad/m.
     * The heading noise per metre left once they are estimated: the wheels' random errors give
       :math:`\sqrt{2}\, \sigma_w / b` rad per square-root metre.
 
     The defaults cover the realistic profile's odometry as stated (its world draws it at the mismatch
-    factor, which the localizer is not told); a profile scaled up (``lab eval --error-scale``)
-    states a larger error than they do, and a localizer told less than the world draws holds a turn
-    scale it cannot move and loses the robot in long spins (docs/tuning/localizer-refind.md, the lost
-    robot). None when ``config`` is None and the defaults already cover the profile."""
+    factor, which the localizer is not told); a profile scaled up (``lab eval --error-scale``) states a
+    larger error than they do, and a localizer told less than the world draws holds a turn scale it
+    cannot move and loses the robot in long spins (docs/tuning/localizer-refind.md, the lost robot).
+    None when ``config`` is None and the profile states neither a slip nor errors beyond the defaults."""
     base = config or LocalizerConfig()
     stated = {
-        "turn_scale_sigma": math.sqrt(
-            odometry.wheel_radius_error**2 + odometry.track_width_error**2 + 4.0 * odometry.spin_slip**2 / 3.0
-        ),
+        "turn_scale_sigma": math.hypot(odometry.wheel_radius_error, odometry.track_width_error),
         "curvature_sigma_rad_per_m": odometry.wheel_ratio_error / wheel_base,
         "calibrated_heading_rad_per_sqrt_m": math.sqrt(2.0) * odometry.wheel_noise / wheel_base,
+        "spin_slip_sigma": 2.0 * odometry.spin_slip / math.sqrt(3.0),
     }
+    if not base.odometry_calibration:
+        return config
     wider = {k: v for k, v in stated.items() if v > getattr(base, k)}
+    if "spin_slip_sigma" in wider and wheel_base != base.track_m:
+        wider["track_m"] = wheel_base
     return replace(base, **wider) if wider else config
 
 
@@ -497,7 +505,8 @@ def localization_in_words(data: dict) -> str:
     in the simulator, how far the estimate ended from the truth.
 
     For example ``54 landmark updates; the wheels over-count turns by 4.2 % (turn scale 0.960 +- 0.006)
-    and drift 0.012 +- 0.004 rad per metre; 0.7 cm from the true pose at the end``; after a survey tour
+    and drift 0.012 +- 0.004 rad per metre; 0.7 cm from the true pose at the end`` (with the spin's slip
+    in the state, ``..., spins 5.1 +- 1.2 % more, and drift ...``); after a survey tour
     (``survey_tour``) it starts with ``a survey tour of 4 stands first (87 sightings of 12 posters, 208
     s)``; a robot the gate had lost and sightings re-found (``landmark_refinds``) says ``54 landmark
     updates (lost and re-found once)``.
@@ -524,8 +533,11 @@ def localization_in_words(data: dict) -> str:
         k, sk = cal["turn_scale"], cal["turn_scale_sd"]
         over = 100.0 * (1.0 / k - 1.0)
         verb = f"over-count turns by {over:.1f} %" if over >= 0 else f"under-count turns by {-over:.1f} %"
+        spin = ""
+        if "spin_slip" in cal:  # the spin's slip in the state: what a turn in place over-counts beyond
+            spin = f", spins {100 * cal['spin_slip']:.1f} +- {100 * cal['spin_slip_sd']:.1f} % more,"
         parts.append(
-            f"the wheels {verb} (turn scale {k:.3f} +- {sk:.3f}) and drift "
+            f"the wheels {verb} (turn scale {k:.3f} +- {sk:.3f}){spin} and drift "
             f"{cal['curvature_rad_per_m']:.3f} +- {cal['curvature_sd_rad_per_m']:.3f} rad per metre"
         )
     cam = data.get("camera_estimate") or {}
