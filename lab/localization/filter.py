@@ -494,7 +494,9 @@ class Localizer:
     """The EKF over ``x = [x, y, theta]`` (see the module docstring for its equations), and with
     ``config.odometry_calibration`` over ``s = [x, y, theta, k, c]``: the pose and the odometry's turn
     scale and curvature bias (:func:`calibrated_motion_model`), which the landmark updates estimate
-    through their correlation with the heading (a landmark sees the pose only: ``H = [H_x, 0]``).
+    through their correlation with the heading (a landmark sees the pose only: ``H = [H_x, 0]``); with
+    ``config.spin_slip_sigma`` above 0, ``[x, y, theta, k, c, sigma]``, the spin's slip too
+    (:attr:`spin_slip`).
 
     ``x`` and ``Sigma`` are the pose's mean and covariance (the first three of ``s`` and ``P``);
     :attr:`calibration` the odometry's; :meth:`landmark_estimates` a surveyed map's posters, which join

@@ -12,7 +12,7 @@ Each sighting determines the whole planar pose on its own: :math:`x_z = g(z, l)`
 :math:`\Sigma_z = J_z Q J_z^T` (:func:`~lab.localization.posters.sighting_pose`). :class:`Refinder` keeps
 the poses that the recent rejected sightings imply, carried along by the odometry since, with the
 filter's motion model, its calibration and their uncertainty (a 5-state ``[x_z, k, c]`` per sighting,
-predicted like the filter's own)::
+or 6 with the spin's slip, predicted like the filter's own)::
 
     r_i <- f(r_i, u),   C_i <- F C_i F^T + V M(u) V^T        (r_i = [x_z, k, c] at the sighting)
 
