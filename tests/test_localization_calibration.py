@@ -58,6 +58,10 @@ def test_the_spin_fraction_and_the_slips_correction():
     assert calibrated_motion_model(s, [0.3, 0.0, 0.0], H)[2] == 0.0
     arc = calibrated_motion_model(s, [0.2, 0.0, 0.25], H)[2]
     assert arc == pytest.approx((0.98 - 0.05 * H * 0.25 / (0.2 + H * 0.25)) * 0.25)
+    with pytest.raises(ValueError, match="needs half_track_m > 0"):  # else the slip silently does nothing
+        calibrated_motion_model(s, [0.0, 0.0, 1.0])
+    with pytest.raises(ValueError, match="needs half_track_m > 0"):
+        calibrated_motion_jacobians(s, [0.0, 0.0, 1.0])
     s[5] = 0.0  # no slip: the five-state's motion
     np.testing.assert_allclose(
         calibrated_motion_model(s, [0.2, 0.01, 0.25], H)[:5],

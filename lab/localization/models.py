@@ -110,6 +110,7 @@ def calibrated_motion_model(s, u, half_track_m: float = 0.0) -> np.ndarray:
     it too.
     """
     s = np.asarray(s, float)
+    _check_half_track(s, half_track_m)
     dx, dy, dth = np.asarray(u, float)
     turn = s[3] * dth + s[4] * dx
     if s.size == 6:
@@ -137,6 +138,7 @@ def calibrated_motion_jacobians(s, u, half_track_m: float = 0.0) -> tuple[np.nda
     and column only with ``sigma`` in the state).
     """
     s = np.asarray(s, float)
+    _check_half_track(s, half_track_m)
     n = s.size
     dx, dy, dth = np.asarray(u, float)
     F3, V3 = motion_jacobians(s[:3], u)
@@ -153,6 +155,15 @@ def calibrated_motion_jacobians(s, u, half_track_m: float = 0.0) -> tuple[np.nda
             V[2, 0] += s[5] * q * dth * math.copysign(1.0, dx) / (a + q) ** 2
             V[2, 2] -= s[5] * q * (2.0 * a + q) / (a + q) ** 2
     return F, V
+
+
+def _check_half_track(s, half_track_m: float) -> None:
+    """The spin's slip needs the track: with ``half_track_m`` 0 every increment's spin fraction is 0 and
+    the slip would silently do nothing."""
+    if s.size == 6 and not half_track_m > 0:
+        raise ValueError(
+            f"the six-state model (the spin's slip) needs half_track_m > 0 [m], got {half_track_m!r}"
+        )
 
 
 def measurement_model(x, l) -> np.ndarray:
